@@ -20,6 +20,7 @@ import numpy as np
 
 from viewer.scene import Scene
 
+MAX_LIGHT_SAMPLES = 2048
 FACINGS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 
 
@@ -43,6 +44,8 @@ class VoxelGrid:
     """(K, 3) area-weighted mean albedo."""
     emission: np.ndarray
     """(K, 3) area-weighted mean emitted radiance (front side)."""
+    lights: "LightSamples"
+    """The emitting surface in pieces finer than the voxels, for direct light (see LightSamples)."""
 
     def __post_init__(self):
         for name in ("coords", "position", "normal", "area", "albedo", "emission"):
@@ -91,6 +94,31 @@ class VoxelGrid:
         coords = np.stack([ids % n, (ids // n) % n, ids // (n * n)], axis=1)
         return {"hash_id": ids, "center": self.lo + (coords + 0.5) * self.voxel_size, "area": area,
                 "albedo": albedo, "emission": emission}
+
+
+@dataclass(frozen=True)
+class LightSamples:
+    """Emitting triangles cut into pieces of at most half a voxel: the quadrature for direct light.
+
+    A lamp is small and bright; seen from a point a few centimetres away, one point-to-patch term per
+    voxel misjudges its solid angle badly, while the pieces keep it within a few percent. Visibility is
+    still traced once per emitting voxel (`voxel`), shared by its pieces.
+    """
+
+    position: np.ndarray
+    """(S, 3) piece centroids."""
+    normal: np.ndarray
+    """(S, 3) front normals."""
+    area: np.ndarray
+    """(S,) piece areas."""
+    radiance: np.ndarray
+    """(S, 3) emitted radiance."""
+    voxel: np.ndarray
+    """(S,) index of the voxel that holds the piece."""
+
+    @property
+    def count(self) -> int:
+        return len(self.area)
 
 
 def grid_frame(scene: Scene, resolution: int) -> tuple[np.ndarray, float]:
@@ -178,4 +206,22 @@ def voxelize(scene: Scene, resolution: int = 32, normal_mode: str = "area") -> V
     vox_coords = np.stack([cell_id % resolution, (cell_id // resolution) % resolution,
                            cell_id // resolution ** 2], axis=1)
     return VoxelGrid(lo=lo, voxel_size=h, resolution=resolution, coords=vox_coords, position=position,
-                     normal=n, area=area, albedo=albedo, emission=emission)
+                     normal=n, area=area, albedo=albedo, emission=emission,
+                     lights=_light_samples(scene, face_ids, lo, h, resolution, keys))
+
+
+def _light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSamples:
+    emitting = face_ids[np.any(scene.emission[face_ids] > 0, axis=1)]
+    if not len(emitting):
+        empty = np.zeros((0, 3))
+        return LightSamples(empty, empty, np.zeros(0), empty, np.zeros(0, np.int64))
+    # Half a voxel, unless the emitters are large (a glowing wall): then about MAX_LIGHT_SAMPLES pieces,
+    # since a large emitter is no longer small next to the voxels anyway.
+    total = float(scene.face_areas[emitting].sum())
+    centroid, area, source = _subdivide(scene.triangles[emitting], max(0.5 * h, 2.0 * np.sqrt(total / MAX_LIGHT_SAMPLES)))
+    face = emitting[source]
+    normal = scene.face_normals[face]
+    coords = np.clip(np.floor((centroid - lo) / h).astype(np.int64), 0, resolution - 1)
+    cell = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2
+    voxel = np.searchsorted(keys, cell * 6 + np.argmax(normal @ FACINGS.T, axis=1))
+    return LightSamples(centroid, normal, area, scene.emission[face], voxel)

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Set up a fresh Debian machine for the viewer: system libraries (EGL/GL through Mesa, LLVM for
+# Mitsuba's fast variant, Xvfb for window tests) and a .venv in the repository root.
+#   bash .ci/setup.sh          the viewer and the reference (Mitsuba)
+#   bash .ci/setup.sh test     ... plus what the tests need
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+packages=(libegl1 libgl1 libgles2 libllvm19 xvfb xauth)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ]; then
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  elif command -v sudo >/dev/null && sudo -n true 2>/dev/null; then
+    sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  else
+    echo "setup: please install the system packages: sudo apt-get install ${missing[*]}" >&2
+    exit 1
+  fi
+fi
+
+python=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  "$python" -m venv .venv
+fi
+extras="reference"
+if [ "${1:-}" = "test" ]; then
+  extras="reference,test"
+fi
+.venv/bin/python -m pip install -q --upgrade pip >/dev/null
+.venv/bin/python -m pip install -q -e ".[${extras}]"

@@ -1,0 +1,30 @@
+"""Scenes that tests build in a line (in the spirit of Mitsuba's dictionaries)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from viewer.scene import Scene
+
+# Unit cube corners and its six faces, counter-clockwise seen from outside.
+CUBE_VERTICES = np.array([[x, y, z] for z in (-1, 1) for y in (-1, 1) for x in (-1, 1)], np.float64)
+CUBE_QUADS = np.array([[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]])
+
+
+def quads_to_triangles(quads: np.ndarray) -> np.ndarray:
+    return np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+
+
+def box(half_size=1.0, centre=(0.0, 0.0, 0.0), inward=False, albedo=0.5, emission=0.0, name="box") -> Scene:
+    """An axis-aligned box; `inward` turns its faces to the inside (a closed room)."""
+    faces = quads_to_triangles(CUBE_QUADS)
+    if inward:
+        faces = faces[:, ::-1]
+    vertices = CUBE_VERTICES * half_size + np.asarray(centre, np.float64)
+    return Scene(name, vertices, faces, np.broadcast_to(albedo, (len(faces), 3)),
+                 np.broadcast_to(emission, (len(faces), 3)), np.zeros(len(faces), np.int64), (name,))
+
+
+def furnace() -> Scene:
+    """Closed room, albedo 0.5 and emission 1 everywhere: L = 1 / (1 - 0.5) = 2 in free space."""
+    return box(inward=True, albedo=0.5, emission=1.0, name="furnace")

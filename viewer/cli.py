@@ -1,0 +1,156 @@
+"""The command line: `python -m viewer [capture|sample] ...` (see ../shared/DESIGN.md).
+
+Exit status 0 on success, 2 for bad input (one line on stderr, no traceback), 1 for an internal error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from viewer.gi import GISettings, Timings
+from viewer.scene import SceneError
+
+
+class InputError(Exception):
+    """Bad input from the user: reported in one line with exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise InputError(f"{self.prog}: {message}")
+
+
+def _gi_arguments(p: argparse.ArgumentParser):
+    d = GISettings()
+    p.add_argument("--voxels", type=int, default=d.voxels, help="voxels per axis (N)")
+    p.add_argument("--probes", type=int, default=d.probes, help="probes per axis (M)")
+    p.add_argument("--kernel", choices=("physical", "paper"), default=d.kernel, help="light transition kernel")
+    p.add_argument("--bounces", type=int, default=d.bounces, help="most bounces summed")
+    p.add_argument("--directions", type=int, default=d.directions, help="directions gathered per probe")
+    p.add_argument("--dering", type=float, default=d.dering, help="SH deringing strength 0..1")
+    p.add_argument("--sun", help="directional light dx,dy,dz,r,g,b (direction towards the sun, irradiance)")
+
+
+def gi_settings(args) -> GISettings:
+    for name, low, high in (("voxels", 4, 256), ("probes", 2, 128), ("bounces", 0, 100000),
+                            ("directions", 16, 65536)):
+        value = getattr(args, name)
+        if not low <= value <= high:
+            raise InputError(f"--{name} {value}: must be between {low} and {high}")
+    if not 0.0 <= args.dering <= 1.0:
+        raise InputError(f"--dering {args.dering}: must be between 0 and 1")
+    return GISettings(voxels=args.voxels, probes=args.probes, kernel=args.kernel, bounces=args.bounces,
+                      directions=args.directions, dering=args.dering)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="python -m viewer", description="Real-time diffuse global illumination viewer.")
+    sub = parser.add_subparsers(dest="command", parser_class=_Parser)
+
+    view = sub.add_parser("view", help="the interactive viewer (default)")
+    view.add_argument("scene", nargs="?", default="cornell")
+
+    sample = sub.add_parser("sample", help="incident-radiance SH at points, as the renderer sees it")
+    sample.add_argument("scene", help="a built-in scene name or a scene file (.obj .glb .gltf .ply)")
+    sample.add_argument("--points", required=True, help="(P, 3) float32 world points, .npy")
+    sample.add_argument("--method", choices=("solver", "compute", "neural"), default="solver")
+    sample.add_argument("--out", required=True, help="(P, 9, 3) float32 SH output, .npy")
+    _gi_arguments(sample)
+
+    capture = sub.add_parser("capture", help="render a PNG headless (EGL)")
+    capture.add_argument("scene", nargs="?", default="cornell")
+    capture.add_argument("--out", required=True, help="PNG file to write")
+    capture.add_argument("--size", default="1280x720", help="WxH")
+    capture.add_argument("--gi", choices=("off", "compute", "solver", "neural"), default="solver")
+    capture.add_argument("--view", default="final")
+    capture.add_argument("--camera", help="ox,oy,oz,tx,ty,tz")
+    capture.add_argument("--fov", type=float, help="vertical field of view, degrees")
+    capture.add_argument("--exposure", type=float, default=0.0, help="exposure in EV")
+    _gi_arguments(capture)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] not in ("view", "sample", "capture", "-h", "--help"):
+        argv = ["view", *argv]
+    try:
+        args = build_parser().parse_args(argv)
+        return {"view": run_view, "sample": run_sample, "capture": run_capture}[args.command](args)
+    except (InputError, SceneError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    except Exception as exc:  # an internal error: one line, and the traceback only when asked for
+        if os.environ.get("VIEWER_DEBUG"):
+            raise
+        print(f"internal error: {type(exc).__name__}: {exc} (set VIEWER_DEBUG=1 for a traceback)",
+              file=sys.stderr)
+        return 1
+
+
+def load_points(path: str) -> np.ndarray:
+    file = Path(path)
+    if not file.is_file():
+        raise InputError(f"{path}: no such points file")
+    try:
+        points = np.load(file, allow_pickle=False)
+    except Exception as exc:
+        raise InputError(f"{path}: not a readable .npy array ({type(exc).__name__})") from None
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) == 0:
+        raise InputError(f"{path}: points must be a non-empty (P, 3) array, got shape {points.shape}")
+    if not np.issubdtype(points.dtype, np.number) or np.issubdtype(points.dtype, np.complexfloating):
+        raise InputError(f"{path}: points must be real numbers, got {points.dtype}")
+    points = points.astype(np.float64)
+    if not np.all(np.isfinite(points)):
+        raise InputError(f"{path}: points contain NaN or infinity")
+    return points
+
+
+def _load_scene(args):
+    from viewer import scene as scenes
+
+    sun = scenes.parse_sun(args.sun) if getattr(args, "sun", None) else None
+    return scenes.load(args.scene, sun=sun)
+
+
+def run_sample(args) -> int:
+    from viewer import gi
+
+    settings = gi_settings(args)
+    points = load_points(args.points)
+    out = Path(args.out)
+    if out.parent and not out.parent.exists():
+        raise InputError(f"{args.out}: folder {out.parent} does not exist")
+    start = time.perf_counter()
+    scene = _load_scene(args)
+    timings = Timings({"load": time.perf_counter() - start})
+    if args.method == "solver":
+        grid = gi.solve(scene, settings, include_emitted=True, timings=timings)
+    else:
+        raise InputError(f"--method {args.method}: not available in this build yet (use solver)")
+    clock = time.perf_counter()
+    sh = grid.interpolate(points).astype(np.float32)
+    timings.stages["interpolate"] = time.perf_counter() - clock
+    np.save(out, sh)
+    print(f"sample {args.method}: {len(points)} points; {timings}", file=sys.stderr)
+    return 0
+
+
+def run_capture(args) -> int:
+    from viewer.gpu import offscreen
+
+    return offscreen.run_capture(args)
+
+
+def run_view(args) -> int:
+    from viewer import app
+
+    return app.run(args)

@@ -1,0 +1,69 @@
+"""One call from a Scene to its probe grid with the numpy solver: voxelize, light, bounce, project.
+
+The settings here are the product defaults; `python -m viewer sample` and the viewer's "CPU solver" GI
+source both come through `solve`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+from viewer import probes, transport, voxels
+from viewer.raymarch import Tracer
+from viewer.scene import Scene
+
+
+@dataclass(frozen=True)
+class GISettings:
+    voxels: int = 32
+    """N: voxels per axis."""
+    probes: int = 16
+    """M: probes per axis over the scene bounds."""
+    kernel: str = "physical"
+    """Light transition kernel: `physical` or `paper` (see viewer.transport)."""
+    bounces: int = 100
+    """Most bounces summed (the solver stops earlier once converged)."""
+    directions: int = 512
+    """Directions gathered per probe."""
+    dering: float = 0.0
+    """SH deringing strength (0 = off)."""
+    normal_mode: str = "area"
+    """Voxel normals: `area` (area-weighted) or `paper` (eq. 3)."""
+
+
+@dataclass
+class Timings:
+    """Seconds spent in each stage."""
+
+    stages: dict[str, float] = field(default_factory=dict)
+
+    def __str__(self):
+        parts = [f"{name} {seconds:.3f}s" for name, seconds in self.stages.items()]
+        return ", ".join(parts + [f"total {sum(self.stages.values()):.3f}s"])
+
+
+def solve(scene: Scene, settings: GISettings = GISettings(), include_emitted: bool = True,
+          timings: Timings | None = None) -> probes.ProbeGrid:
+    timings = timings if timings is not None else Timings()
+    clock = time.perf_counter()
+
+    def lap(name):
+        nonlocal clock
+        now = time.perf_counter()
+        timings.stages[name] = timings.stages.get(name, 0.0) + now - clock
+        clock = now
+
+    grid = voxels.voxelize(scene, settings.voxels, settings.normal_mode)
+    tracer = Tracer.build(grid)
+    lap("voxelize")
+    g = transport.transition_matrix(grid, settings.kernel, tracer)
+    lap("transition")
+    light = transport.solve(grid, scene.sun, transport.TransportSettings(settings.kernel, settings.bounces),
+                            transition=g, tracer=tracer)
+    lap("bounces")
+    probe_settings = probes.ProbeSettings(resolution=settings.probes, directions=settings.directions,
+                                          include_emitted=include_emitted, dering=settings.dering)
+    result = probes.project(grid, light, scene.sun, scene.bounds, probe_settings, tracer)
+    lap("probes")
+    return result

@@ -1,0 +1,217 @@
+"""ProbeGrid: M^3 L2-SH light probes over the scene bounds, and how to read them back.
+
+Probe (i, j, k) sits at the centre of cell (i, j, k) of an M^3 grid over [lo, hi]
+(`lo + (index + 0.5) * spacing`), so a GL 3D texture over the same box samples probe centres at texel
+centres and clamps at the edges. `coefficients[i, j, k]` is (9, 3): the projection of the incident
+radiance L(p, w) onto the SH basis of `viewer.sh`, RGB in the last axis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from viewer import sh
+
+
+@dataclass(frozen=True)
+class ProbeGrid:
+    lo: np.ndarray
+    """(3,) lower corner of the probe box (world units)."""
+    hi: np.ndarray
+    """(3,) upper corner."""
+    coefficients: np.ndarray
+    """(M, M, M, 9, 3) float32 incident-radiance SH, indexed [x, y, z]."""
+    valid: np.ndarray
+    """(M, M, M) bool: False for probes found inside solid geometry (their values are filled in from
+    valid neighbours, see `fill_invalid`)."""
+
+    def __post_init__(self):
+        c = np.asarray(self.coefficients, np.float32)
+        if c.ndim != 5 or c.shape[3:] != (9, 3) or not (c.shape[0] == c.shape[1] == c.shape[2]):
+            raise ValueError(f"coefficients must be (M, M, M, 9, 3), got {c.shape}")
+        object.__setattr__(self, "coefficients", c)
+        object.__setattr__(self, "valid", np.asarray(self.valid, bool).reshape(c.shape[:3]))
+        object.__setattr__(self, "lo", np.asarray(self.lo, np.float64).reshape(3))
+        object.__setattr__(self, "hi", np.asarray(self.hi, np.float64).reshape(3))
+
+    @property
+    def resolution(self) -> int:
+        return self.coefficients.shape[0]
+
+    @property
+    def spacing(self) -> np.ndarray:
+        return (self.hi - self.lo) / self.resolution
+
+    @staticmethod
+    def positions_for(lo, hi, resolution: int) -> np.ndarray:
+        """(M, M, M, 3) probe centres, indexed [x, y, z]."""
+        lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        axes = [lo[a] + (np.arange(resolution) + 0.5) * (hi[a] - lo[a]) / resolution for a in range(3)]
+        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self.positions_for(self.lo, self.hi, self.resolution)
+
+    # ---- reading ------------------------------------------------------------------------------------
+    def interpolate(self, points: np.ndarray) -> np.ndarray:
+        """Trilinear SH at world points (P, 3) -> (P, 9, 3), clamped at the outer probes (the same
+        sampling as a CLAMP_TO_EDGE 3D texture)."""
+        p = np.asarray(points, np.float64).reshape(-1, 3)
+        m = self.resolution
+        u = (p - self.lo) / self.spacing - 0.5
+        u = np.clip(u, 0.0, m - 1)
+        i0 = np.minimum(np.floor(u).astype(np.int64), max(m - 2, 0))
+        f = u - i0
+        i1 = np.minimum(i0 + 1, m - 1)
+        out = np.zeros((len(p), 9, 3), np.float64)
+        for corner in range(8):
+            bx, by, bz = corner & 1, (corner >> 1) & 1, (corner >> 2) & 1
+            ix = np.where(bx, i1[:, 0], i0[:, 0])
+            iy = np.where(by, i1[:, 1], i0[:, 1])
+            iz = np.where(bz, i1[:, 2], i0[:, 2])
+            w = (np.where(bx, f[:, 0], 1 - f[:, 0]) * np.where(by, f[:, 1], 1 - f[:, 1])
+                 * np.where(bz, f[:, 2], 1 - f[:, 2]))
+            out += w[:, None, None] * self.coefficients[ix, iy, iz]
+        return out.astype(np.float32)
+
+    def irradiance(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """Irradiance E(n) (P, 3) at points for unit normals (cosine-lobe convolution)."""
+        c = self.interpolate(points)
+        y = sh.basis(np.asarray(normals, np.float64).reshape(-1, 3)) * sh.COSINE_LOBE
+        return np.einsum("pk,pkc->pc", y, c)
+
+    # ---- GPU layout ---------------------------------------------------------------------------------
+    def texture_data(self) -> list[np.ndarray]:
+        """Seven RGBA float32 volumes (M, M, M, 4) in GL order [z, y, x]: the 27 coefficients packed as
+        coefficient-major RGB triples (c0.rgb c1.r | c1.gb c2.rg | ...), the last texel's alpha unused."""
+        m = self.resolution
+        flat = self.coefficients.transpose(2, 1, 0, 3, 4).reshape(m, m, m, 27)
+        flat = np.concatenate([flat, np.zeros((m, m, m, 1), np.float32)], axis=-1)
+        return [np.ascontiguousarray(flat[..., 4 * t:4 * t + 4]) for t in range(7)]
+
+    def with_coefficients(self, coefficients: np.ndarray) -> "ProbeGrid":
+        return replace(self, coefficients=coefficients)
+
+
+def fill_invalid(coefficients: np.ndarray, valid: np.ndarray, iterations: int | None = None) -> np.ndarray:
+    """Replace invalid probes by the mean of their valid 6-neighbours, growing outwards until every
+    probe has a value, so that trilinear sampling near a wall never mixes in light from inside it."""
+    c = np.array(coefficients, np.float64)
+    known = np.array(valid, bool)
+    if known.all() or not known.any():
+        return c.astype(np.float32) if known.any() else np.zeros_like(c, np.float32)
+    m = c.shape[0]
+    for _ in range(iterations or 3 * m):
+        if known.all():
+            break
+        total = np.zeros_like(c)
+        count = np.zeros(known.shape)
+        for axis in range(3):
+            for shift in (1, -1):
+                kn = np.roll(known, shift, axis=axis)
+                cv = np.roll(c, shift, axis=axis)
+                edge = [slice(None)] * 3
+                edge[axis] = 0 if shift == 1 else m - 1
+                kn[tuple(edge)] = False  # no wrap-around
+                total += np.where(kn[..., None, None], cv, 0.0)
+                count += kn
+        grow = (~known) & (count > 0)
+        c[grow] = total[grow] / count[grow][:, None, None]
+        known = known | grow
+    return c.astype(np.float32)
+
+
+# ---- projection: what each probe sees -----------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ProbeSettings:
+    resolution: int = 16
+    """M: probes per axis over the scene bounds."""
+    directions: int = 512
+    """Directions gathered per probe for the light reflected by surfaces (a Fibonacci lattice)."""
+    include_emitted: bool = True
+    """Add the light arriving straight from emitters and the sun. The renderer shades those itself and
+    asks for False (indirect light only); `sample` and the comparisons with Mitsuba use True."""
+    invalid_backface_fraction: float = 0.25
+    """A probe that sees the back of surfaces in more than this fraction of directions is inside solid
+    geometry: marked invalid and filled from valid neighbours, so it does not leak light into rooms."""
+    dering: float = 0.0
+    """Deringing window strength (0 = off, see `viewer.sh.dering`)."""
+    seed: int = 0
+    """Rotation of the direction lattice."""
+
+
+def project(voxels, radiosity, sun=None, bounds=None, settings: ProbeSettings = ProbeSettings(),
+            tracer=None) -> ProbeGrid:
+    """Project the incident radiance at every probe onto L2 SH.
+
+    Reflected light (smooth) is gathered by marching `settings.directions` rays per probe to the first
+    voxel hit. Light straight from emitters (small and bright) is integrated voxel by voxel instead,
+    with the solid angle of each emitting voxel and its visibility, and the sun is added as a delta
+    (`sh.project_delta`): the same split as light sampling in a path tracer, which keeps a small lamp
+    from being missed or aliased by the direction lattice.
+    """
+    from viewer.raymarch import BACKFACE, Tracer
+
+    tracer = tracer or Tracer.build(voxels)
+    lo, hi = bounds if bounds is not None else (voxels.lo, voxels.hi)
+    m = settings.resolution
+    points = ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3)
+    dirs, weights = sh.sphere_directions(settings.directions, seed=settings.seed)
+    reflected = np.vstack([radiosity.reflected, np.zeros((1, 3))])  # row -1: nothing hit
+    coefficients = np.zeros((len(points), 9, 3))
+    backface = np.zeros(len(points))
+    per_chunk = max(1, (1 << 21) // len(dirs))
+    for s in range(0, len(points), per_chunk):
+        p = points[s:s + per_chunk]
+        hits = tracer.first_hits(np.repeat(p, len(dirs), axis=0), np.tile(dirs, (len(p), 1)))
+        hits = hits.reshape(len(p), len(dirs))
+        backface[s:s + per_chunk] = (hits == BACKFACE).mean(axis=1)
+        radiance = reflected[np.where(hits >= 0, hits, -1)]
+        coefficients[s:s + per_chunk] = sh.project(dirs, weights, radiance)
+    if settings.include_emitted:
+        coefficients += _emitter_sh(voxels, radiosity, points, tracer)
+        coefficients += _sun_sh(sun, points, tracer)
+    valid = backface <= settings.invalid_backface_fraction
+    grid = coefficients.reshape(m, m, m, 9, 3)
+    valid = valid.reshape(m, m, m)
+    grid = fill_invalid(grid, valid)
+    if settings.dering > 0:
+        grid = sh.dering(grid, settings.dering)
+    return ProbeGrid(lo=lo, hi=hi, coefficients=grid, valid=valid)
+
+
+def _emitter_sh(voxels, radiosity, points, tracer, chunk: int = 1 << 21) -> np.ndarray:
+    """SH of the light arriving straight from the emitters, summed over the fine light samples: each
+    piece is a patch of solid angle cos_s A_s / (r^2 + A_s / pi) (the near-field clamp of the
+    transport kernel), seen unless its voxel is occluded."""
+    from viewer.transport import _light_visibility
+
+    lights = voxels.lights
+    out = np.zeros((len(points), 9, 3))
+    if not lights.count:
+        return out
+    per = max(1, chunk // lights.count)
+    for s in range(0, len(points), per):
+        p = points[s:s + per]
+        d = lights.position[None] - p[:, None]                       # (P, S, 3) probe -> light
+        r2 = np.einsum("psc,psc->ps", d, d)
+        w = d / np.sqrt(np.maximum(r2, 1e-30))[..., None]
+        cos_s = -np.einsum("psc,sc->ps", w, lights.normal)
+        omega = np.where(cos_s > 0, cos_s * lights.area / (r2 + lights.area / np.pi), 0.0)
+        omega = omega * _light_visibility(tracer, voxels, p, None, omega > 0)
+        weighted = omega[..., None] * sh.basis(w)                    # (P, S, 9)
+        out[s:s + per] = np.einsum("psk,sc->pkc", weighted, lights.radiance)
+    return out
+
+
+def _sun_sh(sun, points, tracer) -> np.ndarray:
+    out = np.zeros((len(points), 9, 3))
+    if sun is None or not np.any(sun.irradiance > 0):
+        return out
+    lit = tracer.escapes(points, sun.direction)
+    out[lit] = sh.project_delta(sun.direction, sun.irradiance)
+    return out
