@@ -1,0 +1,114 @@
+"""`python -m viewer sample`: the contract the evaluation tools rely on (DESIGN.md, Command line)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "viewer", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd or ROOT, timeout=600)
+
+
+@pytest.fixture
+def points(tmp_path):
+    path = tmp_path / "points.npy"
+    np.save(path, np.array([[0.0, 0.0, 0.0], [0.5, -0.5, 0.2], [-0.6, 0.6, -0.3]], np.float32))
+    return path
+
+
+def test_sample_writes_sh_at_points_and_reports_seconds(tmp_path, points):
+    out = tmp_path / "sh.npy"
+    result = run("sample", "cornell", "--points", points, "--method", "solver", "--out", out,
+                 "--voxels", "12", "--probes", "6", "--directions", "128")
+    assert result.returncode == 0, result.stderr
+    sh = np.load(out)
+    assert sh.shape == (3, 9, 3) and sh.dtype == np.float32 and np.all(np.isfinite(sh))
+    assert np.all(sh[:, 0, :] > 0)  # the lit box: positive mean radiance everywhere inside
+    assert "total" in result.stderr and "s" in result.stderr
+
+
+def test_a_scene_without_emitters_gives_a_black_finite_field(tmp_path, points):
+    scene = tmp_path / "dark.obj"
+    scene.write_text("v -1 -1 -1\nv 1 -1 -1\nv 1 -1 1\nv -1 -1 1\nv 0 1 0\nf 1 3 2\nf 1 4 3\nf 1 2 5\n")
+    out = tmp_path / "sh.npy"
+    result = run("sample", scene, "--points", points, "--out", out, "--voxels", "8", "--probes", "4")
+    assert result.returncode == 0, result.stderr
+    sh = np.load(out)
+    assert np.all(np.isfinite(sh)) and np.all(sh == 0)
+
+
+def write(path: Path, content) -> Path:
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        path.write_text(content)
+    return path
+
+
+BAD_SCENES = {
+    "missing": lambda d: d / "nope.obj",
+    "directory": lambda d: d,
+    "unsupported": lambda d: write(d / "scene.fbx", "whatever"),
+    "empty obj": lambda d: write(d / "empty.obj", ""),
+    "no faces": lambda d: write(d / "points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"),
+    "index out of range": lambda d: write(d / "bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n"),
+    "nan vertex": lambda d: write(d / "nan.obj", "v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"),
+    "binary garbage obj": lambda d: write(d / "garbage.obj", bytes(range(256)) * 4),
+    "corrupt glb": lambda d: write(d / "bad.glb", b"glTF\x02\x00\x00\x00garbage"),
+    "corrupt ply": lambda d: write(d / "bad.ply", "ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n"),
+    "unknown built-in": lambda d: Path("no-such-builtin"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_SCENES))
+def test_bad_scenes_exit_2_with_one_line(tmp_path, points, case):
+    scene = BAD_SCENES[case](tmp_path)
+    result = run("sample", scene, "--points", points, "--out", tmp_path / "sh.npy", "--voxels", "8")
+    assert result.returncode == 2, (case, result.stderr)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    assert not (tmp_path / "sh.npy").exists()
+
+
+BAD_POINTS = {
+    "missing": None,
+    "wrong shape": np.zeros((4, 2), np.float32),
+    "empty": np.zeros((0, 3), np.float32),
+    "nan": np.array([[0, np.nan, 0]], np.float32),
+    "strings": np.array([["a", "b", "c"]]),
+    "not npy": b"this is not an npy file",
+    "pickled objects": np.array([[object(), 1, 2]], dtype=object),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_POINTS))
+def test_bad_points_exit_2_with_one_line(tmp_path, case):
+    path = tmp_path / "p.npy"
+    value = BAD_POINTS[case]
+    if isinstance(value, bytes):
+        path.write_bytes(value)
+    elif value is not None:
+        np.save(path, value, allow_pickle=True)
+    result = run("sample", "cornell", "--points", path, "--out", tmp_path / "sh.npy", "--voxels", "8")
+    assert result.returncode == 2, (case, result.stderr)
+    assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("args", [["--voxels", "0"], ["--probes", "-3"], ["--kernel", "magic"],
+                                  ["--method", "psychic"], ["--voxels", "ten"], ["--sun", "1,2,3"],
+                                  ["--sun", "0,0,0,1,1,1"], ["--dering", "3"]])
+def test_bad_options_exit_2_with_one_line(tmp_path, points, args):
+    result = run("sample", "cornell", "--points", points, "--out", tmp_path / "sh.npy", *args)
+    assert result.returncode == 2, (args, result.stderr)
+    assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
+
+
+def test_output_into_a_missing_folder_is_bad_input(tmp_path, points):
+    result = run("sample", "cornell", "--points", points, "--out", tmp_path / "no" / "sh.npy")
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
