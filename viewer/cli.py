@@ -68,7 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     capture.add_argument("--out", required=True, help="PNG file to write")
     capture.add_argument("--size", default="1280x720", help="WxH")
     capture.add_argument("--gi", choices=("off", "compute", "solver", "neural"), default="solver")
-    capture.add_argument("--view", default="final")
+    capture.add_argument("--view", default="final",
+                         help="final, direct, indirect, albedo, normals, voxels or probes")
+    capture.add_argument("--tonemap", choices=("aces", "reinhard", "none"), default="aces")
     capture.add_argument("--camera", help="ox,oy,oz,tx,ty,tz")
     capture.add_argument("--fov", type=float, help="vertical field of view, degrees")
     capture.add_argument("--exposure", type=float, default=0.0, help="exposure in EV")
@@ -147,7 +149,10 @@ def run_sample(args) -> int:
 def run_capture(args) -> int:
     from viewer.gpu import offscreen
 
-    return offscreen.run_capture(args)
+    try:
+        return offscreen.run_capture(args)
+    except offscreen.CaptureError as exc:
+        raise InputError(str(exc)) from None
 
 
 def run_view(args) -> int:
