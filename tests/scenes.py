@@ -28,3 +28,15 @@ def box(half_size=1.0, centre=(0.0, 0.0, 0.0), inward=False, albedo=0.5, emissio
 def furnace() -> Scene:
     """Closed room, albedo 0.5 and emission 1 everywhere: L = 1 / (1 - 0.5) = 2 in free space."""
     return box(inward=True, albedo=0.5, emission=1.0, name="furnace")
+
+
+def ceiling_lamp(half_size=0.3, height=0.95, radiance=5.0) -> Scene:
+    """A square lamp facing down (counter-clockwise seen from below)."""
+    h = half_size
+    vertices = np.array([[-h, height, -h], [h, height, -h], [h, height, h], [-h, height, h]], np.float64)
+    return Scene("lamp", vertices, np.array([[0, 1, 2], [0, 2, 3]]), 0.0, radiance, 0, ("lamp",))
+
+
+def lit_room(*objects: Scene) -> Scene:
+    """A closed white room (albedo 0.5) lit by a ceiling lamp, with objects in it."""
+    return Scene.concatenate("lit-room", [box(inward=True, albedo=0.5, name="room"), ceiling_lamp(), *objects])
