@@ -56,9 +56,12 @@ class Tracer:
 
     def cell_index(self, points: np.ndarray) -> np.ndarray:
         """Flat cell index of points, -1 outside the grid."""
-        c = np.floor((points - self.lo) / self.h).astype(np.int64)
-        inside = np.all((c >= 0) & (c < self.n), axis=-1)
-        return np.where(inside, c[..., 0] + c[..., 1] * self.n + c[..., 2] * self.n * self.n, -1)
+        c = np.floor((points - self.lo) * (1.0 / self.h)).astype(np.int64)
+        # one unsigned comparison catches both c < 0 and c >= n
+        inside = (c.view(np.uint64) < self.n).all(axis=-1)
+        flat = c[..., 0] + c[..., 1] * self.n + c[..., 2] * (self.n * self.n)
+        flat[~inside] = -1
+        return flat
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
         """Index of the voxel each ray hits first, MISS, or BACKFACE.
@@ -119,7 +122,7 @@ class Tracer:
 
         Occupied cells are not solid blocks: a ray that grazes along a wall, or leaves a surface close
         to a room corner, passes through the wall's own voxel layer without crossing its plane. Inside
-        occupied cells the samples are a quarter voxel apart, so cells are rarely skipped.
+        crossing is exact, so each occupied cell is tested once, when the march first lands in it.
         """
         out = np.empty(len(a), bool)
         for s in range(0, len(a), chunk):

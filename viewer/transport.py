@@ -77,20 +77,23 @@ def transition_matrix(voxels: VoxelGrid, kernel: str = "physical", tracer: Trace
     visibility = _Visibility(voxels, tracer)
     pos, nrm, area = voxels.position, voxels.normal, voxels.area
     k = voxels.count
+    # Dot products of d = p_j - p_i expanded into matrix products (BLAS), block by block of receivers.
+    pos_sq = np.einsum("ij,ij->i", pos, pos)
+    pos_dot_n = np.einsum("ij,ij->i", pos, nrm)
     rows, cols, vals = [], [], []
     for i0 in range(0, k, block):
         i = np.arange(i0, min(i0 + block, k))
-        d = pos[None, :, :] - pos[i, None, :]
-        r2 = np.einsum("ijc,ijc->ij", d, d)
+        r2 = np.maximum(pos_sq[i, None] + pos_sq[None, :] - 2.0 * (pos[i] @ pos.T), 0.0)
+        r2[np.arange(len(i)), i] = 0.0
         r = np.sqrt(np.maximum(r2, 1e-30))
-        cos_i = np.einsum("ijc,ic->ij", d, nrm[i]) / r
+        cos_i = (nrm[i] @ pos.T - pos_dot_n[i, None]) / r
         if kernel == "paper":
             mask = (cos_i > 0) & (r2 > 0)
             ii, jj = np.nonzero(mask)
             rows.append(i[ii]), cols.append(jj)
             vals.append(cos_i[ii, jj] * area[jj] / (r2[ii, jj] + area[jj] / np.pi))
             continue
-        cos_j = -np.einsum("ijc,jc->ij", d, nrm) / r
+        cos_j = (pos[i] @ nrm.T - pos_dot_n[None, :]) / r
         # Symmetric visibility: trace each unordered pair once (j > i) and fill both directions.
         mask = (cos_i > 0) & (cos_j > 0) & (np.arange(k)[None, :] > i[:, None])
         ii, jj = np.nonzero(mask)
@@ -194,11 +197,12 @@ def direct_irradiance(voxels: VoxelGrid, tracer: Tracer | None = None, chunk: in
     per = max(1, chunk // lights.count)
     for s0 in range(0, voxels.count, per):
         i = np.arange(s0, min(s0 + per, voxels.count))
-        d = lights.position[None] - voxels.position[i, None]          # (I, S, 3) receiver -> light
-        r2 = np.einsum("isc,isc->is", d, d)
-        w = d / np.sqrt(np.maximum(r2, 1e-30))[..., None]
-        cos_i = np.einsum("isc,ic->is", w, voxels.normal[i])
-        cos_s = -np.einsum("isc,sc->is", w, lights.normal)
+        p, n = voxels.position[i], voxels.normal[i]
+        # d = light - receiver, its dot products as matrix products
+        r2 = np.maximum((p * p).sum(1)[:, None] + (lights.position ** 2).sum(1)[None] - 2.0 * p @ lights.position.T, 0.0)
+        r = np.sqrt(np.maximum(r2, 1e-30))
+        cos_i = (n @ lights.position.T - (p * n).sum(1)[:, None]) / r
+        cos_s = (p @ lights.normal.T - (lights.position * lights.normal).sum(1)[None]) / r
         weight = np.where((cos_i > 0) & (cos_s > 0), cos_i * cos_s * lights.area / (r2 + lights.area / np.pi), 0.0)
         visible = _light_visibility(tracer, voxels, voxels.position[i], voxels.normal[i], weight > 0)
         out[i] = (weight * visible) @ lights.radiance
@@ -250,12 +254,12 @@ def solve(voxels: VoxelGrid, sun: DirectionalLight | None = None,
     previous = bounce
     for done in range(1, settings.bounces + 1):
         if done > 1:
-            previous, bounce = bounce, reflectance * (g @ bounce)
+            previous, bounce = bounce, reflectance * (g @ bounce.astype(np.float32))
             reflected += bounce
         if np.abs(bounce).max() <= settings.tolerance * max(np.abs(reflected).max(), 1e-30):
             converged = True
             break
     if not converged and settings.extrapolate and done > 1:
         reflected += _geometric_tail(previous, bounce)
-    irradiance = np.asarray(g @ reflected) + e_direct
+    irradiance = np.asarray(g @ reflected.astype(np.float32), np.float64) + e_direct
     return Radiosity(radiance=emitted + reflected, emitted=emitted, irradiance=irradiance, bounces=done)
