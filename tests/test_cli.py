@@ -112,3 +112,27 @@ def test_bad_options_exit_2_with_one_line(tmp_path, points, args):
 def test_output_into_a_missing_folder_is_bad_input(tmp_path, points):
     result = run("sample", "cornell", "--points", points, "--out", tmp_path / "no" / "sh.npy")
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_capture_views_match_the_renderer():
+    from viewer.cli import VIEWS
+    from viewer.gpu.renderer import VIEWS as RENDERER_VIEWS
+
+    assert VIEWS == RENDERER_VIEWS
+
+
+@pytest.mark.parametrize("args", [["--size", "0x10"], ["--size", "big"], ["--camera", "1,2"], ["--fov", "500"],
+                                  ["--view", "xray"]])
+def test_bad_capture_options_exit_2_with_one_line(tmp_path, args):
+    result = run("capture", "cornell", "--out", tmp_path / "x.png", "--gi", "off", *args)
+    assert result.returncode == 2, (args, result.stderr)
+    assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
+
+
+def test_capture_writes_a_png(tmp_path):
+    out = tmp_path / "box.png"
+    result = run("capture", "cornell", "--out", out, "--size", "64x48", "--gi", "off", "--msaa", "0")
+    assert result.returncode == 0, result.stderr
+    from PIL import Image
+
+    assert Image.open(out).size == (64, 48)

@@ -17,6 +17,10 @@ from viewer.gi import GISettings, Timings
 from viewer.scene import SceneError
 
 
+VIEWS = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
+"""The renderer's view modes (viewer.gpu.renderer.VIEWS; listed here so parsing needs no GL)."""
+
+
 class InputError(Exception):
     """Bad input from the user: reported in one line with exit status 2."""
 
@@ -68,9 +72,14 @@ def build_parser() -> argparse.ArgumentParser:
     capture.add_argument("--out", required=True, help="PNG file to write")
     capture.add_argument("--size", default="1280x720", help="WxH")
     capture.add_argument("--gi", choices=("off", "compute", "solver", "neural"), default="solver")
-    capture.add_argument("--view", default="final",
-                         help="final, direct, indirect, albedo, normals, voxels or probes")
-    capture.add_argument("--tonemap", choices=("aces", "reinhard", "none"), default="aces")
+    capture.add_argument("--view", choices=VIEWS, default="final")
+    capture.add_argument("--tonemap", choices=("aces", "reinhard", "none"), default="aces",
+                         help="tone curve; `none` (clamp) for comparisons with Mitsuba")
+    capture.add_argument("--msaa", type=int, default=4, help="multisample count")
+    capture.add_argument("--light-samples", dest="light_samples", type=int, default=32,
+                         help="shadowed points on the emitters for direct light")
+    capture.add_argument("--voxel-color", dest="voxel_color", choices=("albedo", "radiance"), default="albedo",
+                         help="colour of the voxels view")
     capture.add_argument("--camera", help="ox,oy,oz,tx,ty,tz")
     capture.add_argument("--fov", type=float, help="vertical field of view, degrees")
     capture.add_argument("--exposure", type=float, default=0.0, help="exposure in EV")

@@ -134,28 +134,25 @@ class Tracer:
         length = np.linalg.norm(d, axis=1)
         d = d / np.maximum(length, 1e-30)[:, None]
         clear = np.ones(len(a), bool)
-        t = np.zeros(len(a))
-        checked = np.full(len(a), -1, np.int64)  # the last occupied cell tested, tested once per visit
-        active = np.arange(len(a))
+        # State of the segments still marching, compacted as they finish.
+        ray = np.arange(len(a))
+        o, t = a, np.zeros(len(a))
+        checked = np.full(len(a), -1, np.int64)  # the last occupied cell tested: each is tested once
         for _ in range(8 * self.n):
-            active = active[t[active] < length[active]]
-            if not len(active):
-                break
-            p = a[active] + t[active, None] * d[active]
-            cell = self.cell_index(p)
-            inside = cell >= 0
+            cell = self.cell_index(o + t[:, None] * d)
             # the grid is convex: a segment that has left it meets nothing more
-            active, cell, p = active[inside], cell[inside], p[inside]
-            occupied = np.nonzero(self.occupied[cell] & (cell != checked[active]))[0]
-            if len(occupied):
-                rays = active[occupied]
-                checked[rays] = cell[occupied]
-                solid = self._crosses_a_surface(a[rays], d[rays], length[rays], cell[occupied])
-                clear[active[occupied[solid]]] = False
-                keep = np.ones(len(active), bool)
-                keep[occupied[solid]] = False
-                active, cell = active[keep], cell[keep]
-            t[active] += self.free_steps[cell] * self.h
+            live = (t < length) & (cell >= 0)
+            test = np.nonzero(live & self.occupied[np.maximum(cell, 0)] & (cell != checked))[0]
+            if len(test):
+                checked[test] = cell[test]
+                blocked = test[self._crosses_a_surface(o[test], d[test], length[test], cell[test])]
+                clear[ray[blocked]] = False
+                live[blocked] = False
+            if not live.all():
+                ray, o, d, t, length, checked, cell = (x[live] for x in (ray, o, d, t, length, checked, cell))
+                if not len(ray):
+                    break
+            t += self.free_steps[cell] * self.h
         return clear
 
     def _crosses_a_surface(self, a, d, length, cells) -> np.ndarray:
