@@ -1,0 +1,104 @@
+// The scene's triangles, flat-shaded per face: direct light (emitter samples + sun, shadowed), indirect
+// diffuse light from the SH probe grid, and the emitters' own radiance. Writes linear HDR radiance
+// (or a debug quantity, see view_mode) to a float target; present.glsl tone-maps it.
+//
+//   outgoing = albedo / pi * (E_direct + E_indirect) + emission      (Lambertian, DESIGN.md)
+//
+// The probe grid holds indirect incident radiance only (no emitters, no sun), so direct light is not
+// counted twice.
+//
+// Defines (one compiled variant each, since llvmpipe runs both sides of a branch with masks, so a
+// uniform switch would pay for the unused terms): VIEW (one of the VIEW_* below), INDIRECT (0: GI off),
+// INTERLEAVE (1: interleaved direct light, VIEW_FINAL and VIEW_DIRECT only). With INTERLEAVE each pixel
+// of a 2x2 block sums a different quarter of the emitter samples and writes the pieces that
+// interleave_resolve.glsl recombines: everything but the reflected direct light, the direct irradiance,
+// albedo / pi, and the surface's plane (inverse view depth and its screen-space gradient).
+
+#define VIEW_FINAL 0
+#define VIEW_DIRECT 1
+#define VIEW_INDIRECT 2
+#define VIEW_ALBEDO 3
+#define VIEW_NORMALS 4
+
+#ifndef VIEW
+#define VIEW VIEW_FINAL
+#endif
+#ifndef INDIRECT
+#define INDIRECT 1
+#endif
+#ifndef INTERLEAVE
+#define INTERLEAVE 0
+#endif
+
+#if defined VERTEX_SHADER
+
+invariant gl_Position;  // the same depth in the depth pre-pass and the shading pass
+
+in vec3 in_position;
+in vec3 in_normal;
+in vec3 in_albedo;
+in vec3 in_emission;
+
+uniform mat4 view_proj;
+
+out vec3 v_position;
+flat out vec3 v_normal;
+flat out vec3 v_albedo;
+flat out vec3 v_emission;
+
+void main() {
+    v_position = in_position;
+    v_normal = in_normal;
+    v_albedo = in_albedo;
+    v_emission = in_emission;
+    gl_Position = view_proj * vec4(in_position, 1.0);
+}
+
+#elif defined FRAGMENT_SHADER
+
+#include "tonemap.glsl"
+#include "probe_grid.glsl"
+#include "direct_light.glsl"
+
+in vec3 v_position;
+flat in vec3 v_normal;
+flat in vec3 v_albedo;
+flat in vec3 v_emission;
+
+layout(location = 0) out vec4 frag_color;
+#if INTERLEAVE
+layout(location = 1) out vec4 frag_direct_irradiance;
+layout(location = 2) out vec4 frag_albedo_over_pi;
+layout(location = 3) out vec4 frag_plane;
+#endif
+
+void main() {
+    // Surfaces reflect on both sides (Mitsuba's two-sided diffuse); emitters emit from the front only.
+    vec3 n = gl_FrontFacing ? v_normal : -v_normal;
+    vec3 emission = gl_FrontFacing ? v_emission : vec3(0.0);
+#if VIEW == VIEW_ALBEDO
+    vec3 result = v_albedo;
+#elif VIEW == VIEW_NORMALS
+    vec3 result = srgb_to_linear(n * 0.5 + 0.5);  // present.glsl encodes sRGB: this shows n/2 + 1/2 as is
+#else
+    vec3 result = vec3(0.0);
+#if INTERLEAVE
+    ivec2 block = ivec2(gl_FragCoord.xy) & 1;
+    vec3 irradiance = emitter_irradiance_interleaved(v_position, n, block.x + 2 * block.y)
+                    + sun_irradiance_at(v_position, n);
+    frag_direct_irradiance = vec4(irradiance, 1.0);
+    frag_albedo_over_pi = vec4(v_albedo / PI, 1.0);
+    // 1 / view depth is linear in screen space on a plane: its value and gradient identify the plane.
+    frag_plane = vec4(gl_FragCoord.w, dFdx(gl_FragCoord.w), dFdy(gl_FragCoord.w), 1.0);
+    result += emission;
+#elif VIEW != VIEW_INDIRECT
+    result += v_albedo / PI * direct_irradiance(v_position, n) + emission;
+#endif
+#if VIEW != VIEW_DIRECT && INDIRECT
+    result += v_albedo / PI * probe_irradiance(v_position, n);
+#endif
+#endif
+    frag_color = vec4(result, 1.0);
+}
+
+#endif

@@ -1,0 +1,266 @@
+"""The renderer, headless through EGL (Mesa llvmpipe in CI): what a user sees in the Cornell box.
+
+Images are small (96x96) so the whole file runs in seconds on a CPU rasterizer. Regions are fractions
+of the image: (top, bottom, left, right).
+"""
+
+from __future__ import annotations
+
+import shutil
+from argparse import Namespace
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from viewer import sh
+from viewer.gpu.context import GLUnavailable, create_context
+from viewer.gpu.offscreen import OffscreenRenderer, capture, run_capture
+from viewer.gpu.programs import SHADERS, ShaderError
+from viewer.gpu.renderer import VIEWS, RenderSettings, Renderer
+from viewer.gpu.targets import HdrTarget
+from viewer.probes import ProbeGrid
+from viewer.scene import load
+from viewer.voxels import voxelize
+
+SIZE = (96, 96)
+RED_WALL = (0.2, 0.6, 0.02, 0.12)
+GREEN_WALL = (0.2, 0.6, 0.88, 0.97)
+FLOOR_FRONT_LEFT = (0.9, 0.98, 0.1, 0.4)
+SMALL_BOX_FRONT = (0.72, 0.84, 0.53, 0.72)   # faces the camera, away from the lamp: no direct light
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    try:
+        context = create_context()
+    except GLUnavailable as exc:
+        pytest.skip(str(exc))
+    yield context
+    context.release()
+
+
+@pytest.fixture(scope="module")
+def cornell():
+    return load("cornell")
+
+
+def constant_probes(scene, radiance, resolution: int = 4) -> ProbeGrid:
+    """Probes that all see the same uniform radiance (RGB) from every direction."""
+    c = np.zeros((resolution,) * 3 + (9, 3), np.float32)
+    c[..., 0, :] = np.asarray(radiance, np.float32) / sh.basis(np.array([0.0, 0.0, 1.0]))[0]
+    lo, hi = scene.bounds
+    return ProbeGrid(lo, hi, c, np.ones((resolution,) * 3, bool))
+
+
+@pytest.fixture(scope="module")
+def offscreen(ctx, cornell):
+    renderer = OffscreenRenderer(SIZE, samples=0, ctx=ctx)
+    renderer.renderer.set_scene(cornell)
+    yield renderer
+    renderer.release()
+
+
+def region(image: np.ndarray, box) -> np.ndarray:
+    """Mean colour (3,) of a region given as fractions (top, bottom, left, right)."""
+    h, w = image.shape[:2]
+    top, bottom, left, right = box
+    return image[int(top * h):int(bottom * h), int(left * w):int(right * w)].reshape(-1, 3).mean(axis=0)
+
+
+def test_cornell_box_has_a_red_left_wall_a_green_right_wall_and_a_lit_floor(offscreen, cornell):
+    offscreen.renderer.set_probes(constant_probes(cornell, [0.2, 0.2, 0.2]))
+    image = offscreen.render().astype(np.float64) / 255.0
+    r, g, b = region(image, RED_WALL)
+    assert r > 2 * g and r > 2 * b and r > 0.3, f"left wall {r:.2f} {g:.2f} {b:.2f} is not red"
+    r, g, b = region(image, GREEN_WALL)
+    assert g > 1.5 * r and g > 1.5 * b and g > 0.2, f"right wall {r:.2f} {g:.2f} {b:.2f} is not green"
+    floor = region(image, FLOOR_FRONT_LEFT)
+    assert floor.mean() > 0.4, f"floor {floor} is not lit"
+    # The lamp is at the top centre, drawn with its own (saturating) radiance.
+    lamp = region(image, (0.13, 0.15, 0.45, 0.55))
+    assert lamp.min() > 0.95
+
+
+def test_direct_light_has_no_indirect_part_and_gi_lights_the_shadows(offscreen, cornell):
+    renderer = offscreen.renderer
+    renderer.set_probes(None)
+    dark = region(offscreen.render_hdr(view="final"), SMALL_BOX_FRONT)
+    renderer.set_probes(constant_probes(cornell, [0.3, 0.3, 0.3]))
+    lit = region(offscreen.render_hdr(view="final"), SMALL_BOX_FRONT)
+    indirect_only = region(offscreen.render_hdr(view="indirect"), SMALL_BOX_FRONT)
+    assert np.all(dark < 0.01), f"the box face turned from the lamp gets direct light: {dark}"
+    assert np.all(lit > dark + 0.1)
+    # Uniform radiance L gives irradiance pi L and outgoing albedo * L on any surface.
+    albedo = cornell.group_albedo("small-box")
+    np.testing.assert_allclose(indirect_only, albedo * 0.3, rtol=0.03)
+
+
+@pytest.mark.parametrize("interleave", [True, False])
+def test_every_view_renders_finite_values(ctx, cornell, interleave):
+    probes = constant_probes(cornell, [0.5, 0.4, 0.3], resolution=6)
+    offscreen = OffscreenRenderer(SIZE, RenderSettings(interleave=interleave), samples=0, ctx=ctx)
+    try:
+        renderer = offscreen.renderer
+        renderer.set_scene(cornell)
+        renderer.set_probes(probes)
+        renderer.set_voxels(voxelize(cornell, 16))
+        for view in VIEWS:
+            hdr = offscreen.render_hdr(view=view)
+            assert np.all(np.isfinite(hdr)), f"view {view}: NaN or infinity"
+            assert hdr.max() > 0.05, f"view {view}: nothing drawn"
+            display = offscreen.render(view=view)
+            assert display.shape == (SIZE[1], SIZE[0], 3)
+    finally:
+        offscreen.release()
+
+
+def test_probe_textures_clamp_at_the_edges(ctx, cornell):
+    """Probes bright only in the +x layer must not light the opposite (-x) wall: a repeating texture
+    would blend that layer into the other edge of the box."""
+    m = 4
+    lo, hi = cornell.bounds
+    c = np.zeros((m, m, m, 9, 3), np.float32)
+    c[m - 1, :, :, 0, :] = 5.0
+    probes = ProbeGrid(lo, hi, c, np.ones((m, m, m), bool))
+    offscreen = OffscreenRenderer(SIZE, RenderSettings(probe_normal_offset=0.0), samples=0, ctx=ctx)
+    try:
+        offscreen.renderer.set_scene(cornell)
+        offscreen.renderer.set_probes(probes)
+        image = offscreen.render_hdr(view="indirect")
+    finally:
+        offscreen.release()
+    right = region(image, GREEN_WALL).max()
+    left = region(image, RED_WALL).max()
+    assert right > 0.1
+    assert left < 1e-3 * right, f"light from the +x probes leaks onto the -x wall: {left} vs {right}"
+
+
+def test_a_broken_shader_raises_a_clear_error_and_the_old_program_keeps_working(ctx, cornell, tmp_path):
+    shaders = tmp_path / "shaders"
+    shutil.copytree(SHADERS, shaders)
+    renderer = Renderer(ctx, shader_dir=shaders)
+    target = HdrTarget(ctx, SIZE)
+    try:
+        renderer.set_scene(cornell)
+        renderer.draw(target)
+        before = target.read()
+        source = (shaders / "sh.glsl").read_text().splitlines()
+        line = next(i for i, text in enumerate(source) if "y[0] = 0.282095;" in text)
+        source[line] = "    y[0] = 0.282095 +;"   # a syntax error in an included file
+        (shaders / "sh.glsl").write_text("\n".join(source) + "\n")
+        with pytest.raises(ShaderError) as error:
+            renderer.reload_shaders()
+        assert f"sh.glsl:{line + 1}:" in str(error.value) and "error" in str(error.value)
+        renderer.draw(target)
+        np.testing.assert_array_equal(target.read(), before)
+    finally:
+        renderer.release()
+        target.release()
+
+
+def test_capture_writes_a_png_of_the_requested_size(tmp_path, cornell):
+    out = tmp_path / "cornell.png"
+    image = capture(cornell, None, out, size=(120, 80), samples=2)
+    assert image.shape == (80, 120, 3)
+    assert Image.open(out).size == (120, 80)
+
+
+def test_run_capture_checks_its_arguments(tmp_path):
+    out = tmp_path / "shot.png"
+    args = Namespace(scene="cornell", out=str(out), size="64x48", gi="off", view="normals",
+                     camera="0,0,3.9,0,0,0", fov=40.0, exposure=0.0)
+    assert run_capture(args) == 0
+    assert Image.open(out).size == (64, 48)
+    with pytest.raises(ValueError, match="--size"):
+        run_capture(Namespace(**{**vars(args), "size": "64by48"}))
+    with pytest.raises(ValueError, match="--camera"):
+        run_capture(Namespace(**{**vars(args), "camera": "1,2,3"}))
+    with pytest.raises(ValueError, match="--view"):
+        run_capture(Namespace(**{**vars(args), "view": "xray"}))
+
+
+def test_direct_light_matches_the_path_tracer(ctx, cornell):
+    """Direct light only (Mitsuba: max_depth 2) against our shadow-mapped emitter samples, in linear
+    radiance: the mean over the image within 2%, and 90% of pixels within 15% of the reference
+    (its own noise at 512 spp is ~5%)."""
+    reference = pytest.importorskip("viewer.reference")
+    try:
+        expected = reference.render(cornell, width=64, height=64, spp=512, max_depth=2)
+    except reference.ReferenceUnavailable as exc:
+        pytest.skip(str(exc))
+    offscreen = OffscreenRenderer((64, 64), samples=8, ctx=ctx)
+    try:
+        offscreen.renderer.set_scene(cornell)
+        ours = offscreen.render_hdr(view="direct")
+    finally:
+        offscreen.release()
+    lum_ours, lum_ref = ours.mean(axis=-1), expected.mean(axis=-1)
+    assert abs(lum_ours.mean() / lum_ref.mean() - 1) < 0.02
+    lit = lum_ref > 0.05 * lum_ref.mean()
+    relative = np.abs(lum_ours[lit] - lum_ref[lit]) / lum_ref[lit]
+    assert np.quantile(relative, 0.9) < 0.15
+
+
+def test_interleaved_direct_light_matches_the_full_sum(ctx, cornell):
+    """Each pixel of a 2x2 block sums a quarter of the light samples; the resolve filter must give back
+    the full sum: the same image mean, and pixels that differ only by the filter's slight blur (one
+    pixel is large at 96x96, where penumbrae are a few pixels wide)."""
+    images = {}
+    for interleave in (False, True):
+        offscreen = OffscreenRenderer(SIZE, RenderSettings(interleave=interleave), samples=0, ctx=ctx)
+        try:
+            offscreen.renderer.set_scene(cornell)
+            images[interleave] = offscreen.render_hdr(view="direct").mean(axis=-1)
+        finally:
+            offscreen.release()
+    exact, interleaved = images[False], images[True]
+    assert abs(interleaved.mean() / exact.mean() - 1) < 0.005
+    lit = exact > 0.1 * exact.mean()
+    relative = np.abs(interleaved[lit] - exact[lit]) / exact[lit]
+    assert np.median(relative) < 0.015 and np.quantile(relative, 0.9) < 0.06
+
+
+def pixel_on_plane(camera, size, pixel, point, normal):
+    """The world point seen through the centre of pixel (column, row from the top), on a plane."""
+    from viewer.gpu.camera import perspective, view_matrix
+
+    width, height = size
+    inverse = np.linalg.inv(perspective(camera.fov, width / height, 0.1, 10.0) @ view_matrix(camera))
+    ndc = np.array([(pixel[0] + 0.5) / width * 2 - 1, 1 - (pixel[1] + 0.5) / height * 2, 1.0, 1.0])
+    far = inverse @ ndc
+    origin = np.asarray(camera.origin, np.float64)
+    direction = far[:3] / far[3] - origin
+    t = np.dot(np.asarray(point) - origin, normal) / np.dot(direction, normal)
+    return origin + t * direction
+
+
+def test_indirect_light_equals_the_probe_grids_irradiance(ctx, cornell):
+    """The GPU path (texture packing, trilinear lookup, SH unpacking, cosine-lobe convolution) gives the
+    same outgoing indirect radiance as ProbeGrid.irradiance in numpy, on walls in four orientations."""
+    m = 5
+    rng = np.random.default_rng(1)
+    lo, hi = cornell.bounds
+    coefficients = np.zeros((m, m, m, 9, 3), np.float32)
+    x = np.linspace(0, 1, m)[:, None, None, None]
+    coefficients[..., 0, :] = 1.0 + 0.5 * x                      # varies across the box (interpolation)
+    coefficients[..., 1:, :] = 0.15 * rng.standard_normal((m, m, m, 8, 3))
+    probes = ProbeGrid(lo, hi, coefficients, np.ones((m, m, m), bool))
+    settings = RenderSettings(probe_normal_offset=0.5)
+    offscreen = OffscreenRenderer(SIZE, settings, samples=0, ctx=ctx)
+    try:
+        offscreen.renderer.set_scene(cornell)
+        offscreen.renderer.set_probes(probes)
+        image = offscreen.render_hdr(view="indirect")
+    finally:
+        offscreen.release()
+    walls = {  # pixel (column, row), a point on the plane, its normal, its group
+        "back": ((60, 30), (0, 0, -1), (0, 0, 1)), "red-wall": ((6, 40), (-1, 0, 0), (1, 0, 0)),
+        "floor": ((20, 92), (0, -1, 0), (0, 1, 0)), "ceiling": ((60, 6), (0, 1, 0), (0, -1, 0))}
+    offset = settings.probe_normal_offset * probes.spacing.min()
+    for group, (pixel, point, normal) in walls.items():
+        normal = np.asarray(normal, np.float64)
+        p = pixel_on_plane(cornell.camera, SIZE, pixel, point, normal)
+        expected = cornell.group_albedo(group) / np.pi * np.maximum(
+            probes.irradiance(p[None] + offset * normal, normal[None])[0], 0)
+        np.testing.assert_allclose(image[pixel[1], pixel[0]], expected, rtol=0.01, atol=1e-4, err_msg=group)

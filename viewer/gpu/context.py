@@ -1,0 +1,33 @@
+"""A headless OpenGL 4.3+ context through EGL (no display needed; Mesa llvmpipe on machines without a GPU).
+
+Everything that needs a GL context lives under `viewer.gpu`; this module is the one place that makes
+one without a window (the window's context comes from moderngl-window). DESIGN.md, "The GL stack on
+these machines": without `backend="egl"` moderngl looks for an X display.
+"""
+
+from __future__ import annotations
+
+import moderngl
+
+GL_REQUIRED = 430
+"""Compute shaders, SSBOs and image load/store need OpenGL 4.3."""
+
+
+class GLUnavailable(RuntimeError):
+    """No usable OpenGL context could be created; the message says what to install or check."""
+
+
+def create_context(require: int = GL_REQUIRED) -> moderngl.Context:
+    """A standalone (headless) EGL context of at least GL `require` (430 = 4.3)."""
+    try:
+        return moderngl.create_standalone_context(backend="egl", require=require)
+    except Exception as exc:  # moderngl raises plain Exception subclasses for every failure
+        raise GLUnavailable(
+            f"cannot create a headless OpenGL {require // 100}.{require % 100 // 10} context through EGL "
+            f"({exc}); install libegl1 and libgl1 (Mesa llvmpipe works without a GPU)") from None
+
+
+def describe(ctx: moderngl.Context) -> str:
+    """One line naming the GL implementation, for logs and benchmark records."""
+    info = ctx.info
+    return f"{info.get('GL_RENDERER', '?')} / OpenGL {info.get('GL_VERSION', '?')}"

@@ -1,0 +1,64 @@
+"""GPU geometry: the scene's triangles (flat per-face attributes) and the debug views' instanced shapes."""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from viewer.scene import Scene
+
+SCENE_ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission")
+
+
+class SceneMesh:
+    """The scene as a non-indexed triangle list: every vertex carries its face's normal, albedo and
+    emission (flat shading, one material per face). Degenerate faces are dropped (no normal)."""
+
+    def __init__(self, ctx: moderngl.Context, scene: Scene):
+        self.ctx = ctx
+        keep = scene.face_areas > 0
+        corners = scene.triangles[keep]                                   # (F, 3, 3)
+        per_face = [scene.face_normals[keep], scene.albedo[keep], scene.emission[keep]]
+        columns = [corners] + [np.repeat(a[:, None, :], 3, axis=1) for a in per_face]
+        vertices = np.concatenate(columns, axis=2).astype(np.float32)     # (F, 3, 12)
+        self.vertex_count = 3 * len(corners)
+        self.buffer = ctx.buffer(vertices.tobytes())
+        self._arrays: dict[int, moderngl.VertexArray] = {}
+
+    def vertex_array(self, program: moderngl.Program) -> moderngl.VertexArray:
+        """A vertex array binding the attributes this program reads (the others are skipped)."""
+        key = program.glo
+        if key not in self._arrays:
+            layout = " ".join("3f" if name in program else "12x" for name in SCENE_ATTRIBUTES)
+            names = [name for name in SCENE_ATTRIBUTES if name in program]
+            self._arrays[key] = self.ctx.vertex_array(program, [(self.buffer, layout, *names)])
+        return self._arrays[key]
+
+    def render(self, program: moderngl.Program) -> None:
+        self.vertex_array(program).render(moderngl.TRIANGLES, vertices=self.vertex_count)
+
+    def forget_programs(self) -> None:
+        """Drop the vertex arrays (after shaders were reloaded: they point at the old programs)."""
+        for array in self._arrays.values():
+            array.release()
+        self._arrays.clear()
+
+    def release(self) -> None:
+        self.forget_programs()
+        self.buffer.release()
+
+
+def cube() -> np.ndarray:
+    """(36, 6) float32: a unit cube in [-0.5, 0.5]^3 as triangles, position and face normal."""
+    rows = []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            normal = np.zeros(3)
+            normal[axis] = sign
+            u, v = np.eye(3)[(axis + 1) % 3], np.eye(3)[(axis + 2) % 3]
+            centre = 0.5 * normal
+            quad = [centre + 0.5 * (a * u + b * v) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+            for i in (0, 1, 2, 0, 2, 3):
+                rows.append(np.concatenate([quad[i], normal]))
+    return np.asarray(rows, np.float32)
+

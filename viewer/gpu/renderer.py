@@ -1,0 +1,334 @@
+"""The renderer: a Scene and a ProbeGrid -> linear HDR radiance -> a tone-mapped sRGB image.
+
+Per fragment (shaders/surface.glsl): outgoing = albedo / pi * (E_direct + E_indirect) + emission, with
+E_direct from fixed samples on the area emitters and the sun, shadowed by shadow maps
+(viewer/gpu/shadows.py), and E_indirect the cosine-lobe convolution of the probe grid's SH, which holds
+indirect incident radiance only. `present` applies exposure, a tone curve and the sRGB encoding.
+Without multisampling the direct light is interleaved over 2x2 pixel blocks and recombined by a filter
+(RenderSettings.interleave, shaders/interleave_resolve.glsl): the renderer's largest cost on a CPU
+rasterizer.
+
+The renderer does not know where its pixels go: it draws into any HdrTarget and presents into any
+framebuffer (the window's screen, or an offscreen image, see viewer/gpu/offscreen.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import moderngl
+import numpy as np
+
+from viewer.gpu.camera import clip_range, gl_bytes, perspective, view_matrix, view_projection
+from viewer.gpu.lights import emitter_samples
+from viewer.gpu.mesh import SceneMesh, cube
+from viewer.gpu.probe_textures import ProbeTextures, empty_grid
+from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
+from viewer.gpu.shadows import EmitterShadows, SunShadow
+from viewer.gpu.targets import HdrTarget, InterleaveBuffers
+from viewer.probes import ProbeGrid
+from viewer.scene import Camera, Scene
+from viewer.voxels import VoxelGrid
+
+VIEWS = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
+SURFACE_VIEWS = {"final": 0, "direct": 1, "indirect": 2, "albedo": 3, "normals": 4, "probes": 0}
+TONEMAPS = {"none": 0, "reinhard": 1, "aces": 2}
+VOXEL_COLORS = ("albedo", "radiance")
+PROBE_UNIT, ATLAS_UNIT, SUN_UNIT, HDR_UNIT, INTERLEAVE_UNIT = 0, 7, 8, 9, 10
+
+
+@dataclass
+class RenderSettings:
+    """How a frame is drawn; the renderer reads these on every draw, so a UI can change them live."""
+
+    exposure: float = 0.0
+    """Exposure in stops (EV): linear radiance is scaled by 2^exposure before the tone curve."""
+    tonemap: str = "aces"
+    """Tone curve: `aces` (Narkowicz's ACES fit), `reinhard` (x / (1 + x)), or `none` (clamp to [0, 1],
+    like an 8-bit Mitsuba image: use it to compare against the reference)."""
+    indirect: bool = True
+    """Add the probe grid's indirect light (when a grid was given)."""
+    probe_normal_offset: float = 0.5
+    """Probes are sampled this many probe spacings off the surface along its normal (leak reduction)."""
+    light_samples: int = 32
+    """Points on the area emitters for direct light; each has a shadow cube, so the penumbra is made of
+    this many hard shadows."""
+    shadow_tile: int = 256
+    """Texels along one face of an emitter sample's shadow cube."""
+    shadow_bias: float = 0.5
+    """Normal offset of the shadow lookup, in shadow-map texels at the receiver's distance."""
+    sun_shadow_size: int = 2048
+    """Texels along the sun's shadow map."""
+    voxel_color: str = "albedo"
+    """`voxels` view: colour cubes by `albedo` or by outgoing `radiance` (when a radiance was given)."""
+    probe_radius: float = 0.15
+    """`probes` view: sphere radius as a fraction of the probe spacing."""
+    interleave: bool = True
+    """Interleaved direct light: each pixel of a 2x2 block shades a quarter of the emitter samples and a
+    3x3 plane-aware tent filter recombines them (on llvmpipe about 45% less work for the direct light;
+    the penumbra gets smoother, shadow edges blur by about a pixel). Applies to the `final` and
+    `direct` views of targets without multisampling, with 8 light samples or more."""
+
+    def __post_init__(self):
+        if self.tonemap not in TONEMAPS:
+            raise ValueError(f"tonemap must be one of {', '.join(TONEMAPS)}, not {self.tonemap!r}")
+        if self.voxel_color not in VOXEL_COLORS:
+            raise ValueError(f"voxel_color must be one of {', '.join(VOXEL_COLORS)}, not {self.voxel_color!r}")
+
+
+class Renderer:
+    """Draws a scene lit by its emitters, its sun and a probe grid, on a GL 4.3+ context.
+
+        renderer = Renderer(ctx)                      # compiles the shaders (ShaderError if broken)
+        renderer.set_scene(scene)                     # again whenever the scene changes
+        renderer.set_probes(probes)                   # whenever the GI changes; None: GI off
+        target = HdrTarget(ctx, (width, height))      # float radiance (+ depth), any size
+        renderer.draw(target, camera, view="final")
+        renderer.present(target, window_framebuffer, view="final")
+
+    `settings` (RenderSettings) may be changed between frames; shadow maps are rebuilt when a setting
+    they depend on changes. `reload_shaders()` recompiles from the files and keeps the old programs
+    when that fails.
+    """
+
+    def __init__(self, ctx: moderngl.Context, settings: RenderSettings | None = None,
+                 shader_dir: Path | str = SHADERS):
+        self.ctx = ctx
+        self.settings = settings or RenderSettings()
+        self.programs = ProgramLibrary(ctx, shader_dir)
+        for name in ("surface", "shadow_depth", "present", "voxel_cubes", "probe_spheres", "interleave_resolve"):
+            self.programs.get(name)  # compile everything now: a broken shader fails here, not mid-frame
+        self.scene: Scene | None = None
+        self.bounds: tuple[np.ndarray, np.ndarray] | None = None
+        self.mesh: SceneMesh | None = None
+        self._emitter_shadows: EmitterShadows | None = None
+        self._sun_shadow: SunShadow | None = None
+        self._shadow_key = None
+        self.probes: ProbeGrid | None = None
+        self._probe_textures = ProbeTextures(ctx, empty_grid())
+        self._probe_instances = None
+        self._voxel_instances = None
+        self._voxel_data = None
+        self._voxel_key = None
+        self._cube = ctx.buffer(cube().tobytes())
+        self._quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
+        self._present_array = ctx.vertex_array(self.programs.get("present"), [])
+        self._resolve_array = ctx.vertex_array(self.programs.get("interleave_resolve"), [])
+        self._interleave: InterleaveBuffers | None = None
+
+    # ---- inputs ------------------------------------------------------------------------------------
+    def set_scene(self, scene: Scene) -> None:
+        """Upload the scene's triangles; its shadow maps are rendered on the next draw."""
+        if self.mesh is not None:
+            self.mesh.release()
+        self.scene = scene
+        self.bounds = scene.bounds   # (lo, hi); Scene.bounds scans the faces, so not once per frame
+        self.mesh = SceneMesh(self.ctx, scene)
+        self._shadow_key = None
+
+    def set_probes(self, probes: ProbeGrid | None) -> None:
+        """The indirect light (incident radiance without emitters and sun), or None for GI off."""
+        self.probes = probes
+        self._probe_textures.update(probes if probes is not None else empty_grid())
+        self._release_instances("_probe_instances")
+        if probes is not None:
+            index = np.argwhere(probes.valid if probes.valid.any() else np.ones_like(probes.valid)).astype(np.int32)
+            self._probe_instances = (self.ctx.buffer(index.tobytes()), len(index))
+
+    def set_voxels(self, voxels: VoxelGrid | None, radiance: np.ndarray | None = None) -> None:
+        """Voxels for the `voxels` view, with their outgoing radiance (K, 3) if known."""
+        self._release_instances("_voxel_instances")
+        self._voxel_data = None
+        if voxels is None or voxels.count == 0:
+            return
+        cells = voxels.cells()
+        _, inverse = np.unique(voxels.hash_id, return_inverse=True)   # the cells' order, as in cells()
+        if radiance is not None:  # area-weighted mean over the voxels (facings) of each cell
+            weighted = np.asarray(radiance, np.float64) * voxels.area[:, None]
+            total = np.stack([np.bincount(inverse, weighted[:, c]) for c in range(3)], axis=1)
+            radiance = total / cells["area"][:, None]
+        self._voxel_data = (cells["center"], cells["albedo"], radiance, voxels.voxel_size)
+        self._voxel_key = None
+
+    def _release_instances(self, name: str) -> None:
+        instances = getattr(self, name)
+        if instances is not None:
+            instances[0].release()
+        setattr(self, name, None)
+
+    def reload_shaders(self) -> None:
+        """Recompile the shaders from their files; on a ShaderError the old programs stay in use."""
+        try:
+            self.programs.reload()
+        finally:
+            if self.mesh is not None:
+                self.mesh.forget_programs()
+            self._present_array.release()
+            self._resolve_array.release()
+            self._present_array = self.ctx.vertex_array(self.programs.get("present"), [])
+            self._resolve_array = self.ctx.vertex_array(self.programs.get("interleave_resolve"), [])
+            self._shadow_key = None
+
+    # ---- drawing -----------------------------------------------------------------------------------
+    def draw(self, target: HdrTarget, camera: Camera | None = None, view: str = "final") -> None:
+        """Draw linear HDR values for `view` into the target (resolved, ready to present or read)."""
+        if view not in VIEWS:
+            raise ValueError(f"view must be one of {', '.join(VIEWS)}, not {view!r}")
+        if self.scene is None:
+            raise RuntimeError("Renderer.draw: no scene (call set_scene first)")
+        camera = camera or self.scene.camera
+        self._ensure_shadows()
+        lo, hi = self.bounds
+        view_proj = view_projection(camera, target.aspect, lo, hi)
+        ctx = self.ctx
+        target.framebuffer.use()
+        target.framebuffer.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        if view == "voxels":
+            self._draw_voxels(view_proj)
+        elif self._interleaved(target, view):
+            self._draw_interleaved(target, view_proj, SURFACE_VIEWS[view])
+        else:
+            self._draw_surfaces(view_proj, SURFACE_VIEWS[view], target.framebuffer)
+            if view == "probes":
+                self._draw_probes(camera, target.aspect)
+        target.resolve()
+
+    def _interleaved(self, target: HdrTarget, view: str) -> bool:
+        s = self.settings
+        return s.interleave and target.samples <= 1 and view in ("final", "direct") and s.light_samples >= 8
+
+    def _draw_interleaved(self, target: HdrTarget, view_proj: np.ndarray, mode: int) -> None:
+        """Surfaces into the interleave buffers, then the recombining filter into the target."""
+        if self._interleave is None or self._interleave.size != target.size:
+            if self._interleave is not None:
+                self._interleave.release()
+            self._interleave = InterleaveBuffers(self.ctx, target.size)
+        buffers = self._interleave
+        buffers.framebuffer.use()
+        buffers.framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        self._draw_surfaces(view_proj, mode, buffers.framebuffer, interleave=True)
+        target.framebuffer.use()
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        program = self.programs.get("interleave_resolve")
+        set_uniforms(program, **buffers.use(INTERLEAVE_UNIT))
+        self._resolve_array.render(moderngl.TRIANGLES, vertices=3)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+
+    def present(self, target: HdrTarget, framebuffer: moderngl.Framebuffer, view: str = "final") -> None:
+        """Exposure, tone curve and sRGB from the target's HDR texture into `framebuffer`'s viewport
+        (which may be larger than the target: the image is then scaled up bilinearly)."""
+        s = self.settings
+        raw = view in ("albedo", "normals") or (view == "voxels" and not self._voxel_radiance_shown())
+        program = self.programs.get("present")
+        framebuffer.use()
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        target.texture.use(location=HDR_UNIT)
+        set_uniforms(program, hdr_image=HDR_UNIT, exposure_scale=float(2.0 ** s.exposure),
+                     tone_curve=TONEMAPS[s.tonemap], raw=raw,
+                     output_viewport=tuple(float(v) for v in framebuffer.viewport))
+        self._present_array.render(moderngl.TRIANGLES, vertices=3)
+
+    def _ensure_shadows(self) -> None:
+        s = self.settings
+        key = (id(self.mesh), s.light_samples, s.shadow_tile, s.sun_shadow_size)
+        if key == self._shadow_key:
+            return
+        for shadow in (self._emitter_shadows, self._sun_shadow):
+            if shadow is not None:
+                shadow.release()
+        lo, hi = self.bounds
+        depth = self.programs.get("shadow_depth")
+        self._emitter_shadows = EmitterShadows(self.ctx, emitter_samples(self.scene, s.light_samples), lo, hi,
+                                               s.shadow_tile)
+        self._emitter_shadows.render(depth, self.mesh.render)
+        self._sun_shadow = SunShadow(self.ctx, self.scene.sun, lo, hi, s.sun_shadow_size)
+        self._sun_shadow.render(depth, self.mesh.render)
+        self._shadow_key = key
+
+    def _draw_surfaces(self, view_proj: np.ndarray, mode: int, framebuffer: moderngl.Framebuffer,
+                       interleave: bool = False) -> None:
+        s = self.settings
+        probes = self.probes if s.indirect else None
+        program = self.programs.get("surface", VIEW=mode, INDIRECT=int(probes is not None),
+                                    INTERLEAVE=int(interleave))
+        units = self._probe_textures.use(PROBE_UNIT)
+        self._emitter_shadows.use(ATLAS_UNIT)
+        self._sun_shadow.use(SUN_UNIT)
+        offset = s.probe_normal_offset * float(np.min(probes.spacing)) if probes is not None else 0.0
+        set_uniforms(program, view_proj=gl_bytes(view_proj), probe_sh=units,
+                     probe_lo=tuple(self._probe_textures.lo), probe_hi=tuple(self._probe_textures.hi),
+                     probe_normal_offset=offset,
+                     shadow_bias=float(s.shadow_bias),
+                     **self._emitter_shadows.uniforms(ATLAS_UNIT), **self._sun_shadow.uniforms(SUN_UNIT))
+        self._depth_prepass(view_proj, framebuffer)
+        self.mesh.render(program)
+        self.ctx.depth_func = "<"
+
+    def _depth_prepass(self, view_proj: np.ndarray, framebuffer: moderngl.Framebuffer) -> None:
+        """Lay down the depth first, so the expensive surface shader runs once per visible pixel
+        (the Cornell box is shaded 1.4 times per pixel without it). Both programs declare
+        `invariant gl_Position`, so the depths match exactly and the second pass tests with <=."""
+        program = self.programs.get("shadow_depth")
+        program["view_proj"].write(gl_bytes(view_proj))
+        attachments = len(framebuffer.color_attachments)
+        framebuffer.color_mask = (False,) * 4 if attachments == 1 else ((False,) * 4,) * attachments
+        self.ctx.depth_func = "<"
+        self.mesh.render(program)
+        framebuffer.color_mask = (True,) * 4 if attachments == 1 else ((True,) * 4,) * attachments
+        self.ctx.depth_func = "<="
+
+    def _draw_probes(self, camera: Camera, aspect: float) -> None:
+        if self._probe_instances is None:
+            return
+        program = self.programs.get("probe_spheres")
+        buffer, count = self._probe_instances
+        units = self._probe_textures.use(PROBE_UNIT)
+        m = self.probes.resolution
+        lo, hi = self.bounds
+        near, far = clip_range(camera, lo, hi)
+        set_uniforms(program, view=gl_bytes(view_matrix(camera)),
+                     projection=gl_bytes(perspective(camera.fov, aspect, near, far)), probe_sh=units,
+                     probe_lo=tuple(self._probe_textures.lo), probe_hi=tuple(self._probe_textures.hi),
+                     probe_count=(m, m, m),
+                     sphere_radius=self.settings.probe_radius * float(np.min(self.probes.spacing)))
+        array = self.ctx.vertex_array(program, [(self._quad, "2f", "in_corner"), (buffer, "3i/i", "in_probe")])
+        array.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
+        array.release()
+
+    def _voxel_radiance_shown(self) -> bool:
+        return (self.settings.voxel_color == "radiance" and self._voxel_data is not None
+                and self._voxel_data[2] is not None)
+
+    def _draw_voxels(self, view_proj: np.ndarray) -> None:
+        if self._voxel_data is None:
+            return
+        centers, albedo, radiance, size = self._voxel_data
+        shown = self._voxel_radiance_shown()
+        if self._voxel_instances is None or self._voxel_key != shown:
+            self._release_instances("_voxel_instances")
+            colors = radiance if shown else albedo
+            data = np.concatenate([centers, colors], axis=1).astype(np.float32)
+            self._voxel_instances = (self.ctx.buffer(data.tobytes()), len(data))
+            self._voxel_key = shown
+        program = self.programs.get("voxel_cubes")
+        buffer, count = self._voxel_instances
+        set_uniforms(program, view_proj=gl_bytes(view_proj), cube_size=size, shade=not shown)
+        array = self.ctx.vertex_array(program, [(self._cube, "3f 3f", "in_position", "in_normal"),
+                                                (buffer, "3f 3f/i", "in_center", "in_color")])
+        array.render(moderngl.TRIANGLES, vertices=36, instances=count)
+        array.release()
+
+    def release(self) -> None:
+        for obj in (self.mesh, self._emitter_shadows, self._sun_shadow, self._probe_textures):
+            if obj is not None:
+                obj.release()
+        self._release_instances("_probe_instances")
+        self._release_instances("_voxel_instances")
+        if self._interleave is not None:
+            self._interleave.release()
+        for obj in (self._cube, self._quad, self._present_array, self._resolve_array):
+            obj.release()
+        self.programs.release()
