@@ -35,7 +35,7 @@ def test_albedo_near_one_converges_without_creating_energy(kernel):
     light = transport.solve(voxels, settings=transport.TransportSettings(kernel=kernel, bounces=200), transition=g)
     t = (voxels.albedo[:, 0] / np.pi)[:, None] * g.toarray()
     # the solver's first bounce comes from the fine light samples, the rest through T
-    first = voxels.albedo[:, 0] / np.pi * transport.direct_irradiance(voxels)[:, 0]
+    first = voxels.albedo[:, 0] / np.pi * transport.direct_irradiance(voxels, kernel=kernel)[:, 0]
     exact = voxels.emission[:, 0] + np.linalg.solve(np.eye(voxels.count) - t, first)
     assert np.all(np.isfinite(light.radiance))
     assert np.allclose(light.radiance[:, 0], exact, rtol=0.01)

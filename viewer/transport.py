@@ -186,9 +186,12 @@ def sun_irradiance(voxels: VoxelGrid, sun: DirectionalLight | None, tracer: Trac
     return out
 
 
-def direct_irradiance(voxels: VoxelGrid, tracer: Tracer | None = None, chunk: int = 1 << 21) -> np.ndarray:
-    """(K, 3) irradiance straight from the emitters, summed over the fine light samples:
-    E_i = sum_s Le_s cos_i cos_s A_s / (r^2 + A_s / pi) V(i, voxel of s)."""
+def direct_irradiance(voxels: VoxelGrid, tracer: Tracer | None = None, kernel: str = "physical",
+                      chunk: int = 1 << 21) -> np.ndarray:
+    """(K, 3) irradiance straight from the emitters, summed over the fine light samples with the same
+    kernel as the bounces: `physical` E_i = sum_s Le_s cos_i cos_s A_s / (r^2 + A_s / pi) V(i, voxel of s);
+    `paper` drops the emitter's cosine and the visibility (eq. 25), so it also lights what lies behind
+    a lamp or in a box's shadow."""
     lights = voxels.lights
     out = np.zeros((voxels.count, 3))
     if not lights.count:
@@ -203,9 +206,12 @@ def direct_irradiance(voxels: VoxelGrid, tracer: Tracer | None = None, chunk: in
         r = np.sqrt(np.maximum(r2, 1e-30))
         cos_i = (n @ lights.position.T - (p * n).sum(1)[:, None]) / r
         cos_s = (p @ lights.normal.T - (lights.position * lights.normal).sum(1)[None]) / r
-        weight = np.where((cos_i > 0) & (cos_s > 0), cos_i * cos_s * lights.area / (r2 + lights.area / np.pi), 0.0)
-        visible = _light_visibility(tracer, voxels, voxels.position[i], voxels.normal[i], weight > 0)
-        out[i] = (weight * visible) @ lights.radiance
+        if kernel == "paper":
+            weight = np.where(cos_i > 0, cos_i * lights.area / (r2 + lights.area / np.pi), 0.0)
+        else:
+            weight = np.where((cos_i > 0) & (cos_s > 0), cos_i * cos_s * lights.area / (r2 + lights.area / np.pi), 0.0)
+            weight *= _light_visibility(tracer, voxels, voxels.position[i], voxels.normal[i], weight > 0)
+        out[i] = weight @ lights.radiance
     return out
 
 
@@ -246,7 +252,7 @@ def solve(voxels: VoxelGrid, sun: DirectionalLight | None = None,
     tracer = tracer or Tracer.build(voxels)
     g = transition if transition is not None else transition_matrix(voxels, settings.kernel, tracer)
     reflectance = voxels.albedo / np.pi
-    e_direct = sun_irradiance(voxels, sun, tracer) + direct_irradiance(voxels, tracer)
+    e_direct = sun_irradiance(voxels, sun, tracer) + direct_irradiance(voxels, tracer, settings.kernel)
     emitted = voxels.emission.astype(np.float64)
     bounce = reflectance * e_direct
     reflected = bounce.copy()

@@ -40,8 +40,8 @@ def main(argv=None):
     parser.add_argument("--out", default=str(ROOT / "docs" / "ACCURACY.md"))
     args = parser.parse_args(argv)
     sources = ["cornell", "paper-test"] + ([str(PUBLIC_BOX)] if PUBLIC_BOX.exists() else [])
-    configs = [("physical", 32, 16)] if args.quick else [
-        ("physical", 16, 16), ("physical", 32, 16), ("physical", 32, 24), ("paper", 32, 16)]
+    configs = [("physical", 32, 24)] if args.quick else [
+        ("physical", 16, 16), ("physical", 32, 16), ("physical", 32, 24), ("paper", 32, 24)]
     rows = []
     for source in sources:
         scene = scenes.load(source)
