@@ -208,6 +208,9 @@ def direct_irradiance(voxels: VoxelGrid, tracer: Tracer | None = None, kernel: s
         cos_s = (p @ lights.normal.T - (lights.position * lights.normal).sum(1)[None]) / r
         if kernel == "paper":
             weight = np.where(cos_i > 0, cos_i * lights.area / (r2 + lights.area / np.pi), 0.0)
+            # like the rows of G: no receiver gathers more than its hemisphere
+            total = weight.sum(axis=1, keepdims=True)
+            weight *= np.where(total > np.pi, np.pi / np.maximum(total, 1e-30), 1.0)
         else:
             weight = np.where((cos_i > 0) & (cos_s > 0), cos_i * cos_s * lights.area / (r2 + lights.area / np.pi), 0.0)
             weight *= _light_visibility(tracer, voxels, voxels.position[i], voxels.normal[i], weight > 0)
