@@ -80,24 +80,24 @@ class Tracer:
     def _first_hits(self, o: np.ndarray, d: np.ndarray) -> np.ndarray:
         result = np.full(len(o), MISS, np.int64)
         start = self.cell_index(o)
-        t = np.zeros(len(o))
-        active = np.nonzero(start >= 0)[0]
+        # State of the rays still marching, compacted as they finish.
+        ray = np.nonzero(start >= 0)[0]
+        o, d, start = o[ray], d[ray], start[ray]
+        t = np.zeros(len(ray))
         for _ in range(8 * self.n):
-            if not len(active):
+            if not len(ray):
                 break
-            cell = self.cell_index(o[active] + t[active, None] * d[active])
-            alive = cell >= 0
-            active, cell = active[alive], cell[alive]
-            occupied = self.occupied[cell]
-            if occupied.any():
-                rays, cells = active[occupied], cell[occupied]
-                hit = self._facing_voxel(o[rays], d[rays], cells, cells == start[rays])
+            cell = self.cell_index(o + t[:, None] * d)
+            live = cell >= 0
+            test = np.nonzero(live & self.occupied[np.maximum(cell, 0)])[0]
+            if len(test):
+                hit = self._facing_voxel(o[test], d[test], cell[test], cell[test] == start[test])
                 done = hit != MISS
-                result[rays[done]] = hit[done]
-                finished = np.zeros(len(active), bool)
-                finished[np.nonzero(occupied)[0][done]] = True
-                active, cell = active[~finished], cell[~finished]
-            t[active] += self.free_steps[cell] * self.h
+                result[ray[test[done]]] = hit[done]
+                live[test[done]] = False
+            if not live.all():
+                ray, o, d, start, t, cell = (x[live] for x in (ray, o, d, start, t, cell))
+            t += self.free_steps[cell] * self.h
         return result
 
     def _facing_voxel(self, o, d, cells, in_start_cell) -> np.ndarray:
