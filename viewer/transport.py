@@ -190,8 +190,8 @@ def direct_irradiance(voxels: VoxelGrid, tracer: Tracer | None = None, kernel: s
                       chunk: int = 1 << 21) -> np.ndarray:
     """(K, 3) irradiance straight from the emitters, summed over the fine light samples with the same
     kernel as the bounces: `physical` E_i = sum_s Le_s cos_i cos_s A_s / (r^2 + A_s / pi) V(i, voxel of s);
-    `paper` drops the emitter's cosine and the visibility (eq. 25), so it also lights what lies behind
-    a lamp or in a box's shadow."""
+    `paper` drops the emitter's cosine and the visibility (eq. 25), so it lights what lies in a box's
+    shadow; emitters still emit from their front side only."""
     lights = voxels.lights
     out = np.zeros((voxels.count, 3))
     if not lights.count:
@@ -207,7 +207,8 @@ def direct_irradiance(voxels: VoxelGrid, tracer: Tracer | None = None, kernel: s
         cos_i = (n @ lights.position.T - (p * n).sum(1)[:, None]) / r
         cos_s = (p @ lights.normal.T - (lights.position * lights.normal).sum(1)[None]) / r
         if kernel == "paper":
-            weight = np.where(cos_i > 0, cos_i * lights.area / (r2 + lights.area / np.pi), 0.0)
+            # no emitter cosine and no visibility, but emitters stay one-sided (the fixed convention)
+            weight = np.where((cos_i > 0) & (cos_s > 0), cos_i * lights.area / (r2 + lights.area / np.pi), 0.0)
             # like the rows of G: no receiver gathers more than its hemisphere
             total = weight.sum(axis=1, keepdims=True)
             weight *= np.where(total > np.pi, np.pi / np.maximum(total, 1e-30), 1.0)

@@ -37,11 +37,15 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one configuration per scene")
     parser.add_argument("--points", type=int, default=500)
+    parser.add_argument("--config", action="append", metavar="KERNEL:N:M",
+                        help="only these configurations, e.g. physical:32:24 (repeatable)")
     parser.add_argument("--out", default=str(ROOT / "docs" / "ACCURACY.md"))
     args = parser.parse_args(argv)
     sources = ["cornell", "paper-test"] + ([str(PUBLIC_BOX)] if PUBLIC_BOX.exists() else [])
     configs = [("physical", 32, 24)] if args.quick else [
         ("physical", 16, 16), ("physical", 32, 16), ("physical", 32, 24), ("paper", 32, 24)]
+    if args.config:
+        configs = [(k, int(n), int(m)) for k, n, m in (c.split(":") for c in args.config)]
     rows = []
     for source in sources:
         scene = scenes.load(source)
@@ -54,25 +58,25 @@ def main(argv=None):
     write_report(Path(args.out), rows, args)
 
 
+MARKER = "<!-- accuracy-table -->"
+
+
 def write_report(path: Path, rows, args):
+    """Replace the table between the two markers in `path` (the prose around it stays)."""
     lines = [
-        "# Accuracy of the numpy solver against Mitsuba 3",
-        "",
-        "Relative RMSE of the incident-radiance SH that `python -m viewer sample SCENE --method solver` returns,",
-        f"against Mitsuba 3 (`{reference.variant()}`, 4096 directions per point with light sampling), over "
-        f"{args.points} random free-space points per scene (at least 0.06 from every surface, not inside objects):",
-        "`sqrt(mean((ours - ref)^2)) / sqrt(mean(ref^2))` over points, the 9 coefficients and RGB.",
-        "Seconds: the whole solve (voxelize, transition matrix, bounces, probe projection) on this machine "
-        f"({platform.processor() or platform.machine()}, 2 cores), one run.",
-        "",
-        "Regenerate: `.venv/bin/python -m viewer.bench.accuracy`" + (" --quick" if args.quick else ""),
+        f"Mitsuba 3 `{reference.variant()}`, 4096 directions per point with light sampling; {args.points} "
+        "free-space points per scene. Seconds: the whole solve, one run, on this 2-core machine.",
         "",
         "| scene | kernel | voxels N | probes M | rel. RMSE | seconds |",
         "|---|---|---|---|---|---|",
     ]
     lines += [f"| {s} | {k} | {n} | {m} | {e:.3f} | {t:.1f} |" for s, k, n, m, e, t in rows]
+    table = "\n".join(lines)
+    text = path.read_text() if path.exists() else f"# Accuracy\n\n{MARKER}\n{MARKER}\n"
+    before, _, rest = text.partition(MARKER)
+    _, _, after = rest.partition(MARKER)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
+    path.write_text(before + MARKER + "\n" + table + "\n" + MARKER + after)
 
 
 if __name__ == "__main__":
