@@ -121,8 +121,9 @@ class Tracer:
         surface being its plane clipped to its cell. `a` must lie in the grid.
 
         Occupied cells are not solid blocks: a ray that grazes along a wall, or leaves a surface close
-        to a room corner, passes through the wall's own voxel layer without crossing its plane. Inside
-        crossing is exact, so each occupied cell is tested once, when the march first lands in it.
+        to a room corner, passes through the wall's own voxel layer without crossing its plane. The
+        crossing is exact, so each occupied cell is tested once, when the march first lands in it;
+        steps are at least half a voxel, so a segment that only cuts a cell's corner may miss it.
         """
         out = np.empty(len(a), bool)
         for s in range(0, len(a), chunk):

@@ -43,7 +43,8 @@ class TransportSettings:
     kernel: str = "physical"
     """`physical` (form factor with visibility) or `paper` (eq. 25: receiver cosine, no visibility)."""
     bounces: int = 100
-    """Most bounces summed; 0 gives emission and direct sunlight only."""
+    """Most bounces summed. The first is the direct light (emitters and sun) reflected once, so 0 and 1
+    both give direct light only."""
     tolerance: float = 1e-4
     """Stop once a bounce adds less than this fraction of the light gathered so far."""
     extrapolate: bool = True
@@ -156,7 +157,9 @@ class _Visibility:
         unknown = self.known[ci, cj] < 0
         if unknown.any():
             count = len(self.known)
-            pairs = np.unique(ci[unknown] * count + cj[unknown])
+            # one trace per unordered pair, from the lower cluster index: V is symmetric
+            lo, hi = np.minimum(ci[unknown], cj[unknown]), np.maximum(ci[unknown], cj[unknown])
+            pairs = np.unique(lo * count + hi)
             a, b = pairs // count, pairs % count
             seen = _segments_visible(self.tracer, v.voxel_size, self.c_pos[a], self.c_nrm[a],
                                      self.c_pos[b], self.c_nrm[b])

@@ -223,5 +223,15 @@ def _light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSamp
     normal = scene.face_normals[face]
     coords = np.clip(np.floor((centroid - lo) / h).astype(np.int64), 0, resolution - 1)
     cell = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2
-    voxel = np.searchsorted(keys, cell * 6 + np.argmax(normal @ FACINGS.T, axis=1))
+    key = cell * 6 + np.argmax(normal @ FACINGS.T, axis=1)
+    voxel = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
+    stray = keys[voxel] != key
+    if stray.any():
+        # a sliver of emitter whose piece landed in a cell where the finer voxel pieces did not:
+        # give it the nearest voxel of the same facing
+        centres = np.stack([keys // 6 % resolution, keys // 6 // resolution % resolution,
+                            keys // 6 // resolution ** 2], axis=1)
+        for s in np.nonzero(stray)[0]:
+            same = np.nonzero(keys % 6 == key[s] % 6)[0]
+            voxel[s] = same[np.argmin(np.linalg.norm(centres[same] - coords[s], axis=1))]
     return LightSamples(centroid, normal, area, scene.emission[face], voxel)
