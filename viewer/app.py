@@ -1,33 +1,517 @@
-"""`python -m viewer`: the viewer on a scene (the built-in Cornell box by default).
+"""`python -m viewer [view] [SCENE]`: the interactive viewer (moderngl-window, glfw, imgui).
 
-The interactive window (moderngl-window, imgui) is the next piece of work; until it lands, and always
-where there is no display, this renders the scene headless through EGL to a PNG and says where it went.
+Without a display (no DISPLAY / WAYLAND_DISPLAY), or when no window can be opened, it says so and
+renders the scene headless through EGL to `<scene>.png` instead.
+
+The window is a moderngl-window `WindowConfig` (`ViewerApp`, its class attributes are its settings) on
+the glfw backend: the pyglet backend never delivers file drops on X11 (../shared/DESIGN.md). The pieces
+live in viewer/ui/: the imgui renderer and input, panels, frame-time graph, camera controller, the 3D
+viewport, background loading and the GI sources.
 """
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
+import json
+import logging
 import os
 import sys
+import time
+import weakref
+from pathlib import Path
 from types import SimpleNamespace
+
+import moderngl_window as mglw
 
 from viewer.gi import GISettings
 
+VIEW_CHOICES = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
+GI_CHOICES = ("off", "compute", "solver", "neural")
+
+
+def log(message: str) -> None:
+    """One line on stderr; tests and users read these (`viewer: ...`)."""
+    print(f"viewer: {message}", file=sys.stderr, flush=True)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The viewer's own flags (cheap to call: no GL or imgui import)."""
+    d = GISettings()
+    parser.add_argument("--gi", choices=GI_CHOICES, default="solver", help="indirect light source at start")
+    parser.add_argument("--view", choices=VIEW_CHOICES, default="final", help="what the view shows at start")
+    parser.add_argument("--size", default="1280x720", help="window size WxH")
+    parser.add_argument("--voxels", type=int, default=d.voxels, help="voxels per axis")
+    parser.add_argument("--probes", type=int, default=d.probes, help="probes per axis")
+    parser.add_argument("--bounces", type=int, default=d.bounces, help="most bounces summed")
+    parser.add_argument("--kernel", choices=("physical", "paper"), default=d.kernel)
+    parser.add_argument("--directions", type=int, default=d.directions, help="directions gathered per probe")
+    parser.add_argument("--screenshot", help="save the rendered image (no panels) here once it has settled "
+                                             "(GI done, full resolution), then quit")
+    parser.add_argument("--screenshot-window", help="with --screenshot: also save the whole window, panels "
+                                                    "included")
+    parser.add_argument("--frames", type=int, help="quit after this many frames")
+    parser.add_argument("--quit-after", type=float, help="quit after this many seconds")
+    parser.add_argument("--hide-panel", action="store_true", help="start with the settings panel hidden (Tab)")
+    parser.add_argument("--bench", type=int, metavar="FRAMES",
+                        help="once the picture has settled (GI done), draw the scene this many more frames at "
+                             "full resolution, print their CPU and GPU ms, and quit")
+    parser.add_argument("--redraw-always", action="store_true",
+                        help="draw the scene every frame, not only when it changes (for timing)")
+    parser.add_argument("--stats", help="write a JSON summary (frame times, scene, camera, messages) here at "
+                                        "exit and after every screenshot")
+    parser.add_argument("--shader-dir", help="load shaders from this folder instead of shaders/")
+
+
+def options_from(args) -> SimpleNamespace:
+    """The command line's namespace with every viewer flag present (defaults for missing ones)."""
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("scene", nargs="?", default="cornell")
+    add_arguments(parser)
+    options = vars(parser.parse_args([]))
+    options.update({k: v for k, v in vars(args).items() if v is not None})
+    return SimpleNamespace(**options)
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    from viewer.cli import InputError
+
+    try:
+        width, height = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise InputError(f"--size {text!r}: expected WxH, e.g. 1280x720") from None
+    if not (64 <= width <= 16384 and 64 <= height <= 16384):
+        raise InputError(f"--size {text!r}: each side must be 64..16384")
+    return width, height
+
 
 def run(args) -> int:
+    options = options_from(args)
+    parse_size(options.size)
+    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        log(f"no display found (DISPLAY and WAYLAND_DISPLAY are unset); rendering {options.scene} headless")
+        return render_headless(options)
+    from viewer.scene import load
+
+    scene = load(options.scene)   # a bad scene fails here: one line and exit status 2 (viewer.cli)
+    try:
+        window = open_window(options)
+    except Exception as exc:  # no X server behind DISPLAY, no GL 4.3, glfw missing ...
+        log(f"cannot open a window ({type(exc).__name__}: {exc}); rendering {options.scene} headless")
+        return render_headless(options)
+    ViewerApp.argv = options
+    app = ViewerApp(ctx=window.ctx, wnd=window, timer=mglw.timers.clock.Timer(), scene=scene)
+    window._config = weakref.ref(app)  # as moderngl-window's create_window_config_instance does
+    try:
+        mglw.run_window_config_instance(app)
+    finally:
+        app.close()
+    return 0
+
+
+def open_window(options):
+    """A glfw window with a GL 4.3+ core context, made current."""
+    width, height = parse_size(options.size)
+    logging.getLogger("moderngl_window").setLevel(logging.WARNING)
+    window_cls = mglw.get_local_window_cls("glfw")
+    window = window_cls(title=ViewerApp.title, size=(width, height), fullscreen=False,
+                        resizable=ViewerApp.resizable, visible=True, gl_version=ViewerApp.gl_version,
+                        aspect_ratio=ViewerApp.aspect_ratio, vsync=ViewerApp.vsync, samples=ViewerApp.samples,
+                        cursor=True)
+    mglw.activate_context(window=window)
+    return window
+
+
+def render_headless(options) -> int:
+    """What the viewer does without a window: a PNG of the scene through EGL (`python -m viewer capture`)."""
     from viewer.cli import run_capture
 
-    out = getattr(args, "out", None) or f"{os.path.splitext(os.path.basename(str(args.scene)))[0]}.png"
-    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
-        print(f"viewer: no display found; rendering {args.scene} headless to {out}", file=sys.stderr)
-    else:
-        print(f"viewer: the interactive window is not built yet; rendering {args.scene} to {out}",
-              file=sys.stderr)
-    d = GISettings()
-    capture = SimpleNamespace(scene=args.scene, out=out, size="1280x720", gi="solver", view="final",
-                              camera=None, fov=None, exposure=0.0, sun=None, voxels=d.voxels,
-                              probes=d.probes, kernel=d.kernel, bounces=d.bounces,
-                              directions=d.directions, dering=d.dering)
+    out = getattr(options, "screenshot", None) or f"{Path(str(options.scene)).stem}.png"
+    gi = options.gi if options.gi in ("off", "solver") else "solver"
+    capture = SimpleNamespace(scene=options.scene, out=out, size=options.size, gi=gi, view=options.view,
+                              camera=None, fov=None, exposure=0.0, sun=None, voxels=options.voxels,
+                              probes=options.probes, kernel=options.kernel, bounces=options.bounces,
+                              directions=options.directions, dering=GISettings().dering)
     status = run_capture(capture)
     if status == 0:
-        print(f"viewer: wrote {os.path.abspath(out)}", file=sys.stderr)
+        log(f"wrote {os.path.abspath(out)}")
     return status
+
+
+class ViewerApp(mglw.WindowConfig):
+    """The viewer window. Class attributes are its settings (moderngl-window's convention); `argv` holds
+    the options of `add_arguments` (set by `run`)."""
+
+    title = "GI viewer"
+    gl_version = (4, 3)
+    """Compute shaders and image load/store need 4.3; Mesa gives 4.5 core."""
+    window_size = (1280, 720)
+    aspect_ratio = None
+    """Free aspect: the view fills the window whatever its shape."""
+    resizable = True
+    vsync = True
+    samples = 0
+    clear_color = None
+    """The viewport covers the whole window every frame: no clear needed."""
+    light_samples = 16
+    """Emitter samples for direct light (the renderer's default is 32, which costs twice as much)."""
+    interleave = True
+    """Interleaved direct light (about 3x less direct-light work, see RenderSettings.interleave)."""
+    render_scale = 1.0
+    """Resolution of the still image as a fraction of the window's."""
+    preview_scale = 0.5
+    """Resolution while the camera or a slider moves, as a fraction of the still image's."""
+    interaction_linger = 0.25
+    """Seconds after the last camera input during which frames stay at preview resolution."""
+    msaa = 0
+    """Multisampling of the scene image (edge anti-aliasing; 4 doubles the cost on llvmpipe)."""
+    active_fps = 60.0
+    idle_fps = 4.0
+    """Frame rate when nothing moves and nothing is computed (input wakes the loop at once)."""
+    idle_after = 1.0
+    """Seconds after the last input before the loop goes idle."""
+    font_size = 15.0
+
+    @classmethod
+    def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
+        add_arguments(parser)
+
+    def __init__(self, scene=None, **kwargs):
+        super().__init__(**kwargs)
+        import glfw
+        from imgui_bundle import imgui
+
+        from viewer.gpu.context import describe
+        from viewer.gpu.programs import SHADERS
+        from viewer.gpu.renderer import RenderSettings, Renderer
+        from viewer.scene import load
+        from viewer.ui.controls import Controls
+        from viewer.ui.frame_graph import FrameTimes
+        from viewer.ui.gi_sources import GIController
+        from viewer.ui.imgui_input import ImguiInput
+        from viewer.ui.imgui_renderer import ImguiRenderer
+        from viewer.ui.panels import Message, ViewOptions
+        from viewer.ui.session import Session
+        from viewer.ui.viewport import Viewport
+
+        self.options = options = self.argv or options_from(SimpleNamespace())
+        self.gl_description = describe(self.ctx)
+        imgui.create_context()
+        imgui.get_io().set_ini_filename(None)   # no imgui.ini in the user's folder
+        self._load_font()
+        self.imgui_renderer = ImguiRenderer(self.ctx)
+        self.imgui_input = ImguiInput(self.wnd.size, self.wnd.buffer_size)
+        keys = self.wnd.keys
+        self.controls = Controls(self.wnd, self.imgui_input, lambda: self.session.camera, {
+            keys.S: lambda mods: self.request_screenshot("window" if mods.shift else "view"),
+            keys.R: lambda mods: self.reload_shaders(),
+            keys.F1: lambda mods: setattr(self.view, "show_help", not self.view.show_help),
+            keys.TAB: lambda mods: setattr(self.view, "show_panel", not self.view.show_panel),
+            keys.Z: lambda mods: self.session.camera.reset(),
+        }, linger=self.interaction_linger)
+        settings = RenderSettings(light_samples=self.light_samples, interleave=self.interleave)
+        self.renderer = Renderer(self.ctx, settings, options.shader_dir or SHADERS)
+        self.viewport = Viewport(self.ctx, self.renderer, self.render_scale, self.preview_scale, samples=self.msaa)
+        self.times = FrameTimes(self.ctx)
+        gi = GIController(self.ctx, options.gi, GISettings(voxels=options.voxels, probes=options.probes,
+                                                           kernel=options.kernel, bounces=options.bounces,
+                                                           directions=options.directions))
+        # Frame-time summaries cover the frames since the indirect light last settled.
+        self.session = Session(self.renderer, gi, scene or load(options.scene), options.scene, log=log,
+                               on_gi_ready=self.times.restart_summary)
+        if options.gi != gi.source:
+            note = gi.unavailable[options.gi]
+            log(f"--gi {options.gi} is not available ({note}); GI is off")
+            self.session.messages.append(Message(f"GI source {options.gi!r} not available: {note}", error=True))
+        self.view = ViewOptions(view=options.view, redraw_always=bool(options.redraw_always),
+                                show_panel=not options.hide_panel)
+        self.shader_error: str | None = None
+        self._screenshot_requested: str | None = None   # "view" (S) or "window" (shift+S)
+        self._screenshot_taken = False
+        self._bench_from: int | None = None   # frame number the --bench frames started at
+        self.frames = 0
+        self._started = self._frame_started = time.perf_counter()
+        self._drop_callback = glfw.set_drop_callback(self.wnd._window, self._glfw_drop)
+        self._x11_window = glfw.get_x11_window(self.wnd._window) if sys.platform.startswith("linux") else 0
+
+    def _load_font(self) -> None:
+        from imgui_bundle import imgui
+        import imgui_bundle
+
+        font = Path(imgui_bundle.__file__).parent / "assets" / "fonts" / "DroidSans.ttf"
+        if font.is_file():
+            imgui.get_io().fonts.add_font_from_file_ttf(str(font), self.font_size)
+
+    # ---- the frame ------------------------------------------------------------------------------------
+    def on_render(self, time_now: float, frame_time: float) -> None:
+        self._frame_started = time.perf_counter()
+        self.times.begin()
+        session = self.session
+        session.update(self.view.view)
+        self.controls.fly(frame_time)
+        screen = self.wnd.fbo
+        with self.times.gpu():
+            screen.use()
+            full = screen.viewport
+            screen.viewport = self._view_rect()
+            drew = self.viewport.frame(session.camera.camera(), self.view.view, session.content_key(), screen,
+                                       preview=self._interacting(), force=self.view.redraw_always)
+            if self._screenshot_requested == "view":
+                self._screenshot_requested = None
+                self._save(self.viewport.read(screen), self._screenshot_path())
+            settled_shot = self._settled_screenshot_due()
+            if settled_shot:
+                self._save(self.viewport.read(screen), self.options.screenshot)
+            if screen.viewport != full:   # the panel's strip: nothing of the scene is drawn there
+                self.ctx.clear(0.09, 0.09, 0.1, 1.0, viewport=(screen.viewport[2], 0, full[2] - screen.viewport[2],
+                                                                full[3]))
+            screen.viewport = full
+            self._draw_ui(frame_time)
+            if settled_shot and self.options.screenshot_window:
+                self._save(self.viewport.read(screen), self.options.screenshot_window)
+            if self._screenshot_requested == "window":
+                self._screenshot_requested = None
+                self._save(self.viewport.read(screen), self._screenshot_path("-window"))
+        self.times.end(drew)
+        self.frames += 1
+        if self.frames == 1:
+            width, height = self.wnd.buffer_size
+            log(f"ready: window 0x{self._x11_window:x}, {width}x{height}, {self.gl_description}, "
+                f"scene {session.name!r}")
+        self._check_quit(settled_shot)
+        self._bench()
+        self._throttle(drew)
+
+    def _view_rect(self) -> tuple[int, int, int, int]:
+        """The part of the window the scene is drawn in: left of the panel while the panel is shown."""
+        from viewer.ui.panels import PANEL_WIDTH
+
+        width, height = self.wnd.buffer_size
+        if not self.view.show_panel:
+            return (0, 0, width, height)
+        scale = width / max(self.wnd.size[0], 1)
+        return (0, 0, max(width - round(PANEL_WIDTH * scale), 64), height)
+
+    def _interacting(self) -> bool:
+        """Draw previews: the user is moving the camera or a slider, or the GI is converging."""
+        from imgui_bundle import imgui
+
+        gi = self.session.gi
+        return self.controls.moving or imgui.is_any_item_active() or (gi.source == "compute" and gi.busy)
+
+    def _settled_screenshot_due(self) -> bool:
+        return (bool(self.options.screenshot) and not self._screenshot_taken and self.frames >= 2
+                and self.viewport.settled and not self.session.busy)
+
+    def _check_quit(self, settled_shot: bool) -> None:
+        o = self.options
+        if settled_shot:
+            self._screenshot_taken = True
+        if (settled_shot or (o.frames is not None and self.frames >= o.frames)
+                or (o.quit_after is not None and time.perf_counter() - self._started >= o.quit_after)):
+            self.wnd.close()
+
+    def _bench(self) -> None:
+        """--bench N: when settled, time N full redraws (the summary printed at exit), then quit."""
+        count = self.options.bench
+        if not count:
+            return
+        if self._bench_from is None:
+            if self.frames >= 2 and self.viewport.settled and not self.session.busy:
+                self._bench_from = self.frames
+                self.view.redraw_always = True
+                self.times.restart_summary()
+                log(f"bench: settled after {time.perf_counter() - self._started:.1f} s; timing {count} redraws")
+        elif self.frames - self._bench_from >= count + 3:   # + the GPU results still in flight
+            self.wnd.close()
+
+    def _throttle(self, drew: bool) -> None:
+        """Cap the frame rate: llvmpipe and the solvers share the same few cores. When nothing moves and
+        nothing is being computed, wait for input (or `1 / idle_fps` s) instead of drawing frames."""
+        import glfw
+
+        if self.view.redraw_always:
+            return
+        now = time.perf_counter()
+        busy = drew or self.session.busy
+        idle = not busy and now - self.controls.last_input >= self.idle_after
+        rest = 1.0 / (self.idle_fps if idle else self.active_fps) - (now - self._frame_started)
+        if rest <= 0:
+            return
+        if idle:
+            glfw.wait_events_timeout(rest)   # returns at once on input or a drop
+        else:
+            time.sleep(rest)
+
+    def _draw_ui(self, frame_time: float) -> None:
+        from imgui_bundle import imgui
+
+        from viewer.ui import panels
+
+        s = self.session
+        imgui.get_io().delta_time = max(frame_time, 1e-4)
+        imgui.new_frame()
+        gi_line = s.gi.status()[0]
+        panels.settings_panel(self.view.show_panel, {
+            "Scene": (self._scene_section, True),
+            "Global illumination": (lambda: panels.gi_section(s.gi), True),
+            "Light": (lambda: panels.light_section(s.edits, s.scene_size), True),
+            "Materials": (lambda: panels.materials_section(s.edits), False),
+            "View": (lambda: panels.view_section(self.view, self.renderer.settings, self.viewport), True),
+        })
+        panels.frame_time_overlay(self.times, gi_line, self.view.show_frame_times)
+        panels.help_window(self.view)
+        panels.messages_window(s.messages, self.shader_error or self.viewport.error)
+        panels.loading_overlay(s.loading)
+        imgui.render()
+        self.imgui_renderer.render(imgui.get_draw_data(), self.wnd.fbo)
+
+    def _scene_section(self) -> None:
+        from imgui_bundle import imgui
+
+        from viewer.ui import panels
+
+        s = self.session
+        if panels.scene_section(s.name, len(s.scene.faces), s.edits, s.loading):
+            s.edits.reset()
+        imgui.same_line()
+        if imgui.button("Reset camera (Z)"):
+            s.camera.reset()
+
+    # ---- actions --------------------------------------------------------------------------------------
+    def _screenshot_path(self, suffix: str = "") -> Path:
+        """`<scene>-<date>-<time>[-window].png` in the current folder, never overwriting a file."""
+        stem = "".join(c if c.isalnum() or c in "-_" else "_" for c in self.session.name) or "screenshot"
+        stem = f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}{suffix}"
+        path, count = Path(f"{stem}.png"), 1
+        while path.exists():
+            count += 1
+            path = Path(f"{stem}-{count}.png")
+        return path
+
+    def _save(self, image, path) -> None:
+        from PIL import Image
+
+        from viewer.ui.panels import Message
+
+        try:
+            Image.fromarray(image).save(path)
+        except (OSError, ValueError) as exc:
+            log(f"cannot save screenshot {path}: {exc}")
+            self.session.messages.append(Message(f"Cannot save {path}: {exc}", error=True))
+            return
+        self.session.messages.append(Message(f"Saved {path}"))
+        if self.options.stats:
+            self._write_stats()   # before the log line: whoever waits for it can read the state
+        log(f"saved screenshot {os.path.abspath(path)}")
+
+    def reload_shaders(self) -> None:
+        from viewer.gpu.programs import ShaderError
+
+        try:
+            self.renderer.reload_shaders()
+        except ShaderError as exc:
+            self.shader_error = str(exc)
+            log(f"shader reload failed, the previous shaders keep running: {exc}")
+        else:
+            self.shader_error = None
+            log("shaders reloaded")
+        self.viewport.invalidate()
+
+    def request_screenshot(self, what: str) -> None:
+        """Save the view ("view") or the whole window with its panels ("window") after this frame."""
+        self._screenshot_requested = what
+
+    # ---- events (moderngl-window calls these) ---------------------------------------------------------
+    def on_key_event(self, key, action, modifiers) -> None:
+        self.controls.key(key, action, modifiers)
+
+    def on_unicode_char_entered(self, char: str) -> None:
+        self.controls.character(char)
+
+    def on_mouse_position_event(self, x: int, y: int, dx: int, dy: int) -> None:
+        self.controls.mouse_position(x, y)
+
+    def on_mouse_press_event(self, x: int, y: int, button: int) -> None:
+        self.controls.mouse_press(x, y, button)
+
+    def on_mouse_drag_event(self, x: int, y: int, dx: int, dy: int) -> None:
+        self.controls.mouse_drag(x, y, dx, dy)
+
+    def on_mouse_release_event(self, x: int, y: int, button: int) -> None:
+        self.controls.mouse_release(x, y, button)
+
+    def on_mouse_scroll_event(self, x_offset: float, y_offset: float) -> None:
+        self.controls.scroll(x_offset, y_offset)
+
+    def on_resize(self, width: int, height: int) -> None:
+        self.imgui_input.resize(self.wnd.size, self.wnd.buffer_size)
+
+    def _glfw_drop(self, window, paths) -> None:
+        import glfw
+
+        x, y = glfw.get_cursor_pos(window)
+        self.on_files_dropped_event(int(x), int(y), list(paths))
+
+    def on_files_dropped_event(self, x: int, y: int, paths: list[str]) -> None:
+        from viewer.ui.panels import Message
+
+        log(f"dropped {len(paths)} file(s) at {x},{y}: {', '.join(paths)}")
+        self.controls.touch(moved=False)
+        if not paths:
+            return
+        if len(paths) > 1:
+            self.session.messages.append(Message(f"{len(paths)} files dropped: opening the first one."))
+        self.session.load_file(paths[0])
+
+    # ---- the end --------------------------------------------------------------------------------------
+    def close(self) -> None:
+        """After the window closed (no GL calls here: the context is gone): stop the solver, report."""
+        self.session.close()
+        redraws, every = self.times.summary(redrawn_only=True), self.times.summary()
+        nan = float("nan")
+        log(f"{self.frames} frames; since the GI settled: scene redraws {int(redraws['frames'])}, CPU median "
+            f"{redraws.get('cpu_median_ms', nan):.1f} ms, GPU median {redraws.get('gpu_median_ms', nan):.1f} ms; "
+            f"all frames: CPU median {every.get('cpu_median_ms', nan):.1f} ms, GPU median "
+            f"{every.get('gpu_median_ms', nan):.1f} ms")
+        if self.options.stats:
+            self._write_stats()
+
+    def _write_stats(self) -> None:
+        """The state a test or a benchmark wants to see, as JSON (`--stats FILE`)."""
+        redraws, every = self.times.summary(redrawn_only=True), self.times.summary()
+        s = self.session
+        camera = s.camera.camera()
+        stats = {
+            "scene": s.name, "source": s.source, "triangles": int(len(s.scene.faces)),
+            "groups": list(s.scene.groups), "loads": s.loads, "load_errors": s.load_errors,
+            "gi_source": s.gi.source, "gi_status": s.gi.status()[0], "view": self.view.view,
+            "gi_settings": dataclasses.asdict(s.gi.settings),
+            "camera": {"origin": list(camera.origin), "target": list(camera.target), "fov": camera.fov},
+            "frames": self.frames, "frame_times_redraws": redraws, "frame_times_all": every,
+            "window": list(self.wnd.buffer_size), "gl": self.gl_description,
+            "messages": [{"text": m.text, "error": m.error} for m in s.messages],
+            "shader_error": self.shader_error, "help_shown": self.view.show_help,
+        }
+        Path(self.options.stats).write_text(json.dumps(stats, indent=2))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m viewer.app [SCENE] [flags]`: the viewer with all of its flags (`python -m viewer view`
+    passes only the scene until viewer/cli.py adds them). Exit status as in viewer.cli."""
+    from viewer.cli import InputError
+    from viewer.scene import SceneError
+
+    parser = argparse.ArgumentParser(prog="python -m viewer.app", description="The interactive GI viewer.")
+    parser.add_argument("scene", nargs="?", default="cornell", help="a built-in scene name or a scene file")
+    add_arguments(parser)
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        return run(args)
+    except (SceneError, InputError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -59,6 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     view = sub.add_parser("view", help="the interactive viewer (default)")
     view.add_argument("scene", nargs="?", default="cornell")
+    from viewer.app import add_arguments  # the viewer's own flags; no GL import
+
+    add_arguments(view)
 
     sample = sub.add_parser("sample", help="incident-radiance SH at points, as the renderer sees it")
     sample.add_argument("scene", help="a built-in scene name or a scene file (.obj .glb .gltf .ply)")

@@ -1,0 +1,240 @@
+"""Where the viewer's indirect light comes from: off, the compute-shader solver, the CPU (numpy)
+solver, or the neural field; one place that restarts the active source when the scene or the GI
+settings change and hands finished probe grids to the render loop.
+
+The CPU solver (viewer.gi.solve) runs in a worker process (viewer.ui.background.SolverProcess) and its
+grid replaces the shown one when it is done. The compute solver (viewer.gpu.compute_solver) runs on the
+render thread's GL context, a few milliseconds a frame, and its probes are shown as they converge.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from viewer.gi import GISettings
+from viewer.probes import ProbeGrid
+from viewer.scene import Scene
+from viewer.ui.background import SOLVER_STAGES, BackgroundTask, SolverProcess
+
+SOURCES = ("off", "compute", "solver", "neural")
+LABELS = {"off": "Off (direct only)", "compute": "Compute (GPU)", "solver": "CPU solver (numpy)",
+          "neural": "Neural (ONNX)"}
+MODELS = Path(__file__).resolve().parent.parent.parent / "models"
+
+
+def unavailable_reasons() -> dict[str, str]:
+    """Source -> why it cannot be chosen in this build (sources missing from the dict can)."""
+    reasons = {}
+    if importlib.util.find_spec("viewer.gpu.compute_solver") is None:
+        reasons["compute"] = ("The compute-shader solver (viewer/gpu/compute_solver.py) is not part of "
+                              "this build yet.")
+    models = sorted(MODELS.glob("*.onnx")) if MODELS.is_dir() else []
+    if not models:
+        reasons["neural"] = "No trained model yet: the neural field needs an .onnx file in models/."
+    else:
+        reasons["neural"] = (f"A model exists ({models[0].name}), but the viewer does not run the neural "
+                             f"field yet.")
+    return reasons
+
+
+class ComputeSource:
+    """The compute-shader solver (viewer.gpu.compute_solver), kept across restarts: while only colours
+    and lights change it keeps its visibility and probe rays, so an edit re-converges in seconds.
+
+    Voxelizing runs off the render thread; the solver then steps on the render thread's context for
+    `budget_ms` a frame. Its probes are read back (a few hundred kB) and handed to the renderer at most
+    every `publish_interval` seconds while converging, and once more when converged.
+    """
+
+    def __init__(self, ctx, publish_interval: float = 1.0, debounce: float = 0.2):
+        self.ctx = ctx
+        self.publish_interval = publish_interval
+        self.debounce = debounce
+        """Seconds a request waits for a newer one (a dragged slider asks every frame)."""
+        self.solver = None
+        self.voxelizing: BackgroundTask | None = None
+        self.error: str | None = None
+        self.steps = 0
+        self._request = None          # (scene, settings) to solve
+        self._requested_at = 0.0
+        self._waiting = False         # the request is not being voxelized yet
+        self._voxelizing_request = None
+        self._unpublished = False
+        self._published_at = 0.0
+
+    def restart(self, scene: Scene, settings: GISettings) -> None:
+        self._request, self._requested_at, self._waiting = (scene, settings), time.perf_counter(), True
+        self.error, self.steps = None, 0
+
+    @property
+    def busy(self) -> bool:
+        return self.error is None and (self._waiting or self.voxelizing is not None
+                                       or (self.solver is not None and not self.solver.converged))
+
+    def step(self, budget_ms: float) -> ProbeGrid | None:
+        """Work for about `budget_ms`; returns new probes when it is time to show them."""
+        from viewer.voxels import voxelize
+
+        try:
+            now = time.perf_counter()
+            if self.voxelizing is not None and self.voxelizing.done:
+                task, request, self.voxelizing = self.voxelizing, self._voxelizing_request, None
+                if task.error:
+                    self.error = task.error
+                    return None
+                if request is self._request:   # else a newer request is waiting: drop these voxels
+                    self._start(task.result)
+            if self._waiting and self.voxelizing is None and now - self._requested_at >= self.debounce:
+                scene, settings = self._request
+                self._waiting, self._voxelizing_request = False, self._request
+                self.voxelizing = BackgroundTask("voxelize", voxelize, scene, settings.voxels, settings.normal_mode)
+            if self.solver is None or self._waiting or self.voxelizing is not None:
+                return None
+            if not self.solver.converged:
+                self._unpublished |= self.solver.step(budget_ms)
+                self.steps += 1
+            if self._unpublished and (self.solver.converged or now - self._published_at >= self.publish_interval):
+                self._unpublished, self._published_at = False, now
+                return self.solver.probe_grid(include_emitted=False)
+        except Exception as exc:  # e.g. a compute shader that does not compile: shown in the panel
+            self.error = f"{type(exc).__name__}: {exc}"
+        return None
+
+    def _start(self, voxels) -> None:
+        from viewer.gpu.compute_solver import ComputeSolver
+
+        scene, settings = self._request
+        if self.solver is None:
+            self.solver = ComputeSolver(self.ctx, voxels, scene.sun, settings, bounds=scene.bounds)
+        else:
+            self.solver.restart(voxels, scene.sun, settings, bounds=scene.bounds)
+        self._unpublished = False
+
+    def status(self) -> str:
+        if self._waiting:
+            return "Compute solver: starting..."
+        if self.voxelizing is not None:
+            return f"Compute solver: voxelizing, {self.voxelizing.elapsed:.1f} s"
+        if self.solver is None:
+            return "Compute solver: idle."
+        solver = self.solver
+        return f"Compute solver: {solver.phase}, {solver.bounces} bounces, {self.steps} steps."
+
+
+class GIController:
+    def __init__(self, ctx, source: str = "solver", settings: GISettings | None = None,
+                 compute_budget_ms: float = 40.0):
+        self.ctx = ctx
+        self.unavailable = unavailable_reasons()
+        self.source = source if source not in self.unavailable else "off"
+        self.settings = settings or GISettings()
+        self.compute_budget_ms = compute_budget_ms
+        self.scene: Scene | None = None
+        self._scene_version = -1
+        self._cpu: SolverProcess | None = None
+        self._cpu_key = None         # (scene version, settings) of the grid the CPU solver last finished
+        self._cpu_grid: ProbeGrid | None = None
+        self._cpu_requested = None   # (scene version, settings) of the solve under way
+        self._compute: ComputeSource | None = None
+        self._outgoing: list[ProbeGrid | None] = []   # grids for the render loop to show, oldest first
+        self.ready_seconds: float | None = None        # how long the last finished solve took
+
+    # ---- inputs -----------------------------------------------------------------------------------------
+    def set_scene(self, scene: Scene, version: int, new_scene: bool = False) -> None:
+        """The scene changed (an edit, or a new file: then the old probes no longer fit and go at once)."""
+        self.scene, self._scene_version = scene, version
+        if new_scene:
+            self._outgoing.append(None)
+        self._restart()
+
+    def set_source(self, source: str) -> None:
+        if source == self.source or source in self.unavailable:
+            return
+        self.source = source
+        self._restart()
+
+    def set_settings(self, **changes) -> None:
+        settings = replace(self.settings, **changes)
+        if settings != self.settings:
+            self.settings = settings
+            self._restart()
+
+    def _restart(self) -> None:
+        if self.scene is None:
+            return
+        if self.source != "solver" and self._cpu is not None:
+            self._cpu.cancel()
+        if self.source == "off":
+            self._outgoing.append(None)
+        elif self.source == "solver":
+            key = (self._scene_version, self.settings)
+            if key == self._cpu_key:
+                self._cpu.cancel()
+                self._outgoing.append(self._cpu_grid)   # already solved: show it again
+            else:
+                self._cpu = self._cpu or SolverProcess()
+                self._cpu.request(self.scene, self.settings)
+                self._cpu_requested = key
+        elif self.source == "compute":
+            self._compute = self._compute or ComputeSource(self.ctx)
+            self._compute.restart(self.scene, self.settings)
+
+    # ---- per frame ----------------------------------------------------------------------------------------
+    def update(self) -> tuple[bool, ProbeGrid | None]:
+        """(changed, grid): whether the shown probes should change, and to what (None: no indirect)."""
+        if self._cpu is not None:
+            grid = self._cpu.poll()
+            if grid is not None and self.source == "solver":
+                self._cpu_key, self._cpu_grid = self._cpu_requested, grid
+                self.ready_seconds = sum(self._cpu.last_seconds.values())
+                self._outgoing.append(grid)
+        if self._compute is not None and self.source == "compute":
+            grid = self._compute.step(self.compute_budget_ms)
+            if grid is not None:
+                self._outgoing.append(grid)
+        if self._outgoing:
+            grid = self._outgoing[-1]
+            self._outgoing.clear()
+            return True, grid
+        return False, None
+
+    @property
+    def busy(self) -> bool:
+        """Still working towards the probes for the current scene and settings."""
+        if self.source == "solver":
+            return self._cpu is not None and self._cpu.busy
+        if self.source == "compute":
+            return self._compute is not None and self._compute.busy
+        return False
+
+    def status(self) -> tuple[str, float | None, str | None]:
+        """(one line for the panel, progress 0..1 or None, error or None)."""
+        if self.source == "off":
+            return "Direct light only.", None, None
+        if self.source == "solver":
+            cpu = self._cpu
+            if cpu is not None and cpu.error:
+                return "CPU solver failed.", None, cpu.error
+            if cpu is not None and cpu.busy:
+                if cpu.running_since is None:
+                    return "CPU solver: starting...", 0.0, None
+                step = min(len(cpu.stages_done) + 1, len(SOLVER_STAGES))
+                return (f"CPU solver: {cpu.stage} ({step}/{len(SOLVER_STAGES)}), {cpu.elapsed:.1f} s",
+                        cpu.progress, None)
+            if self.ready_seconds is not None:
+                return f"CPU solver: done in {self.ready_seconds:.1f} s.", 1.0, None
+            return "CPU solver: idle.", None, None
+        if self.source == "compute":
+            if self._compute is None:
+                return "Compute solver: idle.", None, None
+            if self._compute.error:
+                return "Compute solver failed.", None, self._compute.error
+            return self._compute.status(), None, None
+        return "Not available.", None, None
+
+    def close(self) -> None:
+        if self._cpu is not None:
+            self._cpu.close()

@@ -1,0 +1,292 @@
+"""The imgui windows: the settings panel (scene, GI, light, materials, view, performance), the help
+overlay, messages, and the loading indicator. Each section edits the objects it is given and says
+whether it changed anything; the app decides what that means for the scene, the GI and the view.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from imgui_bundle import imgui
+
+from viewer.gpu.renderer import TONEMAPS, VIEWS, RenderSettings
+from viewer.ui.background import BackgroundTask
+from viewer.ui.frame_graph import FrameTimes, draw_frame_graph
+from viewer.ui.gi_sources import LABELS, SOURCES, GIController
+from viewer.ui.scene_edits import SceneEdits
+
+PANEL_WIDTH = 360
+ERROR_COLOUR = imgui.ImVec4(1.0, 0.45, 0.4, 1.0)
+NOTE_COLOUR = imgui.ImVec4(0.75, 0.75, 0.75, 1.0)
+KERNELS = ("physical", "paper")
+LIGHT_SAMPLES = (4, 8, 16, 32, 64)
+HELP = """\
+Mouse
+  left drag            orbit around the target
+  shift + left drag    pan (also middle drag)
+  wheel                zoom
+  right drag           look around (fly mode)
+  right held + W A S D fly forward / left / back / right
+               Q E     down / up (shift: faster)
+Keys
+  Z     reset the camera
+  S     save a screenshot of the view (PNG in the current folder)
+  shift + S   ... of the whole window, panels included
+  R     reload shaders (errors are shown, the old ones keep running)
+  F1    this help
+  Tab   hide / show the panel
+  Esc   quit
+Files
+  drop an .obj .glb .gltf or .ply file on the window to open it"""
+
+
+@dataclass
+class Message:
+    text: str
+    error: bool = False
+    at: float = field(default_factory=time.perf_counter)
+
+
+@dataclass
+class ViewOptions:
+    view: str = "final"
+    """One of the renderer's VIEWS."""
+    redraw_always: bool = False
+    """Draw the scene every frame even when nothing changed (to measure frame times)."""
+    show_help: bool = False
+    show_panel: bool = True
+    """The settings panel on the right (the scene is drawn left of it)."""
+    show_frame_times: bool = True
+    """The frame-time graph in the top-left corner of the view."""
+
+
+def _to_srgb(linear) -> list[float]:
+    """Linear colour -> sRGB-encoded, as colour pickers show colours (IEC 61966-2-1)."""
+    x = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
+    return list(np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055))
+
+
+def _to_linear(srgb) -> np.ndarray:
+    x = np.clip(np.asarray(srgb, np.float64), 0.0, 1.0)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def colour_edit(label: str, linear) -> tuple[bool, np.ndarray]:
+    """A colour picker that shows a linear colour as it looks on screen (sRGB) and returns it linear."""
+    changed, picked = imgui.color_edit3(label, _to_srgb(linear))
+    return changed, _to_linear(picked) if changed else np.asarray(linear, np.float64)
+
+
+def _tooltip(text: str) -> None:
+    imgui.same_line()
+    imgui.text_disabled("(?)")
+    imgui.set_item_tooltip(text)
+
+
+def scene_section(name: str, triangles: int, edits: SceneEdits, loading: BackgroundTask | None) -> bool:
+    """Returns True when the user asked to reset the edits."""
+    imgui.text(f"{name}: {triangles} triangles, {len(edits.base.groups)} groups")
+    if loading is not None and not loading.done:
+        imgui.text_colored(NOTE_COLOUR, f"Loading {loading.label} ... {loading.elapsed:.1f} s")
+    else:
+        imgui.text_colored(NOTE_COLOUR, "Drop an .obj .glb .gltf or .ply file here to open it.")
+    return imgui.button("Reset edits")
+
+
+def gi_section(gi: GIController) -> None:
+    for index, source in enumerate(SOURCES):
+        reason = gi.unavailable.get(source)
+        if index % 2:
+            imgui.same_line(PANEL_WIDTH / 2)
+        imgui.begin_disabled(reason is not None)
+        if imgui.radio_button(LABELS[source], gi.source == source):
+            gi.set_source(source)
+        imgui.end_disabled()
+        if reason is not None:
+            imgui.set_item_tooltip(reason)  # shown on hover although the button is disabled
+    s = gi.settings
+    changed, kernel = imgui.combo("kernel", KERNELS.index(s.kernel), list(KERNELS))
+    if changed:
+        gi.set_settings(kernel=KERNELS[kernel])
+    _tooltip("physical: both cosines and visibility; paper: eq. 25 (receiver cosine only, no visibility)")
+    changed, bounces = imgui.slider_int("bounces", s.bounces, 0, 100)
+    if changed:
+        gi.set_settings(bounces=bounces)
+    changed, voxels = imgui.slider_int("voxels per axis", s.voxels, 8, 64)
+    if changed:
+        gi.set_settings(voxels=voxels)
+    changed, probes = imgui.slider_int("probes per axis", s.probes, 2, 32)
+    if changed:
+        gi.set_settings(probes=probes)
+    line, progress, error = gi.status()
+    imgui.text(line)
+    if progress is not None and gi.busy:
+        imgui.progress_bar(progress, imgui.ImVec2(-1, 0))
+    if error:
+        imgui.push_text_wrap_pos(0.0)
+        imgui.text_colored(ERROR_COLOUR, error)
+        imgui.pop_text_wrap_pos()
+
+
+def light_section(edits: SceneEdits, scene_size: float) -> bool:
+    light = edits.light
+    changed = False
+    if light.group is None and light.direction is None:
+        imgui.text_colored(NOTE_COLOUR, "This scene has no emitter and no sun.")
+        return False
+    if light.group is not None:
+        imgui.text(f"Emitter: {light.group}")
+        moved, offset = imgui.drag_float3("position", list(light.centre + light.offset), 0.005 * scene_size)
+        if moved:
+            edits.set_light(offset=np.asarray(offset) - light.centre)
+        resized, size = imgui.slider_float("size", light.size, 0.1, 4.0, "%.2f x",
+                                           imgui.SliderFlags_.logarithmic)
+        if resized:
+            edits.set_light(size=size)
+        changed |= moved or resized
+    else:
+        imgui.text("Sun")
+        turned, direction = imgui.drag_float3("direction", list(light.direction), 0.01, -1.0, 1.0)
+        if turned:
+            edits.set_light(direction=direction)
+        changed |= turned
+    recoloured, colour = colour_edit("colour", light.colour)
+    if recoloured:
+        edits.set_light(colour=colour)
+    top = max(100.0, 10.0 ** np.ceil(np.log10(max(edits.initial_intensity, 1e-3) * 5.0)))
+    brighter, intensity = imgui.slider_float("intensity", light.intensity, 0.01, top, "%.2f",
+                                             imgui.SliderFlags_.logarithmic)
+    if brighter:
+        edits.set_light(intensity=intensity)
+    return changed or recoloured or brighter
+
+
+def materials_section(edits: SceneEdits) -> bool:
+    """Albedo per group (shown sRGB-encoded; the scene keeps linear reflectance)."""
+    changed = False
+    for group in edits.material_groups:
+        edited, rgb = colour_edit(group, edits.albedo_of(group))
+        if edited:
+            edits.set_albedo(group, rgb)
+            changed = True
+    return changed
+
+
+def view_section(options: ViewOptions, settings: RenderSettings, viewport) -> None:
+    changed, index = imgui.combo("view", VIEWS.index(options.view), list(VIEWS))
+    if changed:
+        options.view = VIEWS[index]
+    _, settings.exposure = imgui.slider_float("exposure (EV)", settings.exposure, -6.0, 6.0, "%.1f")
+    curves = list(TONEMAPS)
+    changed, index = imgui.combo("tone curve", curves.index(settings.tonemap), curves)
+    if changed:
+        settings.tonemap = curves[index]
+    samples = settings.light_samples if settings.light_samples in LIGHT_SAMPLES else 32
+    changed, index = imgui.combo("light samples", LIGHT_SAMPLES.index(samples), [str(n) for n in LIGHT_SAMPLES])
+    if changed:
+        settings.light_samples = LIGHT_SAMPLES[index]
+    _tooltip("Points on the emitters for direct light and soft shadows (more: smoother, slower)")
+    _, settings.interleave = imgui.checkbox("interleaved direct light", settings.interleave)
+    _tooltip("Each pixel of a 2x2 block shades a quarter of the light samples (about 3x faster)")
+    _, viewport.render_scale = imgui.slider_float("resolution", viewport.render_scale, 0.25, 1.0, "%.2f x")
+    _, viewport.preview_scale = imgui.slider_float("while moving", viewport.preview_scale, 0.25, 1.0, "%.2f x")
+    _tooltip("Resolution while the camera or scene changes; full resolution follows when it stops")
+    _, options.redraw_always = imgui.checkbox("redraw every frame", options.redraw_always)
+    _tooltip("Draw the scene every frame even when nothing changed, to measure frame times")
+    _, options.show_frame_times = imgui.checkbox("frame-time graph", options.show_frame_times)
+
+
+def settings_panel(shown: bool, sections: dict) -> None:
+    """The panel docked on the right; `sections` maps a header to (function drawing it, open at start)."""
+    if not shown:
+        return
+    width, height = imgui.get_io().display_size
+    imgui.set_next_window_pos(imgui.ImVec2(width - PANEL_WIDTH, 0), imgui.Cond_.always)
+    imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, height), imgui.Cond_.always)
+    flags = imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
+    expanded, _ = imgui.begin("GI viewer  (F1 help, Tab hide)", None, flags)
+    if expanded:
+        for header, (draw, open_at_start) in sections.items():
+            flags = imgui.TreeNodeFlags_.default_open if open_at_start else 0
+            if imgui.collapsing_header(header, flags):
+                imgui.push_id(header)
+                draw()
+                imgui.pop_id()
+    imgui.end()
+
+
+def frame_time_overlay(times: FrameTimes, gi_line: str, shown: bool) -> None:
+    """CPU and GPU frame times as a small graph in the top-left corner of the view."""
+    if not shown:
+        return
+    imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.always)
+    imgui.set_next_window_size(imgui.ImVec2(320, 0), imgui.Cond_.always)
+    imgui.set_next_window_bg_alpha(0.6)
+    flags = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.no_saved_settings
+             | imgui.WindowFlags_.no_focus_on_appearing | imgui.WindowFlags_.no_nav | imgui.WindowFlags_.no_move)
+    imgui.begin("Frame time", None, flags)
+    draw_frame_graph(times, height=60.0)
+    imgui.text_colored(NOTE_COLOUR, gi_line)
+    imgui.end()
+
+
+def help_window(options: ViewOptions) -> None:
+    if not options.show_help:
+        return
+    width, height = imgui.get_io().display_size
+    view_width = width - (PANEL_WIDTH if options.show_panel else 0)
+    imgui.set_next_window_pos(imgui.ImVec2(view_width / 2, height / 2), imgui.Cond_.always, imgui.ImVec2(0.5, 0.5))
+    imgui.set_next_window_bg_alpha(0.9)
+    flags = imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
+    _, still_open = imgui.begin("Help (F1)", True, flags)
+    imgui.text(HELP)
+    imgui.end()
+    options.show_help = bool(still_open)
+
+
+def messages_window(messages: list[Message], shader_error: str | None, info_seconds: float = 5.0) -> None:
+    """Errors stay until dismissed; notes fade after `info_seconds`."""
+    now = time.perf_counter()
+    messages[:] = [m for m in messages if m.error or now - m.at < info_seconds]
+    if not messages and not shader_error:
+        return
+    width, height = imgui.get_io().display_size
+    imgui.set_next_window_pos(imgui.ImVec2(16, height - 16), imgui.Cond_.always, imgui.ImVec2(0.0, 1.0))
+    imgui.set_next_window_size_constraints(imgui.ImVec2(200, 0), imgui.ImVec2(max(width - PANEL_WIDTH - 32, 200),
+                                                                              height / 2))
+    flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
+             | imgui.WindowFlags_.no_title_bar)
+    imgui.set_next_window_bg_alpha(0.9)
+    imgui.begin("Messages", None, flags)
+    imgui.push_text_wrap_pos(width - PANEL_WIDTH - 64)
+    if shader_error:
+        imgui.text_colored(ERROR_COLOUR, "Shader error (the previous shaders keep running; fix and press R):")
+        imgui.text(shader_error)
+    for index, message in enumerate(list(messages)):
+        if message.error:
+            imgui.text_colored(ERROR_COLOUR, message.text)
+            imgui.same_line()
+            if imgui.small_button(f"dismiss##{index}"):
+                messages.remove(message)
+        else:
+            imgui.text(message.text)
+    imgui.pop_text_wrap_pos()
+    imgui.end()
+
+
+def loading_overlay(task: BackgroundTask | None) -> None:
+    """A spinner-like indicator in the middle of the window while a dropped file loads."""
+    if task is None or task.done:
+        return
+    width, height = imgui.get_io().display_size
+    imgui.set_next_window_pos(imgui.ImVec2(width / 2, height / 2), imgui.Cond_.always, imgui.ImVec2(0.5, 0.5))
+    flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
+             | imgui.WindowFlags_.no_title_bar | imgui.WindowFlags_.no_inputs)
+    imgui.begin("Loading", None, flags)
+    dots = "." * (1 + int(task.elapsed * 3) % 3)
+    imgui.text(f"Loading {task.label} {dots:<3} {task.elapsed:.1f} s")
+    # An indeterminate bar: a block sweeping across (the loader has no percentage to report).
+    imgui.progress_bar(-1.0 * time.perf_counter(), imgui.ImVec2(260, 0), "")
+    imgui.end()

@@ -1,0 +1,170 @@
+"""What is being viewed: the loaded scene, the user's edits to it, the shown (edited) scene on the GPU,
+its indirect light, voxels for the voxel view, and replacing the scene with a dropped file.
+
+Everything slow (parsing a file, voxelizing, solving) happens off the render thread; `update`, called
+once a frame on the render thread, moves finished results onto the GPU.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from viewer.gpu.renderer import Renderer
+from viewer.scene import ASSETS, SUPPORTED_SUFFIXES, Camera, Scene, load, read_sidecar
+from viewer.ui.background import BackgroundTask
+from viewer.ui.camera_controller import OrbitCamera, framing_camera
+from viewer.ui.gi_sources import GIController
+from viewer.ui.panels import Message
+from viewer.ui.scene_edits import SceneEdits
+
+
+def scene_path(source: str | Path) -> Path:
+    """The file behind a scene argument (a built-in name resolves to assets/scenes/<name>.obj)."""
+    path = Path(source)
+    if not path.suffix and not path.exists():
+        return ASSETS / f"{source}.obj"
+    return path
+
+
+def home_camera(scene: Scene, source: str | Path) -> Camera:
+    """The scene's own camera when its file comes with one (a sidecar .json), else one that frames it."""
+    try:
+        has_camera = "camera" in read_sidecar(scene_path(source))
+    except ValueError:
+        has_camera = False
+    return scene.camera if has_camera else framing_camera(*scene.bounds)
+
+
+class Session:
+    def __init__(self, renderer: Renderer, gi: GIController, scene: Scene, source: str | Path,
+                 log=print, edit_interval: float = 0.1, on_gi_ready=None):
+        self.renderer = renderer
+        self.gi = gi
+        self.log = log
+        self.on_gi_ready = on_gi_ready
+        """Called (no arguments) when the indirect light has settled after a change."""
+        self.edit_interval = edit_interval
+        """Least seconds between two uploads of an edited scene while a slider is dragged."""
+        self.messages: list[Message] = []
+        self.loading: BackgroundTask | None = None
+        self._loading_path: Path | None = None
+        self.scene_version = 0
+        self.probes_version = 0
+        self._voxels: BackgroundTask | None = None
+        self._voxels_wanted = None   # (scene version, voxels per axis) being voxelized
+        self._voxels_key = None      # ... and of the voxels the renderer has
+        self._gi_was_busy = False
+        self.loads = 0       # scenes loaded since start (for tests)
+        self.load_errors = 0
+        self._open(scene, source)
+
+    # ---- the scene ------------------------------------------------------------------------------------
+    def _open(self, scene: Scene, source: str | Path) -> None:
+        self.source = str(source)
+        self.edits = SceneEdits(scene)
+        self._applied_version = self.edits.version
+        self._applied_at = 0.0
+        self.scene = scene
+        self.scene_version += 1
+        self.renderer.set_scene(scene)
+        self.renderer.set_voxels(None)
+        self._voxels_key = None
+        lo, hi = scene.bounds
+        self.camera = OrbitCamera(home_camera(scene, source), float(np.linalg.norm(hi - lo)))
+        self.gi.set_scene(scene, self.scene_version, new_scene=True)
+
+    @property
+    def name(self) -> str:
+        return self.edits.base.name
+
+    @property
+    def scene_size(self) -> float:
+        return self.camera.scene_size
+
+    def load_file(self, path: str | Path) -> None:
+        """Start loading a file in the background; the current scene stays until it has loaded."""
+        path = Path(path)
+        if path.suffix.lower() not in SUPPORTED_SUFFIXES:
+            self._load_failed(path, f"{path.name}: unsupported format {path.suffix or '(none)'!r}; "
+                                    f"use one of {', '.join(SUPPORTED_SUFFIXES)}")
+            return
+        self.log(f"loading {path}")
+        self.loading, self._loading_path = BackgroundTask(path.name, load, path), path
+
+    def _load_failed(self, path: Path, error: str) -> None:
+        self.load_errors += 1
+        self.log(f"cannot load {path}: {error}; keeping {self.name}")
+        self.messages.append(Message(f"Cannot open {path.name}: {error}", error=True))
+
+    @property
+    def busy(self) -> bool:
+        """Something the picture waits for is under way (a file, the GI, voxels for the voxel view)."""
+        return (self.loading is not None or self.gi.busy or self._voxels is not None
+                or self.edits.version != self._applied_version)
+
+    def content_key(self) -> tuple:
+        """Changes whenever what the renderer draws changes (scene, probes, voxels)."""
+        return (self.scene_version, self.probes_version, self._voxels_key)
+
+    # ---- per frame --------------------------------------------------------------------------------------
+    def update(self, view: str) -> None:
+        self._finish_loading()
+        self._apply_edits()
+        changed, grid = self.gi.update()
+        if changed:
+            self.renderer.set_probes(grid)
+            self.probes_version += 1
+        busy = self.gi.busy
+        if self._gi_was_busy and not busy:
+            line, _, error = self.gi.status()
+            self.log(f"GI failed: {error}" if error else f"GI ready: {line}")
+            if self.on_gi_ready is not None:
+                self.on_gi_ready()
+        self._gi_was_busy = busy
+        if view == "voxels":
+            self._update_voxels()
+
+    def _finish_loading(self) -> None:
+        task = self.loading
+        if task is None or not task.done:
+            return
+        self.loading = None
+        if task.error is not None:
+            self._load_failed(self._loading_path, task.error)
+            return
+        scene = task.result
+        self._open(scene, self._loading_path)
+        self.loads += 1
+        self.log(f"loaded {self._loading_path} as {scene.name!r}: {len(scene.faces)} triangles, "
+                 f"{len(scene.groups)} groups, {task.elapsed:.2f} s")
+        self.messages.append(Message(f"Opened {self._loading_path.name} ({len(scene.faces)} triangles)."))
+
+    def _apply_edits(self) -> None:
+        now = time.perf_counter()
+        if self.edits.version == self._applied_version or now - self._applied_at < self.edit_interval:
+            return
+        self.scene = self.edits.apply()
+        self._applied_version, self._applied_at = self.edits.version, now
+        self.scene_version += 1
+        self.renderer.set_scene(self.scene)
+        self.gi.set_scene(self.scene, self.scene_version)
+
+    def _update_voxels(self) -> None:
+        """Voxelize the shown scene for the `voxels` view (in the background, at the GI resolution)."""
+        from viewer.voxels import voxelize
+
+        key = (self.scene_version, self.gi.settings.voxels)
+        if self._voxels is not None and self._voxels.done:
+            task, self._voxels = self._voxels, None
+            if task.error is None:
+                self.renderer.set_voxels(task.result)
+                self._voxels_key = self._voxels_wanted
+        if self._voxels is None and self._voxels_key != key:
+            self._voxels_wanted = key
+            self._voxels = BackgroundTask("voxelize", voxelize, self.scene, key[1])
+
+    def close(self) -> None:
+        self.gi.close()

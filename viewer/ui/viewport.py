@@ -1,0 +1,106 @@
+"""The 3D view inside the window: when to draw the scene, at what resolution, and presenting it.
+
+A full-resolution frame of the renderer costs hundreds of milliseconds on a software GL (llvmpipe), so
+the scene is drawn only when something it depends on changed (camera, view, scene, probes, render
+settings), and while the user is moving the camera or dragging a slider it is drawn at a reduced
+"preview" resolution; the first frame after that replaces the preview with a full-resolution image.
+Presenting (exposure, tone curve) is cheap and happens every frame, so exposure sliders respond at once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import astuple
+
+import moderngl
+import numpy as np
+
+from viewer.gpu.programs import ShaderError
+from viewer.gpu.renderer import Renderer
+from viewer.gpu.targets import HdrTarget
+from viewer.scene import Camera
+
+PRESENT_ONLY = ("exposure", "tonemap")
+"""RenderSettings fields that only the present pass reads: changing them needs no redraw."""
+
+
+class Viewport:
+    def __init__(self, ctx: moderngl.Context, renderer: Renderer, render_scale: float = 1.0,
+                 preview_scale: float = 0.5, samples: int = 0):
+        self.ctx = ctx
+        self.renderer = renderer
+        self.render_scale = render_scale
+        """Full-quality resolution as a fraction of the window's."""
+        self.preview_scale = preview_scale
+        """Resolution while things move, as a fraction of the full-quality one."""
+        self.samples = samples
+        self._targets: dict[str, HdrTarget] = {}
+        self._key = None              # what the view should show now
+        self._drawn: tuple | None = None   # (key, quality) of the image in `_shown`
+        self._shown: HdrTarget | None = None
+        self.error: str | None = None
+        """The last draw's shader error (the previous image stays up until a draw succeeds)."""
+
+    def _settings_key(self) -> tuple:
+        s = self.renderer.settings
+        return tuple(getattr(s, f) for f in s.__dataclass_fields__ if f not in PRESENT_ONLY)
+
+    def _target(self, quality: str, window_size: tuple[int, int]) -> HdrTarget:
+        scale = self.render_scale * (self.preview_scale if quality == "preview" else 1.0)
+        size = (max(1, round(window_size[0] * scale)), max(1, round(window_size[1] * scale)))
+        target = self._targets.get(quality)
+        if target is None or target.size != size or target.samples != min(self.samples, self.ctx.max_samples):
+            if target is not None:
+                if target is self._shown:
+                    self._shown, self._drawn = None, None
+                target.release()
+            target = HdrTarget(self.ctx, size, samples=min(self.samples, self.ctx.max_samples))
+            self._targets[quality] = target
+        return target
+
+    @property
+    def settled(self) -> bool:
+        """The image shown is the full-resolution one of the current state."""
+        return self._drawn == (self._key, "full")
+
+    def frame(self, camera: Camera, view: str, content_key: tuple, framebuffer: moderngl.Framebuffer,
+              preview: bool = False, force: bool = False) -> bool:
+        """Draw the scene if needed, then present it into `framebuffer`. Returns whether it drew.
+
+        content_key: anything else the image depends on (scene and probe versions). preview: the user is
+        interacting; a changed image is then drawn at the preview resolution. force: draw even if
+        nothing changed."""
+        window_size = tuple(framebuffer.viewport[2:])
+        key = (astuple(camera), view, content_key, self._settings_key(), window_size, self.render_scale,
+               self.samples)
+        self._key = key
+        quality = "preview" if preview and self.preview_scale < 1.0 else "full"
+        drew = False
+        if force or self._drawn is None or self._drawn[0] != key or (self._drawn[1] == "preview" and quality == "full"):
+            target = self._target(quality, window_size)
+            try:
+                self.renderer.draw(target, camera, view)
+                self._shown, self._drawn, drew, self.error = target, (key, quality), True, None
+            except ShaderError as exc:  # e.g. a view whose shader variant does not compile
+                self._drawn, self.error = (key, "full"), str(exc)   # not again until something changes
+        if self._shown is not None:
+            self.renderer.present(self._shown, framebuffer, view)
+        else:
+            framebuffer.clear(0.0, 0.0, 0.0, 1.0)
+        return drew
+
+    def invalidate(self) -> None:
+        """Draw again on the next frame (after shaders were reloaded)."""
+        self._drawn, self.error = None, None
+
+    @staticmethod
+    def read(framebuffer: moderngl.Framebuffer) -> np.ndarray:
+        """(H, W, 3) uint8 of what `framebuffer` holds, top row first."""
+        x, y, width, height = framebuffer.viewport
+        data = framebuffer.read(viewport=(x, y, width, height), components=3, alignment=1)
+        return np.frombuffer(data, np.uint8).reshape(height, width, 3)[::-1].copy()
+
+    def release(self) -> None:
+        for target in self._targets.values():
+            target.release()
+        self._targets.clear()
+        self._shown = self._drawn = None
