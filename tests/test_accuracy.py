@@ -38,3 +38,20 @@ def test_free_space_points_keep_their_distance_and_stay_out_of_objects():
     z = np.sin(a) * local[:, 0] + np.cos(a) * local[:, 2]
     inside = (np.abs(x) < 0.3) & (np.abs(local[:, 1]) < 0.61) & (np.abs(z) < 0.3)
     assert not inside.any()
+
+
+def test_compute_solver_is_within_15_percent_of_mitsuba():
+    """`sample --method compute`: the GPU solver's field against the ground truth (it matches the numpy
+    solver to about 1e-6, tests/test_gpu_compute.py, so this guards the whole GPU path end to end)."""
+    from viewer.gpu.compute_solver import solve_probes
+    from viewer.gpu.context import create_context
+
+    scene = scenes.load("paper-test")
+    points = free_space_points(scene, 150, margin=0.06, seed=3)
+    truth = reference.probe_sh(scene, points, directions=1024)
+    ctx = create_context()
+    try:
+        grid = solve_probes(ctx, scene, gi.GISettings(voxels=16, probes=16, directions=256))
+    finally:
+        ctx.release()
+    assert relative_rmse(grid.interpolate(points), truth) < 0.15

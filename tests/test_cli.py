@@ -136,3 +136,24 @@ def test_capture_writes_a_png(tmp_path):
     from PIL import Image
 
     assert Image.open(out).size == (64, 48)
+
+
+def test_neural_without_a_model_is_refused_in_one_line(tmp_path, points):
+    result = run("sample", "cornell", "--points", points, "--method", "neural", "--out", tmp_path / "sh.npy")
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+    assert "model" in result.stderr
+
+
+def test_capture_with_compute_gi_is_brighter_in_shadow_than_gi_off(tmp_path):
+    from PIL import Image
+
+    images = {}
+    for gi in ("off", "compute"):
+        out = tmp_path / f"{gi}.png"
+        result = run("capture", "cornell", "--out", out, "--size", "64x64", "--gi", gi, "--msaa", "0",
+                     "--voxels", "12", "--probes", "8", "--directions", "128")
+        assert result.returncode == 0, result.stderr
+        images[gi] = np.asarray(Image.open(out), np.float64)
+    # the ceiling gets no direct light: only GI lights it
+    ceiling = (slice(2, 8), slice(20, 44))
+    assert images["compute"][ceiling].mean() > images["off"][ceiling].mean() + 10

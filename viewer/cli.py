@@ -148,8 +148,17 @@ def run_sample(args) -> int:
     timings = Timings({"load": time.perf_counter() - start})
     if args.method == "solver":
         grid = gi.solve(scene, settings, include_emitted=True, timings=timings)
+    elif args.method == "compute":
+        from viewer.gpu.compute_solver import solve_probes
+        from viewer.gpu.context import create_context
+
+        ctx = create_context()
+        try:
+            grid = solve_probes(ctx, scene, settings, include_emitted=True, timings=timings)
+        finally:
+            ctx.release()
     else:
-        raise InputError(f"--method {args.method}: not available in this build yet (use solver)")
+        raise InputError(f"--method {args.method}: no trained model ships yet (use solver or compute)")
     clock = time.perf_counter()
     sh = grid.interpolate(points).astype(np.float32)
     timings.stages["interpolate"] = time.perf_counter() - clock

@@ -147,18 +147,22 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def solver_probes(args) -> ProbeSource:
-    """The probe source for `--gi solver`: the numpy transport solver (viewer.gi.solve) with the GI
-    settings found on args (voxels, probes, kernel, bounces, directions, dering; defaults otherwise),
-    indirect light only. Other modes are not available through it."""
+    """The probe source for `--gi solver` (the numpy transport solver, viewer.gi.solve) and `--gi compute`
+    (the compute-shader solver on the capture's own context), with the GI settings found on args
+    (voxels, probes, kernel, bounces, directions, dering; defaults otherwise), indirect light only."""
     def source(scene: Scene, gi: str, ctx) -> ProbeGrid | None:
         from viewer import gi as solver
 
-        if gi != "solver":
-            raise CaptureError(f"--gi {gi}: not available in this build yet (use solver or off)")
         names = ("voxels", "probes", "kernel", "bounces", "directions", "dering")
         settings = solver.GISettings(**{name: getattr(args, name) for name in names
                                         if getattr(args, name, None) is not None})
-        return solver.solve(scene, settings, include_emitted=False)
+        if gi == "solver":
+            return solver.solve(scene, settings, include_emitted=False)
+        if gi == "compute":
+            from viewer.gpu.compute_solver import solve_probes
+
+            return solve_probes(ctx, scene, settings, include_emitted=False)
+        raise CaptureError(f"--gi {gi}: no trained model ships yet (use off, solver or compute)")
     return source
 
 
