@@ -17,6 +17,8 @@ import time
 
 import numpy as np
 import pytest
+
+from conftest import missing
 from PIL import Image
 
 from test_app_x11 import REPO, X11, Viewer, start_xvfb, xvfb_available
@@ -43,7 +45,7 @@ def assert_cornell_box(image: np.ndarray) -> None:
 @pytest.fixture(scope="module")
 def display():
     if not xvfb_available():
-        pytest.skip("Xvfb is not installed (apt-get install xvfb): the window tests need an X server")
+        missing("Xvfb is not installed (apt-get install xvfb): the window tests need an X server")
     process, name = start_xvfb()
     yield name
     process.terminate()

@@ -11,7 +11,7 @@ import pytest
 
 from scenes import box
 from viewer.gi import GISettings
-from viewer.gpu.context import GLUnavailable, create_context
+
 from viewer.scene import Camera, DirectionalLight, load
 from viewer.ui.camera_controller import OrbitCamera, framing_camera
 from viewer.ui.scene_edits import SceneEdits, emitter_group
@@ -19,14 +19,9 @@ from viewer.ui.scene_edits import SceneEdits, emitter_group
 imgui = pytest.importorskip("imgui_bundle").imgui
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    try:
-        context = create_context()
-    except GLUnavailable as exc:
-        pytest.skip(str(exc))
-    yield context
-    context.release()
+@pytest.fixture(scope="session")
+def ctx(gl_context):
+    return gl_context
 
 
 # ---- imgui renderer -----------------------------------------------------------------------------------

@@ -15,7 +15,6 @@ from viewer import probes, transport
 from viewer.gi import GISettings
 from viewer.gpu import compute_scene
 from viewer.gpu.compute_solver import ComputeSettings, ComputeSolver, solve_probes
-from viewer.gpu.context import GLUnavailable, create_context
 from viewer.raymarch import Tracer
 from viewer.scene import DirectionalLight, Scene, load
 from viewer.voxels import voxelize
@@ -24,14 +23,9 @@ from scenes import box, furnace, quads_to_triangles
 CORNELL = GISettings(voxels=16, probes=8)
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    try:
-        context = create_context()
-    except GLUnavailable as exc:
-        pytest.skip(str(exc))
-    yield context
-    context.release()
+@pytest.fixture(scope="session")
+def ctx(gl_context):
+    return gl_context
 
 
 def relative_rmse(value: np.ndarray, reference: np.ndarray) -> float:

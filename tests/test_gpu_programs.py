@@ -43,15 +43,9 @@ def test_an_include_cycle_is_reported(tmp_path):
         preprocess(tmp_path / "a.glsl", "VERTEX_SHADER", search=(tmp_path,))
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from viewer.gpu.context import GLUnavailable, create_context
-    try:
-        context = create_context()
-    except GLUnavailable as exc:
-        pytest.skip(str(exc))
-    yield context
-    context.release()
+@pytest.fixture(scope="session")
+def ctx(gl_context):
+    return gl_context
 
 
 PASS_THROUGH = ("#if defined VERTEX_SHADER\nin vec2 in_position;\n"

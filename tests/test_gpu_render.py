@@ -14,7 +14,6 @@ import pytest
 from PIL import Image
 
 from viewer import sh
-from viewer.gpu.context import GLUnavailable, create_context
 from viewer.gpu.offscreen import OffscreenRenderer, capture, run_capture
 from viewer.gpu.programs import SHADERS, ShaderError
 from viewer.gpu.renderer import VIEWS, RenderSettings, Renderer
@@ -30,14 +29,9 @@ FLOOR_FRONT_LEFT = (0.9, 0.98, 0.1, 0.4)
 SMALL_BOX_FRONT = (0.72, 0.84, 0.53, 0.72)   # faces the camera, away from the lamp: no direct light
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    try:
-        context = create_context()
-    except GLUnavailable as exc:
-        pytest.skip(str(exc))
-    yield context
-    context.release()
+@pytest.fixture(scope="session")
+def ctx(gl_context):
+    return gl_context
 
 
 @pytest.fixture(scope="module")
