@@ -25,8 +25,9 @@ class GISettings:
     """Light transition kernel: `physical` or `paper` (see viewer.transport)."""
     bounces: int = 100
     """Most bounces summed (the solver stops earlier once converged)."""
-    directions: int = 512
-    """Directions gathered per probe."""
+    directions: int = 256
+    """Directions gathered per probe for the reflected light (smooth: on the Cornell box at 32^3 voxels
+    and 24^3 probes, 128, 256 and 512 give 4.2%, 4.1% and 4.1% against Mitsuba)."""
     dering: float = 0.0
     """SH deringing strength (0 = off)."""
     normal_mode: str = "area"

@@ -126,11 +126,15 @@ def fill_invalid(coefficients: np.ndarray, valid: np.ndarray, iterations: int | 
 
 # ---- projection: what each probe sees -----------------------------------------------------------------
 
+FAR_FIELD = 6.0
+"""Distance, in voxel sizes, beyond which an emitting voxel's light pieces are projected as one."""
+
+
 @dataclass(frozen=True)
 class ProbeSettings:
     resolution: int = 16
     """M: probes per axis over the scene bounds."""
-    directions: int = 512
+    directions: int = 256
     """Directions gathered per probe for the light reflected by surfaces (a Fibonacci lattice)."""
     include_emitted: bool = True
     """Add the light arriving straight from emitters and the sun. The renderer shades those itself and
@@ -187,13 +191,24 @@ def project(voxels, radiosity, sun=None, bounds=None, settings: ProbeSettings = 
 def _emitter_sh(voxels, radiosity, points, tracer, chunk: int = 1 << 21) -> np.ndarray:
     """SH of the light arriving straight from the emitters, summed over the fine light samples: each
     piece is a patch of solid angle cos_s A_s / (r^2 + A_s / pi) (the near-field clamp of the
-    transport kernel), seen unless its voxel is occluded."""
+    transport kernel), seen unless its voxel is occluded.
+
+    Seen from afar, the pieces of one emitting voxel all arrive from about the same direction: beyond
+    FAR_FIELD voxel sizes their solid angles are summed and projected once, from the voxel's centre of
+    light; only nearer probes project piece by piece (the directions differ by less than ~1/FAR_FIELD
+    radians there, well below what L2 SH resolves)."""
     from viewer.transport import _light_visibility
 
     lights = voxels.lights
     out = np.zeros((len(points), 9, 3))
     if not lights.count:
         return out
+    emitters, piece_of = np.unique(lights.voxel, return_inverse=True)
+    # per emitting voxel: its pieces' radiance as a (S, U) selection per channel, and its centre of light
+    select = np.zeros((lights.count, len(emitters)))
+    select[np.arange(lights.count), piece_of] = 1.0
+    centre = (select.T @ (lights.position * lights.area[:, None])) / (select.T @ lights.area)[:, None]
+    near_distance = FAR_FIELD * voxels.voxel_size
     per = max(1, chunk // lights.count)
     for s in range(0, len(points), per):
         p = points[s:s + per]
@@ -203,8 +218,19 @@ def _emitter_sh(voxels, radiosity, points, tracer, chunk: int = 1 << 21) -> np.n
         cos_s = -np.einsum("psc,sc->ps", w, lights.normal)
         omega = np.where(cos_s > 0, cos_s * lights.area / (r2 + lights.area / np.pi), 0.0)
         omega = omega * _light_visibility(tracer, voxels, p, None, omega > 0)
-        weighted = omega[..., None] * sh.basis(w)                    # (P, S, 9)
-        out[s:s + per] = np.einsum("psk,sc->pkc", weighted, lights.radiance)
+        to_centre = centre[None] - p[:, None]                          # (P, U, 3)
+        distance = np.linalg.norm(to_centre, axis=-1)
+        far = distance > near_distance
+        # far: one direction per (probe, emitting voxel), carrying the sum of its pieces
+        power = np.stack([omega @ (select * lights.radiance[:, c:c + 1]) for c in range(3)], -1)  # (P, U, 3)
+        basis_far = sh.basis(to_centre / np.maximum(distance, 1e-30)[..., None]) * far[..., None]
+        out[s:s + per] = np.matmul(basis_far.transpose(0, 2, 1), power)
+        # near: piece by piece, for the probes that have a near emitting voxel
+        rows = np.nonzero((~far).any(axis=1))[0]
+        if len(rows):
+            near_pieces = ~far[rows][:, piece_of]                       # (R, S)
+            weighted = (omega[rows] * near_pieces)[..., None] * sh.basis(w[rows])
+            out[s + rows] += np.matmul(weighted.transpose(0, 2, 1), lights.radiance)
     return out
 
 
