@@ -6,7 +6,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-packages=(libegl1 libgl1 libgles2 libllvm19 xvfb xauth)
+# EGL/GL through Mesa; LLVM for Mitsuba; Xvfb and the X libraries glfw loads at run time (and XTEST for
+# the window tests)
+packages=(libegl1 libgl1 libgles2 libllvm19 xvfb xauth libx11-6 libxext6 libxrandr2 libxinerama1
+          libxcursor1 libxi6 libxtst6)
 missing=()
 for p in "${packages[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
