@@ -38,6 +38,8 @@ def _gi_arguments(p: argparse.ArgumentParser):
     p.add_argument("--bounces", type=int, default=d.bounces, help="most bounces summed")
     p.add_argument("--directions", type=int, default=d.directions, help="directions gathered per probe")
     p.add_argument("--dering", type=float, default=d.dering, help="SH deringing strength 0..1")
+    p.add_argument("--normals", choices=("area", "paper"), default=d.normal_mode,
+                   help="voxel normals: area-weighted, or the paper's eq. 3 (plain mean)")
     p.add_argument("--sun", help="directional light dx,dy,dz,r,g,b (direction towards the sun, irradiance)")
 
 
@@ -50,7 +52,7 @@ def gi_settings(args) -> GISettings:
     if not 0.0 <= args.dering <= 1.0:
         raise InputError(f"--dering {args.dering}: must be between 0 and 1")
     return GISettings(voxels=args.voxels, probes=args.probes, kernel=args.kernel, bounces=args.bounces,
-                      directions=args.directions, dering=args.dering)
+                      directions=args.directions, dering=args.dering, normal_mode=args.normals)
 
 
 def build_parser() -> argparse.ArgumentParser:
