@@ -22,14 +22,12 @@ Le is counted once. Directions are a spherical Fibonacci lattice turned by a ran
 
 from __future__ import annotations
 
-import hashlib
 import os
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
-from viewer import sh
+from viewer import reference_cache, sh
 from viewer.scene import Camera, Scene
 
 INSTALL_HINT = "pip install mitsuba (or the project's extra: pip install 'gi-viewer[reference]')"
@@ -409,51 +407,10 @@ def _render(scene, camera, width, height, spp, seed, max_depth):
     return np.array(image, np.float32).reshape(height, width, 3)
 
 
-# ---- disk cache -------------------------------------------------------------------------------------
-
-def cache_dir() -> Path:
-    """$GI_VIEWER_REFERENCE_CACHE_DIR, else $XDG_CACHE_HOME/gi-viewer/reference (~/.cache by default)."""
-    explicit = os.environ.get("GI_VIEWER_REFERENCE_CACHE_DIR")
-    if explicit:
-        return Path(explicit)
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gi-viewer" / "reference"
-
-
-def cache_enabled(requested: bool = True) -> bool:
-    """Off when the caller says so or GI_VIEWER_REFERENCE_CACHE is '0' / 'off'."""
-    return requested and os.environ.get("GI_VIEWER_REFERENCE_CACHE", "").lower() not in ("0", "off", "no")
-
-
-def cache_key(kind: str, scene: Scene, arrays: list[np.ndarray], params: dict) -> str:
-    """sha256 of everything the result depends on: scene arrays, sun, inputs, parameters, variant."""
-    mi, _, _ = _mitsuba()
-    digest = hashlib.sha256(f"{CACHE_VERSION}|{kind}|{variant()}|{mi.__version__}".encode())
-    for a in (scene.vertices, scene.faces, scene.albedo, scene.emission, *arrays):
-        a = np.ascontiguousarray(a)
-        digest.update(f"{a.dtype}{a.shape}".encode())
-        digest.update(a.tobytes())
-    if scene.sun is not None:
-        digest.update(np.concatenate([scene.sun.direction, scene.sun.irradiance]).tobytes())
-    digest.update(repr(sorted(params.items())).encode())
-    return digest.hexdigest()[:32]
-
-
 def _cached(kind, scene, arrays, params, use_cache, compute):
-    if not cache_enabled(use_cache):
+    """Results are cached on disk (viewer.reference_cache), keyed by everything they depend on."""
+    if not reference_cache.enabled(use_cache):
         return compute()
-    path = cache_dir() / f"{kind}-{cache_key(kind, scene, arrays, params)}.npy"
-    if path.exists():
-        try:
-            return np.load(path)
-        except (OSError, ValueError):
-            pass  # a torn or foreign file: recompute and overwrite
-    result = compute()
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        partial = path.with_suffix(f".{os.getpid()}.tmp")
-        with open(partial, "wb") as fh:
-            np.save(fh, result)
-        os.replace(partial, path)
-    except OSError:
-        pass  # a read-only cache is no reason to fail
-    return result
+    mi, _, _ = _mitsuba()
+    tag = f"{CACHE_VERSION}|{kind}|{variant()}|{mi.__version__}"
+    return reference_cache.load_or_compute(kind, reference_cache.key(tag, scene, arrays, params), compute)
