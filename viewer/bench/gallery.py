@@ -1,0 +1,158 @@
+"""Gallery: our renderer next to Mitsuba 3 on the built-in scenes, with PSNR and relative difference.
+
+    python -m viewer.bench.gallery [--size 256] [--spp 256] [--out docs/GALLERY.md]
+
+For each scene: the views final, direct, indirect and probes with the viewer's default tone mapping
+(probes from the compute solver at the GISettings defaults, indirect light only), and the final image
+from the same camera path-traced by Mitsuba (`reference.render`, cached on disk). The comparison is made
+on linear HDR radiance from both, through the one tone map below, never on the viewer's own ACES output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENES = ("cornell", "paper-test")
+VIEWS = ("final", "direct", "indirect", "probes")
+MARKER = "<!-- gallery-table -->"
+
+
+def to_srgb8(radiance: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """Linear radiance -> 8-bit sRGB: scale by 2^exposure, clamp to [0, 1], sRGB transfer function
+    (IEC 61966-2-1), round. The same simple map for both images, like an 8-bit Mitsuba PNG."""
+    x = np.clip(np.nan_to_num(radiance, nan=0.0, posinf=1.0) * 2.0 ** exposure, 0.0, 1.0)
+    encoded = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.round(255.0 * encoded).astype(np.uint8)
+
+
+def psnr(image: np.ndarray, reference: np.ndarray, peak: float = 255.0) -> float:
+    """10 log10(peak^2 / MSE) in dB over all pixels and channels (inf for identical images)."""
+    mse = float(np.mean((image.astype(np.float64) - reference.astype(np.float64)) ** 2))
+    return float("inf") if mse == 0.0 else 10.0 * np.log10(peak ** 2 / mse)
+
+
+def mean_relative_difference(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """sum |est - ref| / sum ref over all pixels and channels of linear radiance: the mean absolute
+    error relative to the mean radiance (robust to dark pixels, unlike a per-pixel ratio)."""
+    return float(np.abs(estimate - truth).sum() / max(float(truth.sum()), 1e-12))
+
+
+def side_by_side(left: np.ndarray, right: np.ndarray, gap: int = 4) -> np.ndarray:
+    """Two (H, W, 3) uint8 images with a white gap between them."""
+    spacer = np.full((left.shape[0], gap, 3), 255, np.uint8)
+    return np.concatenate([left, spacer, right], axis=1)
+
+
+def render_ours(ctx, scene, size: int) -> tuple[dict[str, np.ndarray], np.ndarray, float]:
+    """The four views (uint8, default tone mapping), the linear HDR final image and the solve seconds."""
+    from viewer.gi import GISettings
+    from viewer.gpu.compute_solver import solve_probes
+    from viewer.gpu.offscreen import OffscreenRenderer
+
+    start = time.perf_counter()
+    probes = solve_probes(ctx, scene, GISettings(), include_emitted=False)
+    solve_seconds = time.perf_counter() - start
+    offscreen = OffscreenRenderer((size, size), ctx=ctx)
+    try:
+        offscreen.renderer.set_scene(scene)
+        offscreen.renderer.set_probes(probes)
+        views = {view: offscreen.render(view=view) for view in VIEWS}
+        hdr = offscreen.render_hdr(view="final")
+    finally:
+        offscreen.release()
+    return views, hdr, solve_seconds
+
+
+def run_scene(ctx, name: str, size: int, spp: int, images: Path) -> dict:
+    from PIL import Image
+
+    from viewer import reference
+    from viewer import scene as scenes
+
+    scene = scenes.load(name)
+    views, ours, solve_seconds = render_ours(ctx, scene, size)
+    start = time.perf_counter()
+    truth = reference.render(scene, scene.camera, size, size, spp)
+    mitsuba_seconds = time.perf_counter() - start
+    ours8, truth8 = to_srgb8(ours), to_srgb8(truth)
+    for view, image in views.items():
+        Image.fromarray(image).save(images / f"{name}-{view}.png")
+    Image.fromarray(side_by_side(ours8, truth8)).save(images / f"{name}-vs-mitsuba.png")
+    row = dict(scene=name, psnr=psnr(ours8, truth8), relative=mean_relative_difference(ours, truth),
+               mean_ratio=float(ours.mean() / max(truth.mean(), 1e-12)), solve=solve_seconds,
+               mitsuba=mitsuba_seconds)
+    print(f"{name:12s} PSNR {row['psnr']:5.2f} dB  mean rel. diff {row['relative']:.3f}  "
+          f"mean ours/Mitsuba {row['mean_ratio']:.3f}  solve {solve_seconds:.1f} s  "
+          f"Mitsuba {mitsuba_seconds:.1f} s", flush=True)
+    return row
+
+
+def machine(ctx) -> str:
+    from viewer import reference
+    from viewer.gpu.context import describe
+
+    return (f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPU cores, {describe(ctx)}; "
+            f"Mitsuba 3 `{reference.variant()}`")
+
+
+def write_report(path: Path, rows: list[dict], args, host: str) -> None:
+    """Replace the generated part between the two markers in `path` (the prose around it stays)."""
+    relative = os.path.relpath(Path(args.images), path.parent)
+    lines = [
+        f"Generated by `python -m viewer.bench.gallery --size {args.size} --spp {args.spp}` on {host}.",
+        f"Images {args.size}x{args.size}; Mitsuba path tracer at {args.spp} spp (box filter); ours with "
+        "4x MSAA, probes from the compute solver at the GISettings defaults (indirect only).",
+        "",
+        "| scene | PSNR (8-bit sRGB) | mean rel. diff (linear) | mean ours / Mitsuba | probe solve s | Mitsuba s |",
+        "|---|---|---|---|---|---|",
+    ]
+    lines += [f"| {r['scene']} | {r['psnr']:.2f} dB | {r['relative']:.3f} | {r['mean_ratio']:.3f} | "
+              f"{r['solve']:.1f} | {r['mitsuba']:.1f} |" for r in rows]
+    lines.append("")
+    lines.append("(Mitsuba seconds near 0 mean a cache hit.)")
+    for r in rows:
+        name = r["scene"]
+        lines += ["", f"### {name}", "",
+                  f"Ours (left) and Mitsuba (right), both clamped and sRGB-encoded the same way:", "",
+                  f"![{name}: ours vs Mitsuba]({relative}/{name}-vs-mitsuba.png)", "",
+                  "Our views with the default tone mapping (ACES): " + ", ".join(VIEWS) + ".", "",
+                  " ".join(f"![{name} {v}]({relative}/{name}-{v}.png)" for v in VIEWS)]
+    table = "\n".join(lines)
+    text = path.read_text() if path.exists() else f"# Gallery\n\n{MARKER}\n{MARKER}\n"
+    before, _, rest = text.partition(MARKER)
+    _, _, after = rest.partition(MARKER)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(before + MARKER + "\n" + table + "\n" + MARKER + after)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--size", type=int, default=256, help="image width and height in pixels")
+    parser.add_argument("--spp", type=int, default=256, help="Mitsuba samples per pixel")
+    parser.add_argument("--scenes", nargs="+", default=list(SCENES))
+    parser.add_argument("--out", default=str(ROOT / "docs" / "GALLERY.md"))
+    parser.add_argument("--images", default=str(ROOT / "docs" / "images" / "gallery"))
+    args = parser.parse_args(argv)
+    from viewer.gpu.context import create_context
+
+    images = Path(args.images)
+    images.mkdir(parents=True, exist_ok=True)
+    ctx = create_context()
+    try:
+        rows = [run_scene(ctx, name, args.size, args.spp, images) for name in args.scenes]
+        host = machine(ctx)
+    finally:
+        ctx.release()
+    write_report(Path(args.out), rows, args, host)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
