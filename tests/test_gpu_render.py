@@ -202,7 +202,9 @@ def test_interleaved_direct_light_matches_the_full_sum(ctx, cornell):
     pixel is large at 96x96, where penumbrae are a few pixels wide)."""
     images = {}
     for interleave in (False, True):
-        offscreen = OffscreenRenderer(SIZE, RenderSettings(interleave=interleave), samples=0, ctx=ctx)
+        # the exact per-fragment path: the baked lightmap would make both images the same by construction
+        settings = RenderSettings(interleave=interleave, baked_direct=False)
+        offscreen = OffscreenRenderer(SIZE, settings, samples=0, ctx=ctx)
         try:
             offscreen.renderer.set_scene(cornell)
             images[interleave] = offscreen.render_hdr(view="direct").mean(axis=-1)

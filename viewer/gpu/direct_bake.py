@@ -1,0 +1,148 @@
+"""Baked direct light: diffuse direct irradiance is view-independent, so it is computed once per scene
+(and light setting) into a lightmap atlas, and the per-frame surface pass only reads it with one
+bilinear fetch (RenderSettings.baked_direct).
+
+Every triangle (A, B, C) gets a tile of (n + 2)^2 texels: the point A + u (B - A) + v (C - A) lies at
+tile texel (1 + n u, 1 + n v), n = ceil(longest of |B - A|, |C - A| / texel size); the triangle fills
+the lower-left half, and the texels around it (a one-texel border, and those past the diagonal) hold the
+irradiance of the nearest point inside, so bilinear filtering never reads another triangle. The bake
+evaluates exactly what the per-fragment path does (shaders/direct_light.glsl: the emitter samples with
+their shadow atlas, the sun with its shadow map) in one full-screen pass over textures of texel
+positions and normals (shaders/direct_bake.glsl), for both sides of every face (surfaces reflect on both
+sides: the back sides' lightmap lies right of the front sides' in one texture, so the surface pass
+reads either with one fetch). Penumbrae are then linear between texels a few centimetres apart.
+"""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from viewer.scene import Scene
+
+ATLAS_WIDTH = 2048
+"""Texels along a row of the lightmap atlas (tiles are packed in shelves)."""
+
+
+def lightmap_layout(scene: Scene, texel: float):
+    """Tiles for the scene's non-degenerate faces: (tile origin (F, 2) int, n (F,) int, atlas size).
+    Shelf packing, tallest tiles first."""
+    keep = scene.face_areas > 0
+    corners = scene.triangles[keep].astype(np.float64)
+    legs = np.linalg.norm(corners[:, 1:] - corners[:, :1], axis=2).max(axis=1)
+    n = np.maximum(np.ceil(legs / texel - 1e-6), 1).astype(int)
+    tile = n + 2
+    origin = np.zeros((len(n), 2), int)
+    x = y = shelf = 0
+    width = max(ATLAS_WIDTH, int(tile.max()))
+    for f in np.argsort(-tile, kind="stable"):
+        if x + tile[f] > width:
+            x, y, shelf = 0, y + shelf, 0
+        origin[f] = (x, y)
+        x += tile[f]
+        shelf = max(shelf, tile[f])
+    return origin, n, (int(width), int(y + shelf))
+
+
+def lightmap_texels(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple[int, int], inset: float = 0.25):
+    """(H, W, 4) world positions (w = 1 where a tile covers the texel) and (H, W, 4) front normals of the
+    atlas texels: a tile texel's position is the nearest point of its triangle, `inset` texels inside."""
+    keep = scene.face_areas > 0
+    corners = scene.triangles[keep].astype(np.float64)
+    normals = scene.face_normals[keep]
+    position = np.zeros((size[1], size[0], 4), np.float32)
+    normal = np.zeros((size[1], size[0], 4), np.float32)
+    for f in range(len(n)):
+        m = int(n[f])
+        k = np.arange(m + 2)
+        u, v = np.meshgrid((k - 0.5) / m, (k - 0.5) / m)          # u along columns, v along rows
+        lo = inset / m
+        u, v = np.maximum(u, lo), np.maximum(v, lo)
+        over = (u + v) / (1.0 - lo)
+        scale = np.where(over > 1.0, 1.0 / np.maximum(over, 1e-9), 1.0)
+        u, v = u * scale, v * scale
+        a, b, c = corners[f]
+        points = a + u[..., None] * (b - a) + v[..., None] * (c - a)
+        x, y = origin[f]
+        position[y:y + m + 2, x:x + m + 2, :3] = points
+        position[y:y + m + 2, x:x + m + 2, 3] = 1.0
+        normal[y:y + m + 2, x:x + m + 2, :3] = normals[f]
+    return position, normal
+
+
+def lightmap_vertices(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """(3F, 14) float32: the SceneMesh vertex layout (position, normal, albedo, emission) plus each
+    corner's front-side lightmap coordinate (the back side's is 0.5 further along u)."""
+    keep = scene.face_areas > 0
+    corners = scene.triangles[keep]
+    per_face = [scene.face_normals[keep], scene.albedo[keep], scene.emission[keep]]
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    texel = origin[:, None, :] + 1.0 + n[:, None, None] * uv[None]          # (F, 3, 2) texel units
+    atlas = texel / np.asarray((2 * size[0], size[1]), np.float64)
+    columns = [corners] + [np.repeat(a[:, None, :], 3, axis=1) for a in per_face] + [atlas]
+    return np.concatenate(columns, axis=2).reshape(-1, 14).astype(np.float32)
+
+
+class BakedDirectLight:
+    """The scene's triangles with lightmap coordinates, and the lightmap (front sides | back sides)."""
+
+    ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission", "in_lightmap")
+
+    def __init__(self, ctx: moderngl.Context, scene: Scene, texel: float):
+        self.ctx = ctx
+        origin, n, self.size = lightmap_layout(scene, texel)
+        vertices = lightmap_vertices(scene, origin, n, self.size)
+        self.vertex_count = len(vertices)
+        self.buffer = ctx.buffer(vertices.tobytes())
+        position, normal = lightmap_texels(scene, origin, n, self.size)
+        self._inputs = [ctx.texture(self.size, 4, position.tobytes(), dtype="f4"),
+                        ctx.texture(self.size, 4, normal.tobytes(), dtype="f4")]
+        for texture in self._inputs:
+            texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.texture = ctx.texture((2 * self.size[0], self.size[1]), 4, dtype="f2")
+        self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.texture.repeat_x = self.texture.repeat_y = False
+        self.framebuffer = ctx.framebuffer([self.texture])
+        self._arrays: dict[int, moderngl.VertexArray] = {}
+
+    def bake(self, program: moderngl.Program, first_unit: int) -> None:
+        """Fill the lightmaps; `program` is direct_bake.glsl with the light uniforms set. Leaves the
+        depth test off (a full-screen pass)."""
+        for offset, texture in enumerate(self._inputs):
+            texture.use(location=first_unit + offset)
+        program["bake_position"] = first_unit
+        program["bake_normal"] = first_unit + 1
+        self.framebuffer.use()
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        array = self.ctx.vertex_array(program, [])
+        array.render(moderngl.TRIANGLES, vertices=3)
+        array.release()
+
+    def use(self, unit: int) -> dict:
+        """Bind the lightmap; returns the surface shader's uniforms."""
+        self.texture.use(location=unit)
+        return dict(lightmap=unit)
+
+    # The same interface as SceneMesh (same vertices, in the same order), so the renderer draws either.
+    def vertex_array(self, program: moderngl.Program) -> moderngl.VertexArray:
+        key = program.glo
+        if key not in self._arrays:
+            sizes = {"in_lightmap": 2}
+            layout = " ".join(f"{sizes.get(name, 3)}f" if name in program else f"{4 * sizes.get(name, 3)}x"
+                              for name in self.ATTRIBUTES)
+            used = [name for name in self.ATTRIBUTES if name in program]
+            self._arrays[key] = self.ctx.vertex_array(program, [(self.buffer, layout, *used)])
+        return self._arrays[key]
+
+    def render(self, program: moderngl.Program) -> None:
+        self.vertex_array(program).render(moderngl.TRIANGLES, vertices=self.vertex_count)
+
+    def forget_programs(self) -> None:
+        for array in self._arrays.values():
+            array.release()
+        self._arrays.clear()
+
+    def release(self) -> None:
+        self.forget_programs()
+        for obj in (self.framebuffer, self.texture, *self._inputs, self.buffer):
+            obj.release()
