@@ -38,7 +38,8 @@ def log(message: str) -> None:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The viewer's own flags (cheap to call: no GL or imgui import)."""
     d = GISettings()
-    parser.add_argument("--gi", choices=GI_CHOICES, default="solver", help="indirect light source at start")
+    parser.add_argument("--gi", choices=GI_CHOICES, default="compute",
+                        help="indirect light source at start (compute: the compute-shader solver)")
     parser.add_argument("--view", choices=VIEW_CHOICES, default="final", help="what the view shows at start")
     parser.add_argument("--size", default="1280x720", help="window size WxH")
     parser.add_argument("--voxels", type=int, default=d.voxels, help="voxels per axis")
@@ -127,7 +128,7 @@ def render_headless(options) -> int:
     from viewer.cli import run_capture
 
     out = getattr(options, "screenshot", None) or f"{Path(str(options.scene)).stem}.png"
-    gi = options.gi if options.gi in ("off", "solver") else "solver"
+    gi = options.gi if options.gi in ("off", "solver", "compute") else "compute"
     capture = SimpleNamespace(scene=options.scene, out=out, size=options.size, gi=gi, view=options.view,
                               camera=None, fov=None, exposure=0.0, sun=None, voxels=options.voxels,
                               probes=options.probes, kernel=options.kernel, bounces=options.bounces,
