@@ -18,6 +18,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from viewer.gpu.mesh import TriangleBuffer
 from viewer.scene import Scene
 
 ATLAS_WIDTH = 2048
@@ -83,13 +84,15 @@ def lightmap_vertices(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tup
     return np.concatenate(columns, axis=2).reshape(-1, 14).astype(np.float32)
 
 
-class BakedDirectLight:
-    """The scene's triangles with lightmap coordinates, and the lightmap (front sides | back sides)."""
+class BakedDirectLight(TriangleBuffer):
+    """The scene's triangles with lightmap coordinates (the same vertices as SceneMesh, in the same
+    order, so the renderer draws either), and the lightmap (front sides | back sides)."""
 
     ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission", "in_lightmap")
+    SIZES = {"in_lightmap": 2}
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, texel: float):
-        self.ctx = ctx
+        super().__init__(ctx)
         origin, n, self.size = lightmap_layout(scene, texel)
         vertices = lightmap_vertices(scene, origin, n, self.size)
         self.vertex_count = len(vertices)
@@ -103,7 +106,6 @@ class BakedDirectLight:
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
         self.framebuffer = ctx.framebuffer([self.texture])
-        self._arrays: dict[int, moderngl.VertexArray] = {}
 
     def bake(self, program: moderngl.Program, first_unit: int) -> None:
         """Fill the lightmaps; `program` is direct_bake.glsl with the light uniforms set. Leaves the
@@ -123,26 +125,7 @@ class BakedDirectLight:
         self.texture.use(location=unit)
         return dict(lightmap=unit)
 
-    # The same interface as SceneMesh (same vertices, in the same order), so the renderer draws either.
-    def vertex_array(self, program: moderngl.Program) -> moderngl.VertexArray:
-        key = program.glo
-        if key not in self._arrays:
-            sizes = {"in_lightmap": 2}
-            layout = " ".join(f"{sizes.get(name, 3)}f" if name in program else f"{4 * sizes.get(name, 3)}x"
-                              for name in self.ATTRIBUTES)
-            used = [name for name in self.ATTRIBUTES if name in program]
-            self._arrays[key] = self.ctx.vertex_array(program, [(self.buffer, layout, *used)])
-        return self._arrays[key]
-
-    def render(self, program: moderngl.Program) -> None:
-        self.vertex_array(program).render(moderngl.TRIANGLES, vertices=self.vertex_count)
-
-    def forget_programs(self) -> None:
-        for array in self._arrays.values():
-            array.release()
-        self._arrays.clear()
-
     def release(self) -> None:
-        self.forget_programs()
-        for obj in (self.framebuffer, self.texture, *self._inputs, self.buffer):
+        super().release()
+        for obj in (self.framebuffer, self.texture, *self._inputs):
             obj.release()

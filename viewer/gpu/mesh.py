@@ -10,27 +10,25 @@ from viewer.scene import Scene
 SCENE_ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission")
 
 
-class SceneMesh:
-    """The scene as a non-indexed triangle list: every vertex carries its face's normal, albedo and
-    emission (flat shading, one material per face). Degenerate faces are dropped (no normal)."""
+class TriangleBuffer:
+    """A non-indexed triangle list in one interleaved float buffer, bound per program: a program gets a
+    vertex array with the attributes it reads, the others skipped. Subclasses set `buffer`,
+    `vertex_count`, and may change `ATTRIBUTES` and `SIZES` (floats per attribute, 3 unless listed)."""
 
-    def __init__(self, ctx: moderngl.Context, scene: Scene):
+    ATTRIBUTES: tuple[str, ...] = SCENE_ATTRIBUTES
+    SIZES: dict[str, int] = {}
+
+    def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
-        keep = scene.face_areas > 0
-        corners = scene.triangles[keep]                                   # (F, 3, 3)
-        per_face = [scene.face_normals[keep], scene.albedo[keep], scene.emission[keep]]
-        columns = [corners] + [np.repeat(a[:, None, :], 3, axis=1) for a in per_face]
-        vertices = np.concatenate(columns, axis=2).astype(np.float32)     # (F, 3, 12)
-        self.vertex_count = 3 * len(corners)
-        self.buffer = ctx.buffer(vertices.tobytes())
         self._arrays: dict[int, moderngl.VertexArray] = {}
 
     def vertex_array(self, program: moderngl.Program) -> moderngl.VertexArray:
         """A vertex array binding the attributes this program reads (the others are skipped)."""
         key = program.glo
         if key not in self._arrays:
-            layout = " ".join("3f" if name in program else "12x" for name in SCENE_ATTRIBUTES)
-            names = [name for name in SCENE_ATTRIBUTES if name in program]
+            size = lambda name: self.SIZES.get(name, 3)
+            layout = " ".join(f"{size(n)}f" if n in program else f"{4 * size(n)}x" for n in self.ATTRIBUTES)
+            names = [name for name in self.ATTRIBUTES if name in program]
             self._arrays[key] = self.ctx.vertex_array(program, [(self.buffer, layout, *names)])
         return self._arrays[key]
 
@@ -46,6 +44,21 @@ class SceneMesh:
     def release(self) -> None:
         self.forget_programs()
         self.buffer.release()
+
+
+class SceneMesh(TriangleBuffer):
+    """The scene as a non-indexed triangle list: every vertex carries its face's normal, albedo and
+    emission (flat shading, one material per face). Degenerate faces are dropped (no normal)."""
+
+    def __init__(self, ctx: moderngl.Context, scene: Scene):
+        super().__init__(ctx)
+        keep = scene.face_areas > 0
+        corners = scene.triangles[keep]                                   # (F, 3, 3)
+        per_face = [scene.face_normals[keep], scene.albedo[keep], scene.emission[keep]]
+        columns = [corners] + [np.repeat(a[:, None, :], 3, axis=1) for a in per_face]
+        vertices = np.concatenate(columns, axis=2).astype(np.float32)     # (F, 3, 12)
+        self.vertex_count = 3 * len(corners)
+        self.buffer = ctx.buffer(vertices.tobytes())
 
 
 def cube() -> np.ndarray:
