@@ -134,7 +134,7 @@ FAR_FIELD = 6.0
 class ProbeSettings:
     resolution: int = 16
     """M: probes per axis over the scene bounds."""
-    directions: int = 256
+    directions: int = 512
     """Directions gathered per probe for the light reflected by surfaces (a Fibonacci lattice)."""
     include_emitted: bool = True
     """Add the light arriving straight from emitters and the sun. The renderer shades those itself and
