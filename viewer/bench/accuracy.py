@@ -16,6 +16,7 @@ import numpy as np
 from viewer import gi, reference
 from viewer import scene as scenes
 from viewer.bench.points import free_space_points
+from viewer.bench.report import replace_block
 
 ROOT = Path(__file__).resolve().parents[2]
 PUBLIC_BOX = ROOT.parent / "shared" / "scenes" / "cornellbox-original" / "CornellBox-Original.obj"
@@ -71,12 +72,7 @@ def write_report(path: Path, rows, args):
         "|---|---|---|---|---|---|",
     ]
     lines += [f"| {s} | {k} | {n} | {m} | {e:.3f} | {t:.1f} |" for s, k, n, m, e, t in rows]
-    table = "\n".join(lines)
-    text = path.read_text() if path.exists() else f"# Accuracy\n\n{MARKER}\n{MARKER}\n"
-    before, _, rest = text.partition(MARKER)
-    _, _, after = rest.partition(MARKER)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(before + MARKER + "\n" + table + "\n" + MARKER + after)
+    replace_block(path, MARKER, "\n".join(lines), "# Accuracy against Mitsuba 3")
 
 
 if __name__ == "__main__":

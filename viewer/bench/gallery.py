@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer.bench.report import replace_block
+
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = ("cornell", "paper-test")
 VIEWS = ("final", "direct", "indirect", "probes")
@@ -124,12 +126,7 @@ def write_report(path: Path, rows: list[dict], args, host: str) -> None:
                   f"![{name}: ours vs Mitsuba]({relative}/{name}-vs-mitsuba.png)", "",
                   "Our views with the default tone mapping (ACES): " + ", ".join(VIEWS) + ".", "",
                   " ".join(f"![{name} {v}]({relative}/{name}-{v}.png)" for v in VIEWS)]
-    table = "\n".join(lines)
-    text = path.read_text() if path.exists() else f"# Gallery\n\n{MARKER}\n{MARKER}\n"
-    before, _, rest = text.partition(MARKER)
-    _, _, after = rest.partition(MARKER)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(before + MARKER + "\n" + table + "\n" + MARKER + after)
+    replace_block(path, MARKER, "\n".join(lines), "# Gallery")
 
 
 def main(argv=None) -> int:

@@ -16,6 +16,7 @@ import numpy as np
 
 from viewer import probes, transport
 from viewer import scene as scenes
+from viewer.bench.report import replace_block
 from viewer.gi import GISettings
 from viewer.raymarch import Tracer
 from viewer.voxels import voxelize
@@ -73,13 +74,7 @@ def main(argv=None):
     header = (f"Numpy solver on `{args.scene}`, {args.probes}^3 probes, median of {args.repeats} runs, seconds, "
               f"on {platform.machine()} with 2 cores.\n\nRegenerate: `.venv/bin/python -m viewer.bench.speed "
               f"--voxels {' '.join(map(str, args.voxels))} --repeats {args.repeats}`\n\n")
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    marker = "<!-- solver-speed -->"
-    path = Path(args.out)
-    text = path.read_text() if path.exists() else "# Performance\n\n## Numpy solver\n\n" + marker + "\n" + marker + "\n"
-    before, _, rest = text.partition(marker)
-    _, _, after = rest.partition(marker)
-    path.write_text(before + marker + "\n" + header + block + "\n" + marker + after)
+    replace_block(Path(args.out), "<!-- solver-speed -->", header + block, "# Performance\n\n## Numpy solver")
 
 
 if __name__ == "__main__":
