@@ -116,6 +116,45 @@ def _segments_visible(tracer: Tracer, h: float, pa, na, pb, nb) -> np.ndarray:
     return tracer.segments_clear(pa + SURFACE_OFFSET * h * na, pb + SURFACE_OFFSET * h * nb)
 
 
+@dataclass(frozen=True)
+class Clusters:
+    """Clusters of voxels for far-field visibility: cells of `factor`^3 voxels, one cluster per facing
+    (keys sorted). The numpy and the compute-shader solvers share them."""
+
+    factor: int
+    index: np.ndarray
+    """(K,) cluster of each voxel."""
+    cell: np.ndarray
+    """(K, 3) cluster cell of each voxel (voxel coords // factor)."""
+    position: np.ndarray
+    """(C, 3) area-weighted centroid."""
+    normal: np.ndarray
+    """(C, 3) unit area-weighted normal."""
+    cluster_cell: np.ndarray
+    """(C, 3) cluster cell of each cluster."""
+
+    @property
+    def count(self) -> int:
+        return len(self.position)
+
+
+def clusters_of(voxels: VoxelGrid) -> Clusters:
+    factor = max(1, voxels.resolution // CLUSTER_RESOLUTION)
+    facing = np.argmax(voxels.normal @ FACINGS.T, axis=1)
+    cc = voxels.coords // factor
+    m = -(-voxels.resolution // factor)
+    keys, index = np.unique((cc[:, 0] + cc[:, 1] * m + cc[:, 2] * m * m) * 6 + facing, return_inverse=True)
+    count = len(keys)
+    w = voxels.area[:, None]
+    total = lambda x: np.stack([np.bincount(index, x[:, c], count) for c in range(3)], 1)
+    position = total(voxels.position * w) / np.bincount(index, voxels.area, count)[:, None]
+    n = total(voxels.normal * w)
+    normal = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    cell_id = keys // 6
+    cluster_cell = np.stack([cell_id % m, (cell_id // m) % m, cell_id // (m * m)], axis=1)
+    return Clusters(factor, index, cc, position, normal, cluster_cell)
+
+
 class _Visibility:
     """V_ij for pairs of voxels, exact where it shapes the picture and clustered where it does not.
 
@@ -128,20 +167,10 @@ class _Visibility:
 
     def __init__(self, voxels: VoxelGrid, tracer: Tracer):
         self.voxels, self.tracer = voxels, tracer
-        self.factor = max(1, voxels.resolution // CLUSTER_RESOLUTION)
-        facing = np.argmax(voxels.normal @ FACINGS.T, axis=1)
-        cc = voxels.coords // self.factor
-        m = -(-voxels.resolution // self.factor)
-        keys, self.cluster = np.unique(((cc[:, 0] + cc[:, 1] * m + cc[:, 2] * m * m) * 6 + facing),
-                                       return_inverse=True)
-        self.cluster_cell = cc
-        w = voxels.area[:, None]
-        count = len(keys)
-        total = lambda x: np.stack([np.bincount(self.cluster, x[:, c], count) for c in range(3)], 1)
-        self.c_pos = total(voxels.position * w) / np.bincount(self.cluster, voxels.area, count)[:, None]
-        n = total(voxels.normal * w)
-        self.c_nrm = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-        self.known = np.full((count, count), -1, np.int8)
+        clusters = clusters_of(voxels)
+        self.factor, self.cluster, self.cluster_cell = clusters.factor, clusters.index, clusters.cell
+        self.c_pos, self.c_nrm = clusters.position, clusters.normal
+        self.known = np.full((clusters.count, clusters.count), -1, np.int8)
         self.emitter = np.any(voxels.emission > 0, axis=1)
 
     def between(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:

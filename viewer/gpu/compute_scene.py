@@ -9,7 +9,6 @@ here and in shaders/compute_scene.glsl; programs use 7..15 for their own buffers
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import moderngl
 import numpy as np
@@ -17,8 +16,8 @@ import numpy as np
 from viewer.gpu.programs import set_uniforms
 from viewer.raymarch import Tracer
 from viewer.scene import DirectionalLight
-from viewer.transport import CLUSTER_RESOLUTION, SURFACE_OFFSET
-from viewer.voxels import FACINGS, VoxelGrid
+from viewer.transport import SURFACE_OFFSET, clusters_of
+from viewer.voxels import VoxelGrid
 
 LOOP_BUDGET = 60000
 """Loop iterations one shader invocation may run. llvmpipe gives all loops of a shader invocation batch
@@ -36,45 +35,6 @@ def vec4s(values: np.ndarray, w: np.ndarray | float = 0.0, dtype=np.float32) -> 
     out[:, :3] = values
     out[:, 3] = w
     return out.tobytes()
-
-
-@dataclass(frozen=True)
-class Clusters:
-    """transport._Visibility's clusters: cells of `factor`^3 voxels, one cluster per facing."""
-
-    factor: int
-    index: np.ndarray
-    """(K,) cluster of each voxel."""
-    cell: np.ndarray
-    """(K, 3) cluster cell of each voxel (voxel coords // factor)."""
-    position: np.ndarray
-    """(C, 3) area-weighted centroid."""
-    normal: np.ndarray
-    """(C, 3) unit area-weighted normal."""
-    cluster_cell: np.ndarray
-    """(C, 3) cluster cell of each cluster."""
-
-    @property
-    def count(self) -> int:
-        return len(self.position)
-
-
-def clusters_of(voxels: VoxelGrid) -> Clusters:
-    """The same clusters as transport._Visibility (one per cluster cell and facing, keys sorted)."""
-    factor = max(1, voxels.resolution // CLUSTER_RESOLUTION)
-    facing = np.argmax(voxels.normal @ FACINGS.T, axis=1)
-    cc = voxels.coords // factor
-    m = -(-voxels.resolution // factor)
-    keys, index = np.unique((cc[:, 0] + cc[:, 1] * m + cc[:, 2] * m * m) * 6 + facing, return_inverse=True)
-    count = len(keys)
-    w = voxels.area[:, None]
-    total = lambda x: np.stack([np.bincount(index, x[:, c], count) for c in range(3)], 1)
-    position = total(voxels.position * w) / np.bincount(index, voxels.area, count)[:, None]
-    n = total(voxels.normal * w)
-    normal = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-    cell_id = keys // 6
-    cluster_cell = np.stack([cell_id % m, (cell_id // m) % m, cell_id // (m * m)], axis=1)
-    return Clusters(factor, index, cc, position, normal, cluster_cell)
 
 
 def chunk_ranges(costs, budget: int | None = None) -> list[tuple[int, int]]:
