@@ -1,0 +1,78 @@
+"""The network's input encoding: the symmetries the design relies on, and the direct-light feature's
+physics."""
+
+import numpy as np
+import pytest
+
+from scenes import box, ceiling_lamp, lit_room
+from viewer import encoding, sh
+from viewer.scene import DirectionalLight, Scene, load
+from viewer.voxels import voxelize
+
+
+def encode(scene: Scene, m: int = 8, n: int = 16) -> encoding.Encoding:
+    lo, hi = scene.bounds
+    return encoding.encode(voxelize(scene, n), scene.sun, lo, hi, m)
+
+
+def test_shape_and_finite():
+    enc = encode(load("cornell"), m=16, n=32)
+    assert enc.inputs.shape == (3, encoding.CHANNELS, 16, 16, 16)
+    assert np.all(np.isfinite(enc.inputs)) and np.all(enc.scale > 0)
+
+
+def test_brighter_light_only_changes_the_scale():
+    """Transport is linear in the emitted light: the network sees the same input, the output scale doubles."""
+    scene = load("cornell")
+    brighter = scene.with_emission("light", 2 * scene.emission[scene.face_group == scene.group_index("light")][0])
+    a, b = encode(scene), encode(brighter)
+    np.testing.assert_allclose(b.scale, 2 * a.scale, rtol=1e-5)
+    np.testing.assert_allclose(b.inputs, a.inputs, atol=1e-5)
+
+
+def test_colour_channels_are_independent():
+    """Recolouring a wall in green only changes the green pass's albedo."""
+    scene = load("cornell")
+    red = scene.group_albedo("red-wall")
+    a, b = encode(scene), encode(scene.with_albedo("red-wall", [red[0], 0.6, red[2]]))
+    changed = np.abs(b.inputs - a.inputs).reshape(3, encoding.CHANNELS, -1).max(axis=2) > 1e-6
+    assert changed[1, encoding.FEATURES.index("albedo")]
+    assert not changed[0].any() and not changed[2].any()
+    assert changed[1].sum() == 1
+
+
+def test_no_light_gives_zero_scale_and_zero_inputs_of_light():
+    enc = encode(box(inward=True, albedo=0.5, name="dark-room"))
+    assert np.all(enc.scale == 0)
+    assert np.all(enc.inputs[:, encoding.DIRECT] == 0)
+
+
+def test_direct_feature_is_the_lamps_solid_angle():
+    """A small lamp straight above a probe in an open scene: the DC of the unshadowed feature equals
+    L * A * cos / r^2 * Y00 within the near-field clamp's error."""
+    lamp = ceiling_lamp(half_size=0.05, height=0.95, radiance=10.0)
+    scene = Scene.concatenate("lamp-above-floor", [lamp, box(half_size=1.0, centre=(0, -2.0, 0), name="block")])
+    voxels = voxelize(scene, 32)
+    probe = np.array([[0.0, -0.05, 0.0]])
+    lights = encoding.emitting_patches(np.zeros(voxels.count, np.int64), voxels)
+    value = encoding.emitter_sh(lights, probe)[0, 0, 0]
+    r = 1.0
+    expected = 10.0 * 0.01 / (r * r) * sh.basis(np.array([0.0, 1.0, 0.0]))[0]
+    assert value == pytest.approx(expected, rel=0.02)
+
+
+def test_sun_reaches_only_the_cells_under_the_window():
+    """A closed room with a hole in the ceiling: straight-down sun lights the column under the hole."""
+    room = box(inward=True, albedo=0.5, name="room")
+    ceiling = np.abs(room.triangles[:, :, 1] - 1.0).max(axis=1) < 1e-9
+    walls = Scene("room", room.vertices, room.faces[~ceiling], 0.5, 0.0, 0, ("room",))
+    frame = []
+    for x0, x1, z0, z1 in ((-1, 1, -1, -0.25), (-1, 1, 0.25, 1), (-1, -0.25, -0.25, 0.25), (0.25, 1, -0.25, 0.25)):
+        v = np.array([[x0, 1, z0], [x0, 1, z1], [x1, 1, z1], [x1, 1, z0]], np.float64)  # facing down
+        frame.append(Scene("frame", v, np.array([[0, 1, 2], [0, 2, 3]]), 0.5, 0.0, 0, ("ceiling",)))
+    sun = DirectionalLight(direction=np.array([0.0, 1.0, 0.0]), irradiance=np.ones(3))
+    scene = Scene.concatenate("window", [walls, *frame], sun=sun)
+    enc = encode(scene, m=8, n=32)
+    visible = enc.inputs[0, encoding.DIRECT.start] > 0  # DC of the direct light: the sun is all there is
+    assert visible[3:5, :7, 3:5].all()  # under the hole, all the way down
+    assert not visible[0:2, :7, 0:2].any() and not visible[6:8, :7, 6:8].any()  # under the solid ceiling
