@@ -254,6 +254,13 @@ def _probe_terms(dr, lane: _Lane) -> list:
             for k in range(sh.SH_COUNT) for c in range(3)]
 
 
+def _probe_part_terms(dr, lane: _Lane) -> list:
+    """`_probe_terms` with the reflected and the emitted part apart: 27 + 27 estimates."""
+    y_ray, y_light = _basis(lane.direction), _basis(lane.light_direction)
+    return ([4 * np.pi * y_ray[k] * lane.reflected[c] for k in range(sh.SH_COUNT) for c in range(3)]
+            + [y_light[k] * lane.light_weight[c] for k in range(sh.SH_COUNT) for c in range(3)])
+
+
 def _irradiance_terms(dr, lane: _Lane) -> list:
     """Per-lane estimates of E (RGB): cosine-distributed directions (pdf cos/pi) for the reflected
     part, light samples weighted by the clamped cosine."""
@@ -314,16 +321,31 @@ def probe_sh(scene: Scene, points, directions: int = 1024, spp: int = 1, max_dep
                    lambda: _probe_sh(scene, p, int(directions), int(spp), int(max_depth), int(seed)))
 
 
-def _probe_sh(scene, points, directions, spp, max_depth, seed):
+def _probe_sh(scene, points, directions, spp, max_depth, seed, terms=None):
+    terms = terms or _probe_terms
     mscene = _load(scene, max_depth)
     per_probe = directions * spp
-    out = np.zeros((len(points), sh.SH_COUNT, 3))
+    out = None
     for start, stop in _batches(len(points), per_probe):
         batch_seed = seed * 1_000_003 + start
         dirs = _lattice((stop - start) * spp, directions, batch_seed).reshape(stop - start, per_probe, 3)
-        coefficients = _estimate(mscene, points[start:stop], dirs, _probe_terms, seed=batch_seed)
-        out[start:stop] = coefficients.reshape(-1, sh.SH_COUNT, 3)
-    return out.astype(np.float32)
+        coefficients = _estimate(mscene, points[start:stop], dirs, terms, seed=batch_seed)
+        if out is None:
+            out = np.zeros((len(points), coefficients.shape[1]))
+        out[start:stop] = coefficients
+    parts = out.reshape(len(points), -1, sh.SH_COUNT, 3).astype(np.float32)
+    return parts[:, 0] if parts.shape[1] == 1 else parts
+
+
+def probe_sh_parts(scene: Scene, points, directions: int = 1024, spp: int = 1, max_depth: int = -1,
+                   seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """`probe_sh` split into (reflected, emitted), each (P, 9, 3), from the same paths: the light
+    reflected by surfaces (what the renderer's probes hold, since it shades emitters and the sun
+    itself) and the light arriving straight from emitters and the sun. Their sum is `probe_sh`.
+    Not cached (training scenes are seen once)."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    out = _probe_sh(scene, p, int(directions), int(spp), int(max_depth), int(seed) % 2**31, _probe_part_terms)
+    return out[:, 0], out[:, 1]
 
 
 def irradiance(scene: Scene, points, normals, spp: int = 1024, max_depth: int = -1, seed: int = 0,
