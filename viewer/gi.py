@@ -32,6 +32,10 @@ class GISettings:
     error is structured, not noise): 512 keeps walls and ceiling smooth."""
     dering: float = 0.0
     """SH deringing strength (0 = off)."""
+    invalid_backface_fraction: float = 0.25
+    """Probes that see the back of surfaces in more than this fraction of directions are inside solid
+    geometry: invalid, and filled from their valid neighbours (leak reduction, viewer.probes). 1 turns it
+    off (every probe valid); docs/STABILITY.md measures both."""
     normal_mode: str = "area"
     """Voxel normals: `area` (area-weighted) or `paper` (eq. 3)."""
 
@@ -67,7 +71,8 @@ def solve(scene: Scene, settings: GISettings = GISettings(), include_emitted: bo
                             transition=g, tracer=tracer)
     lap("bounces")
     probe_settings = probes.ProbeSettings(resolution=settings.probes, directions=settings.directions,
-                                          include_emitted=include_emitted, dering=settings.dering)
+                                          include_emitted=include_emitted, dering=settings.dering,
+                                          invalid_backface_fraction=settings.invalid_backface_fraction)
     result = probes.project(grid, light, scene.sun, scene.bounds, probe_settings, tracer)
     lap("probes")
     return result

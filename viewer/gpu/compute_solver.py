@@ -111,7 +111,8 @@ class ComputeSolver:
         self.scene.set_lights(voxels, sun)
         self.transport.configure(settings.kernel, self.options.visibility)
         probe_settings = ProbeSettings(resolution=settings.probes, directions=settings.directions,
-                                       dering=settings.dering)
+                                       dering=settings.dering,
+                                       invalid_backface_fraction=settings.invalid_backface_fraction)
         probes_kept = (geometry_kept and self.probes is not None and np.array_equal(self.probes.lo, lo)
                        and np.array_equal(self.probes.hi, hi)
                        and replace(self.probes.settings, dering=settings.dering) == probe_settings)
