@@ -41,6 +41,7 @@ def _gi_arguments(p: argparse.ArgumentParser):
     p.add_argument("--normals", choices=("area", "paper"), default=d.normal_mode,
                    help="voxel normals: area-weighted, or the paper's eq. 3 (plain mean)")
     p.add_argument("--sun", help="directional light dx,dy,dz,r,g,b (direction towards the sun, irradiance)")
+    p.add_argument("--model", help="the neural source's .onnx file (default: models/probenet.onnx)")
 
 
 def gi_settings(args) -> GISettings:
@@ -160,13 +161,23 @@ def run_sample(args) -> int:
         finally:
             ctx.release()
     else:
-        raise InputError(f"--method {args.method}: no trained model ships yet (use solver or compute)")
+        grid = neural_field(args).solve(scene, include_emitted=True, timings=timings.stages)
     clock = time.perf_counter()
     sh = grid.interpolate(points).astype(np.float32)
     timings.stages["interpolate"] = time.perf_counter() - clock
     np.save(out, sh)
     print(f"sample {args.method}: {len(points)} points; {timings}", file=sys.stderr)
     return 0
+
+
+def neural_field(args):
+    """The model of `--model` (or the shipped one); a missing or broken model is bad input (exit 2)."""
+    from viewer.neural import DEFAULT_MODEL, ModelError, NeuralField
+
+    try:
+        return NeuralField(getattr(args, "model", None) or DEFAULT_MODEL)
+    except ModelError as exc:
+        raise InputError(f"--method neural: {exc}") from None
 
 
 def run_capture(args) -> int:

@@ -162,7 +162,15 @@ def solver_probes(args) -> ProbeSource:
             from viewer.gpu.compute_solver import solve_probes
 
             return solve_probes(ctx, scene, settings, include_emitted=False)
-        raise CaptureError(f"--gi {gi}: no trained model ships yet (use off, solver or compute)")
+        if gi == "neural":
+            from viewer.neural import DEFAULT_MODEL, ModelError, NeuralField
+
+            try:
+                field = NeuralField(getattr(args, "model", None) or DEFAULT_MODEL)
+            except ModelError as exc:
+                raise CaptureError(f"--gi neural: {exc}") from None
+            return field.solve(scene, include_emitted=False)
+        raise CaptureError(f"--gi {gi}: unknown GI source")
     return source
 
 

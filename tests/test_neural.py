@@ -1,0 +1,146 @@
+"""The neural GI source: export fidelity, model cards, refusal of bad models, and the symmetries the
+training relies on."""
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from viewer import encoding, neural
+from viewer.scene import Scene, load
+from viewer.voxels import voxelize
+
+torch = pytest.importorskip("torch", reason="the train extra (torch) is needed to build models in tests")
+
+from viewer.training import export  # noqa: E402 - needs torch
+from viewer.training.models import ProbeNet, ProbeNetConfig  # noqa: E402
+from viewer.training.train import mirror  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def random_model(seed: int = 0) -> ProbeNet:
+    """A small ProbeNet with every weight random (the zero-initialized last layer too)."""
+    torch.manual_seed(seed)
+    model = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2))
+    with torch.no_grad():
+        for p in model.parameters():
+            p.normal_(0.0, 0.3)
+    return model.eval()
+
+
+def encoded(scene: Scene, m: int = 8) -> encoding.Encoding:
+    lo, hi = scene.bounds
+    return encoding.encode(voxelize(scene, 16), scene.sun, lo, hi, m)
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """A random model exported with a card, as the training pipeline writes it."""
+    folder = tmp_path_factory.mktemp("models")
+    model = random_model()
+    path = folder / "tiny.onnx"
+    export.export_onnx(model, path, 8)
+    export.write_card(path, model, 8, training={"note": "random weights, for tests"}, metrics={})
+    card = json.loads(path.with_suffix(".json").read_text())
+    card["inputs"]["voxels"] = 16
+    path.with_suffix(".json").write_text(json.dumps(card))
+    return model, path
+
+
+def test_onnx_equals_torch(exported):
+    model, path = exported
+    inputs = encoded(load("cornell")).inputs
+    assert export.max_difference(model, path, inputs) < 1e-4
+
+
+def test_neural_field_gives_probes_in_radiance_units(exported):
+    model, path = exported
+    field = neural.NeuralField(path)
+    scene = load("cornell")
+    grid = field.solve(scene)
+    assert grid.coefficients.shape == (8, 8, 8, 9, 3) and np.all(np.isfinite(grid.coefficients))
+    enc = encoded(scene)
+    with torch.no_grad():
+        out = model(torch.from_numpy(enc.inputs)).numpy()
+    expected = out[:, :9] * enc.scale[:, None, None, None, None]
+    np.testing.assert_allclose(grid.coefficients, expected.transpose(2, 3, 4, 1, 0), rtol=1e-4, atol=1e-5)
+    reflected = field.solve(scene, include_emitted=False).coefficients
+    assert not np.allclose(reflected, grid.coefficients)
+
+
+def test_brighter_lamp_gives_exactly_brighter_probes(exported):
+    """Linearity in the emitted light holds by construction (the encoding's scale), for any weights."""
+    _, path = exported
+    field = neural.NeuralField(path)
+    scene = load("cornell")
+    light = scene.group_index("light")
+    brighter = scene.with_emission("light", 3 * scene.emission[scene.face_group == light][0])
+    np.testing.assert_allclose(field.solve(brighter).coefficients, 3 * field.solve(scene).coefficients,
+                               rtol=1e-4, atol=1e-5)
+
+
+def test_dark_scene_gives_zero_probes(exported):
+    _, path = exported
+    from scenes import box
+
+    grid = neural.NeuralField(path).solve(box(inward=True, albedo=0.5, name="dark"))
+    assert np.all(grid.coefficients == 0)
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "no-card", "bad-card", "sha", "version"])
+def test_bad_model_is_refused_with_a_clear_message(exported, tmp_path, damage):
+    _, path = exported
+    target = tmp_path / "model.onnx"
+    shutil.copy(path, target)
+    shutil.copy(path.with_suffix(".json"), target.with_suffix(".json"))
+    card = json.loads(target.with_suffix(".json").read_text())
+    if damage == "garbage":
+        target.write_bytes(b"\x00not an onnx file" * 64)
+        card["sha256"] = neural.file_sha256(target)
+    elif damage == "truncated":
+        target.write_bytes(path.read_bytes()[:2000])
+        card["sha256"] = neural.file_sha256(target)
+    elif damage == "no-card":
+        target.with_suffix(".json").unlink()
+    elif damage == "bad-card":
+        card = {"name": "x"}
+    elif damage == "sha":
+        card["sha256"] = "0" * 64
+    elif damage == "version":
+        card["inputs"]["encoding_version"] = encoding.VERSION + 1
+    if damage != "no-card":
+        target.with_suffix(".json").write_text(json.dumps(card))
+    with pytest.raises(neural.ModelError) as info:
+        neural.NeuralField(target)
+    message = str(info.value)
+    assert "\n" not in message and "model" in message.lower() or target.name in message
+
+
+def test_sample_with_a_missing_model_exits_2(tmp_path):
+    points = tmp_path / "p.npy"
+    np.save(points, np.zeros((4, 3), np.float32))
+    result = subprocess.run([sys.executable, "-m", "viewer", "sample", "cornell", "--points", str(points),
+                             "--method", "neural", "--model", str(tmp_path / "none.onnx"),
+                             "--out", str(tmp_path / "o.npy")], capture_output=True, text=True, cwd=ROOT)
+    assert result.returncode == 2
+    assert len(result.stderr.strip().splitlines()) == 1 and "no trained model" in result.stderr
+
+
+def test_mirror_augmentation_is_the_mirrored_scene():
+    """Training mirrors encoded scenes instead of re-encoding them: the mirror of the encoding must be
+    the encoding of the mirrored scene (x -> -x, winding reversed)."""
+    scene = load("paper-test")
+    flipped = Scene("mirrored", scene.vertices * np.array([-1.0, 1.0, 1.0]), scene.faces[:, ::-1],
+                    scene.albedo, scene.emission, scene.face_group, scene.groups)
+    a, b = encoded(scene), encoded(flipped)
+    x = torch.from_numpy(a.inputs)
+    y = torch.zeros(3, 18, 8, 8, 8)
+    v = torch.zeros(3, 8, 8, 8)
+    mirrored, _, _ = mirror(x, y, v, axis=0)
+    np.testing.assert_allclose(b.scale, a.scale, rtol=1e-4)
+    np.testing.assert_allclose(mirrored.numpy(), b.inputs, atol=2e-3)

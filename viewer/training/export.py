@@ -1,0 +1,120 @@
+"""A trained ProbeNet -> `models/<name>.onnx` + its JSON card (what `viewer.neural` loads).
+
+    python -m viewer.training.export runs/probenet --name probenet [--out models]
+
+The export is checked before the card is written: onnxruntime's output must equal PyTorch's within
+1e-4 on a real encoded scene.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from viewer import encoding
+from viewer.neural import OUTPUTS, file_sha256
+from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
+from viewer.training.samples import ENCODING_VOXELS
+
+ROOT = Path(__file__).resolve().parents[2]
+TOLERANCE = 1e-4
+
+
+def load_run(run: Path) -> ProbeNet:
+    state = torch.load(Path(run) / "checkpoint.pt", weights_only=False)
+    model = ProbeNet(ProbeNetConfig(**state["config"]))
+    model.load_state_dict(state["model"])
+    return model.eval()
+
+
+def export_onnx(model: ProbeNet, path: Path, resolution: int) -> None:
+    example = torch.zeros(3, encoding.CHANNELS, resolution, resolution, resolution)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # The TorchScript exporter: torch 2.13's default (dynamo) exporter fails on this model ("references
+    # nonexistent attribute weight"), and the legacy one's graph matches torch within 1e-6.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.onnx.export(model, (example,), str(path), input_names=["inputs"], output_names=["probes"],
+                          dynamic_axes={"inputs": {0: "passes"}, "probes": {0: "passes"}}, dynamo=False)
+
+
+def max_difference(model: ProbeNet, path: Path, inputs: np.ndarray) -> float:
+    """Largest |onnxruntime - torch| over the outputs for the given encoded inputs."""
+    import onnxruntime as ort
+
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    ours = session.run(None, {"inputs": inputs.astype(np.float32)})[0]
+    with torch.no_grad():
+        theirs = model(torch.from_numpy(inputs.astype(np.float32))).numpy()
+    return float(np.abs(ours - theirs).max())
+
+
+def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, metrics: dict) -> dict:
+    card = {
+        "name": path.stem,
+        "file": path.name,
+        "sha256": file_sha256(path),
+        "architecture": {"family": "ProbeNet", **model.config.to_dict()},
+        "parameters": parameter_count(model),
+        "precision": "float32",
+        "inputs": {
+            "name": "inputs", "shape": ["3 x scenes", encoding.CHANNELS, resolution, resolution, resolution],
+            "features": list(encoding.FEATURES), "encoding_version": encoding.VERSION, "voxels": ENCODING_VOXELS,
+            "normalization": "one pass per colour channel; emission and direct light divided by the pass's "
+                             "scale (mean unshadowed direct radiance DC over the probes), outputs multiplied by it",
+        },
+        "outputs": {"name": "probes", "channels": OUTPUTS,
+                    "layout": "0-8 SH of all incident light, 9-17 SH of the light reflected by surfaces, "
+                              "18 validity logit (> 0: outside solid geometry)"},
+        "probes": {"resolution": resolution, "box": "scene bounds", "centres": "lo + (i + 0.5) (hi - lo) / M",
+                   "sh_order": "00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22 (DESIGN.md)", "index": "[x, y, z]"},
+        "training": training,
+        "metrics": metrics,
+        "exported_with": {"torch": torch.__version__, "python": platform.python_version()},
+    }
+    path.with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n")
+    return card
+
+
+def export(run: Path, out: Path, resolution: int, inputs: np.ndarray, training: dict, metrics: dict) -> dict:
+    model = load_run(run)
+    export_onnx(model, out, resolution)
+    difference = max_difference(model, out, inputs)
+    if difference > TOLERANCE:
+        raise RuntimeError(f"onnxruntime differs from torch by {difference:.2e} (> {TOLERANCE})")
+    return write_card(out, model, resolution, training, {**metrics, "onnx_max_difference": difference})
+
+
+def main(argv=None) -> int:
+    from viewer.scene import load
+    from viewer.voxels import voxelize
+
+    parser = argparse.ArgumentParser(prog="python -m viewer.training.export", description=__doc__.splitlines()[0])
+    parser.add_argument("run", type=Path)
+    parser.add_argument("--name", default="probenet")
+    parser.add_argument("--out", type=Path, default=ROOT / "models")
+    parser.add_argument("--probes", type=int, default=16)
+    parser.add_argument("--metrics", type=Path, help="JSON of measured metrics to put on the card")
+    args = parser.parse_args(argv)
+    scene = load("paper-test")
+    lo, hi = scene.bounds
+    inputs = encoding.encode(voxelize(scene, ENCODING_VOXELS), scene.sun, lo, hi, args.probes).inputs
+    history = json.loads((args.run / "history.json").read_text())
+    metrics = json.loads(args.metrics.read_text()) if args.metrics else {}
+    training = {"run": str(args.run), "epochs": len(history["epochs"]),
+                "final_val_relative_rmse": history["val_relative_rmse"][-1]}
+    card = export(args.run, args.out / f"{args.name}.onnx", args.probes, inputs, training, metrics)
+    print(f"wrote {args.out / args.name}.onnx ({card['parameters']} parameters, "
+          f"onnx vs torch {card['metrics']['onnx_max_difference']:.1e})", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,109 @@
+"""The production network: ProbeNet, a small 3D U-Net from the encoded probe lattice to the probes' SH.
+
+Input (B, CHANNELS, M, M, M) from `viewer.encoding.encode` (B = 3 x scenes: one monochrome problem per
+colour channel); output (B, OUTPUTS, M, M, M) in units of the encoding's scale: 9 SH coefficients of
+all the incident radiance (`sample`, the comparisons with Mitsuba), 9 of the light reflected by
+surfaces alone (what the renderer's probes hold: it shades emitters and the sun itself), and one logit
+for "this probe is valid" (outside solid geometry).
+
+Why this shape:
+- Light is not local: the lamp on the ceiling lights the floor sixteen probes away and a wall's colour
+  bleeds across the room. Three stride-2 levels and a global code give every probe a view of the whole
+  scene at a cost of a few thousand cells.
+- Shadows and contact are local: the finest level keeps each probe's own cell and its neighbours.
+- The head is per probe (1x1x1 convolutions): cheap at 16^3 = 4096 probes, and the same weights work
+  for any lattice size divisible by 2^levels.
+- The unshadowed direct light is an input and the head's output is added to it, so the network only
+  learns what is missing: occlusion and the bounced light.
+
+The paper's five families, for its Table 1, are in `viewer.training.paper_models`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from viewer import encoding
+
+
+@dataclass(frozen=True)
+class ProbeNetConfig:
+    width: int = 16
+    """Channels of the first coarse level (M/2); each coarser level doubles them (capped at 4x)."""
+    hidden: int = 16
+    """Width of the per-probe head."""
+    head_layers: int = 2
+    """Layers of the per-probe head after the sum of the levels."""
+    levels: int = 3
+    """Stride-2 levels below the probe lattice (M must be divisible by 2^levels)."""
+    upsample: str = "trilinear"
+    """How a coarse level reaches the finer one: `trilinear` or `nearest` (cheaper, blockier)."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class ProbeNet(nn.Module):
+    """Coarse levels see far, the per-probe head sees near.
+
+    Encoder: each level halves the lattice with a 2x2x2 stride-2 convolution (a learned pooling: every
+    fine cell is read once) and mixes neighbours with a 3x3x3 one. Decoder: each level is projected to
+    `hidden` channels at its own resolution, added to the upsampled coarser sum, and the full-resolution
+    sum meets the probe's own cell features in a small per-probe head. Only `hidden` channels are ever
+    upsampled, so the work at full resolution is a few small matrices per probe whatever the widths of
+    the coarse levels (upsampling is the costliest operator in onnxruntime here)."""
+
+    def __init__(self, config: ProbeNetConfig = ProbeNetConfig()):
+        super().__init__()
+        self.config = config
+        h = config.hidden
+        widths = [encoding.CHANNELS] + [config.width * min(2 ** level, 4) for level in range(config.levels)]
+        self.down = nn.ModuleList(
+            nn.Sequential(nn.Conv3d(widths[i], widths[i + 1], 2, stride=2), nn.ReLU(),
+                          nn.Conv3d(widths[i + 1], widths[i + 1], 3, padding=1), nn.ReLU())
+            for i in range(config.levels))
+        self.project = nn.ModuleList(nn.Conv3d(widths[i + 1], h, 1) for i in range(config.levels))
+        self.code = nn.Linear(widths[-1], h, bias=False)
+        self.local = nn.Conv3d(encoding.CHANNELS, h, 1)
+        layers: list[nn.Module] = []
+        for _ in range(config.head_layers - 1):
+            layers += [nn.Conv3d(h, h, 1), nn.ReLU()]
+        layers.append(nn.Conv3d(h, encoding_outputs(), 1))
+        self.head = nn.Sequential(*layers)
+        nn.init.zeros_(self.head[-1].weight)  # start from "the answer is the unshadowed direct light"
+        nn.init.zeros_(self.head[-1].bias)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        levels = []
+        level = x
+        for down in self.down:
+            level = down(level)
+            levels.append(level)
+        hidden = self.project[-1](level) + self.code(level.mean(dim=(2, 3, 4)))[:, :, None, None, None]
+        for i in range(len(levels) - 2, -1, -1):
+            hidden = self.project[i](levels[i]) + self._up(hidden)
+        hidden = F.relu(self.local(x) + self._up(hidden))
+        out = self.head(hidden)
+        total = out[:, TOTAL] + x[:, encoding.DIRECT]
+        return torch.cat([total, out[:, 9:]], dim=1)
+
+    def _up(self, x: torch.Tensor) -> torch.Tensor:
+        if self.config.upsample == "nearest":
+            return F.interpolate(x, scale_factor=2, mode="nearest")
+        return F.interpolate(x, scale_factor=2, mode="trilinear", align_corners=False)
+
+
+TOTAL, REFLECTED, VALIDITY = slice(0, 9), slice(9, 18), 18
+OUTPUTS = 19
+
+
+def encoding_outputs() -> int:
+    return OUTPUTS
+
+
+def parameter_count(model: nn.Module) -> int:
+    return sum(p.numel() for p in model.parameters())

@@ -1,0 +1,214 @@
+"""The paper's Table 1, reproduced: the five families with and without L2 regularization on the same
+splits, train / validation / test MSE on standardized coefficients, and relative RMSE in radiance units.
+
+    python -m viewer.training.table1 --data data/gi-v1 [--epochs 200] [--out docs/TABLE1.md]
+
+Splits: train = the procedural `train` split plus the paper's five training layouts; validation = the
+procedural `val` split (new layouts from the same distribution); test = `paper-test` (the held-out scene
+of the paper: a new sphere and a pink back wall). Targets: the dataset's 8^3 ground-truth probes.
+The production network (ProbeNet, 8^3 lattice) is trained on the same data and scored the same way,
+as a last row.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.nn import functional as F
+
+from viewer.bench.report import replace_block
+from viewer.training import paper_models as pm
+from viewer.training.samples import Samples, encoded_split, load_split
+
+ROOT = Path(__file__).resolve().parents[2]
+LAMBDA = 1e-5
+"""The regularized runs' lambda (sum of squared weights)."""
+PAPER_REPORTED = {"mlp": "0.003-0.007", "cnn": "0.6-0.78"}
+
+
+def paper_encode(path: str, resolution: int) -> dict[str, np.ndarray]:
+    from viewer.training.dataset import load_example
+    from viewer.voxels import voxelize
+
+    example = load_example(path)
+    rows = pm.voxel_list(voxelize(example.scene, pm.PAPER_VOXELS))
+    pooled = torch.nn.AdaptiveAvgPool1d(pm.PaperConfig.pooled)(torch.from_numpy(rows.T)[None])[0].numpy()
+    return {"pooled": pooled, "rows_min": rows.min(0), "rows_max": rows.max(0),
+            "targets": example.targets[resolution].reshape(-1), "names": np.array(Path(path).stem)}
+
+
+class Split:
+    """One split for the paper families: pooled voxel lists (raw units) and flattened 8^3 targets."""
+
+    def __init__(self, arrays: dict, keep: np.ndarray | None = None):
+        keep = np.arange(len(arrays["names"])) if keep is None else keep
+        self.pooled = arrays["pooled"][keep]
+        self.rows_min, self.rows_max = arrays["rows_min"][keep], arrays["rows_max"][keep]
+        self.targets = arrays["targets"][keep].astype(np.float64)
+        self.names = [str(n) for n in arrays["names"][keep]]
+
+    @staticmethod
+    def join(a: "Split", b: "Split") -> "Split":
+        out = Split.__new__(Split)
+        for name in ("pooled", "rows_min", "rows_max", "targets"):
+            setattr(out, name, np.concatenate([getattr(a, name), getattr(b, name)]))
+        out.names = a.names + b.names
+        return out
+
+
+class Standardized:
+    def __init__(self, train: Split):
+        self.lo, self.hi = train.rows_min.min(0), train.rows_max.max(0)
+        self.mean, self.std = train.targets.mean(0), train.targets.std(0) + 1e-6
+
+    def inputs(self, split: Split) -> torch.Tensor:
+        span = np.where(self.hi > self.lo, self.hi - self.lo, 1.0)
+        x = (split.pooled - self.lo[None, :, None]) / span[None, :, None] * 2 - 1  # commutes with the pooling
+        return torch.from_numpy(np.clip(x, -1, 1).astype(np.float32))
+
+    def targets(self, split: Split) -> torch.Tensor:
+        return torch.from_numpy(((split.targets - self.mean) / self.std).astype(np.float32))
+
+
+def relative_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((estimate - truth) ** 2) / np.mean(truth ** 2)))
+
+
+def train_family(config: pm.PaperConfig, data: dict, std: Standardized, weight_decay: float, epochs: int,
+                 seed: int = 0) -> tuple[dict, list]:
+    torch.manual_seed(seed)
+    model = pm.PaperNet(config)
+    x, y = std.inputs(data["train"]), std.targets(data["train"])
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, epochs, eta_min=3e-5)
+    rng = np.random.default_rng(seed)
+    curve = []
+    for epoch in range(epochs):
+        model.train()
+        total = 0.0
+        order = rng.permutation(len(x))
+        for start in range(0, len(x), 32):
+            pick = torch.from_numpy(order[start:start + 32])
+            mse = F.mse_loss(model.head(x[pick]), y[pick])
+            loss = mse
+            if weight_decay > 0:
+                loss = loss + weight_decay * sum((p ** 2).sum() for n, p in model.named_parameters() if "weight" in n)
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+            total += float(mse) * len(pick)
+        schedule.step()
+        if epoch % 10 == 9 or epoch == epochs - 1:
+            curve.append((epoch + 1, total / len(x), score(model, data["val"], std)[0]))
+    scores = {name: score(model, split, std) for name, split in data.items()}
+    return scores, curve
+
+
+def score(model, split: Split, std: Standardized) -> tuple[float, float]:
+    """(MSE on standardized coefficients, relative RMSE in radiance units)."""
+    model.eval()
+    with torch.no_grad():
+        out = model.head(std.inputs(split)).numpy()
+    mse = float(np.mean((out - std.targets(split).numpy()) ** 2))
+    return mse, relative_rmse(out * std.std + std.mean, split.targets)
+
+
+def probenet_row(root: Path, data: dict, std: Standardized, epochs: int) -> tuple[dict, list]:
+    """ProbeNet on the 8^3 lattice, scored in the paper's standardized units too."""
+    from viewer.training.models import ProbeNet, ProbeNetConfig
+    from viewer.training.train import TrainSettings, train
+    from viewer.training.train import subset as subset_samples
+
+    m = pm.PAPER_PROBES
+    train_set = concat(load_split(root, "train", m), load_split(root, "paper", m), exclude=("paper-test", "cornell"))
+    val_set = load_split(root, "val", m)
+    paper = load_split(root, "paper", m)
+    test_set = subset_samples(paper, np.array([paper.names.index("paper-test")]))
+    model = ProbeNet(ProbeNetConfig(width=8, hidden=16, levels=3))
+    history = train(model, train_set, val_set, TrainSettings(epochs=epochs), quiet=True)
+    scores = {}
+    for name, samples, split in (("train", train_set, data["train"]), ("val", val_set, data["val"]),
+                                 ("test", test_set, data["test"])):
+        predicted = predict_physical(model, samples)  # (S, M, M, M, 9, 3)
+        flat = predicted.reshape(len(samples), -1)
+        order = [samples.names.index(n) for n in split.names]
+        flat = flat[order]
+        standardized = (flat - std.mean) / std.std
+        mse = float(np.mean((standardized - (split.targets - std.mean) / std.std) ** 2))
+        scores[name] = (mse, relative_rmse(flat, split.targets))
+    curve = list(zip(np.array(history.epochs) + 1, history.train, history.val))
+    return scores, curve
+
+
+def predict_physical(model, samples: Samples) -> np.ndarray:
+    from viewer.training.train import batches
+
+    model.eval()
+    outs = []
+    with torch.no_grad():
+        for pick, x, y, v in batches(samples, np.arange(len(samples)), 8):
+            outs.append(model(x)[:, :9].numpy().reshape(len(pick), 3, 9, *x.shape[-3:]))  # all the light
+    normalized = np.concatenate(outs)
+    return samples.physical(normalized)
+
+
+def concat(a: Samples, b: Samples, exclude=()) -> Samples:
+    keep = [i for i, n in enumerate(b.names) if n not in exclude]
+    return Samples(np.concatenate([a.inputs, b.inputs[keep]]), np.concatenate([a.targets, b.targets[keep]]),
+                   np.concatenate([a.valid, b.valid[keep]]), np.concatenate([a.scale, b.scale[keep]]),
+                   a.names + [b.names[i] for i in keep])
+
+
+def load_data(root: Path) -> dict[str, Split]:
+    m = pm.PAPER_PROBES
+    paper = encoded_split(root, "paper", "paper-list", paper_encode, m)
+    names = [str(n) for n in paper["names"]]
+    train_names = np.array([i for i, n in enumerate(names) if n.startswith("paper-train")])
+    test = np.array([names.index("paper-test")])
+    return {"train": Split.join(Split(encoded_split(root, "train", "paper-list", paper_encode, m)),
+                                Split(paper, train_names)),
+            "val": Split(encoded_split(root, "val", "paper-list", paper_encode, m)),
+            "test": Split(paper, test)}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m viewer.training.table1", description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=Path("data/gi-v1"))
+    parser.add_argument("--epochs", type=int, default=200)
+    parser.add_argument("--families", default=",".join(pm.FAMILIES))
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "TABLE1.md")
+    parser.add_argument("--results", type=Path, default=ROOT / "docs" / "data" / "table1.json")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(2)
+    data = load_data(args.data)
+    std = Standardized(data["train"])
+    results = json.loads(args.results.read_text()) if args.results.exists() else {}
+    for family in args.families.split(","):
+        for weight_decay in (0.0, LAMBDA):
+            key = f"{family}|{weight_decay:g}"
+            if key in results and results[key].get("epochs") == args.epochs:
+                continue
+            start = time.perf_counter()
+            if family == "probenet":
+                scores, curve = probenet_row(args.data, data, std, args.epochs // 4)
+            else:
+                scores, curve = train_family(pm.PaperConfig(family=family), data, std, weight_decay, args.epochs)
+            results[key] = {"family": family, "lambda": weight_decay, "epochs": args.epochs, "scores": scores,
+                            "curve": [list(map(float, c)) for c in curve], "seconds": time.perf_counter() - start,
+                            "parameters": sum(p.numel() for p in pm.PaperNet(pm.PaperConfig(family=family)).parameters())
+                            if family != "probenet" else None}
+            print(f"{key}: train {scores['train'][0]:.4f} val {scores['val'][0]:.4f} test {scores['test'][0]:.4f}"
+                  f"  rel. RMSE test {100 * scores['test'][1]:.1f}%  ({results[key]['seconds']:.0f} s)", file=sys.stderr)
+            args.results.parent.mkdir(parents=True, exist_ok=True)
+            args.results.write_text(json.dumps(results, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
