@@ -144,3 +144,60 @@ def test_mirror_augmentation_is_the_mirrored_scene():
     mirrored, _, _ = mirror(x, y, v, axis=0)
     np.testing.assert_allclose(b.scale, a.scale, rtol=1e-4)
     np.testing.assert_allclose(mirrored.numpy(), b.inputs, atol=2e-3)
+
+
+def _wait_for_grid(gi, seconds: float = 60.0):
+    import time
+
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        changed, grid = gi.update()
+        if changed and grid is not None:
+            return grid
+        time.sleep(0.01)
+    raise AssertionError("no probes arrived")
+
+
+def test_viewer_neural_source_updates_after_an_edit(exported):
+    """GI source "neural": the network runs in the frame the voxels arrive; a recoloured wall gives
+    new probes that differ where the wall's light goes."""
+    from viewer.gi import GISettings
+    from viewer.ui.gi_sources import GIController
+
+    _, path = exported
+    gi = GIController(ctx=None, source="neural", settings=GISettings(voxels=16, probes=8), neural_model=path)
+    gi.unavailable.pop("neural", None)
+    gi.source = "neural"
+    scene = load("cornell")
+    try:
+        gi.set_scene(scene, version=1)
+        first = _wait_for_grid(gi)
+        assert first.coefficients.shape == (8, 8, 8, 9, 3) and gi.status()[2] is None
+        assert "ms network" in gi.status()[0]
+        gi.set_scene(scene.with_albedo("red-wall", (0.05, 0.05, 0.8)), version=2)
+        second = _wait_for_grid(gi)
+        assert not np.allclose(first.coefficients, second.coefficients)
+    finally:
+        gi.close()
+
+
+def test_viewer_falls_back_to_the_compute_solver_on_a_corrupt_model(exported, tmp_path):
+    from viewer.gi import GISettings
+    from viewer.ui.gi_sources import GIController
+
+    _, path = exported
+    broken = tmp_path / "broken.onnx"
+    broken.write_bytes(b"garbage")
+    shutil.copy(path.with_suffix(".json"), broken.with_suffix(".json"))
+    gi = GIController(ctx=None, source="compute", settings=GISettings(voxels=8, probes=4), neural_model=broken)
+    gi.unavailable.pop("neural", None)
+    gi.unavailable.pop("compute", None)
+    try:
+        gi.source = "off"
+        gi.scene, gi._scene_version = load("cornell"), 1
+        gi.set_source("neural")
+        assert gi.source == "compute"
+        line, _, error = gi.status()
+        assert error is not None and "Neural model unusable" in error and "compute solver" in error
+    finally:
+        gi.close()

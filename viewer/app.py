@@ -221,8 +221,8 @@ class ViewerApp(mglw.WindowConfig):
         self.session = Session(self.renderer, gi, scene or load(options.scene), options.scene, log=log,
                                on_gi_ready=self.times.restart_summary)
         if options.gi != gi.source:
-            note = gi.unavailable[options.gi]
-            log(f"--gi {options.gi} is not available ({note}); GI is off")
+            note = gi.fallback or gi.unavailable.get(options.gi, "")
+            log(f"--gi {options.gi} is not available ({note}); GI source: {gi.source}")
             self.session.messages.append(Message(f"GI source {options.gi!r} not available: {note}", error=True))
         self.view = ViewOptions(view=options.view, redraw_always=bool(options.redraw_always),
                                 show_panel=not options.hide_panel)

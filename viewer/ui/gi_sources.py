@@ -31,12 +31,8 @@ def unavailable_reasons() -> dict[str, str]:
     if importlib.util.find_spec("viewer.gpu.compute_solver") is None:
         reasons["compute"] = ("The compute-shader solver (viewer/gpu/compute_solver.py) is not part of "
                               "this build yet.")
-    models = sorted(MODELS.glob("*.onnx")) if MODELS.is_dir() else []
-    if not models:
-        reasons["neural"] = "No trained model yet: the neural field needs an .onnx file in models/."
-    else:
-        reasons["neural"] = (f"A model exists ({models[0].name}), but the viewer does not run the neural "
-                             f"field yet.")
+    if not (MODELS / "probenet.onnx").is_file():
+        reasons["neural"] = "No trained model: the neural field needs models/probenet.onnx (docs/TRAINING.md)."
     return reasons
 
 
@@ -124,10 +120,71 @@ class ComputeSource:
         return f"Compute solver: {solver.phase}, {solver.bounces} bounces, {self.steps} steps."
 
 
+class NeuralSource:
+    """The trained network (viewer.neural): voxelizing runs off the render thread, as for the compute
+    solver; the network itself (encode, onnxruntime, unpack: a few milliseconds) runs on the render
+    thread in the frame the voxels arrive, so an edit's new probes are shown in that frame.
+
+    Creating it loads and checks the model: a missing, corrupt or mismatched model raises
+    `viewer.neural.ModelError`, which the controller shows and answers by falling back to the compute
+    solver."""
+
+    def __init__(self, model: Path | None = None):
+        from viewer.neural import DEFAULT_MODEL, NeuralField
+
+        self.field = NeuralField(model or DEFAULT_MODEL)
+        self.voxelizing: BackgroundTask | None = None
+        self.error: str | None = None
+        self.milliseconds: dict[str, float] = {}
+        self._request = None
+        self._voxelizing_request = None
+
+    def restart(self, scene: Scene, settings: GISettings) -> None:
+        self._request, self.error = scene, None
+
+    @property
+    def busy(self) -> bool:
+        return self.error is None and (self._request is not None or self.voxelizing is not None)
+
+    def step(self) -> ProbeGrid | None:
+        from viewer.voxels import voxelize
+
+        try:
+            if self.voxelizing is not None and self.voxelizing.done:
+                task, scene, self.voxelizing = self.voxelizing, self._voxelizing_request, None
+                if task.error:
+                    self.error = task.error
+                elif self._request is None:   # no newer edit waiting: these voxels are current
+                    timings: dict[str, float] = {}
+                    lo, hi = scene.bounds
+                    grid = self.field.predict(task.result, scene.sun, lo, hi, include_emitted=False, timings=timings)
+                    self.milliseconds = {k: 1000 * v for k, v in timings.items()}
+                    self.milliseconds["voxelize"] = 1000 * task.elapsed
+                    return grid
+            if self._request is not None and self.voxelizing is None:
+                scene, self._request = self._request, None
+                self._voxelizing_request = scene
+                self.voxelizing = BackgroundTask("voxelize", voxelize, scene, self.field.card.voxels)
+        except Exception as exc:  # noqa: BLE001 - shown in the panel, the viewer keeps running
+            self.error = f"{type(exc).__name__}: {exc}"
+        return None
+
+    def status(self) -> str:
+        if self.voxelizing is not None:
+            return f"Neural: voxelizing, {self.voxelizing.elapsed:.1f} s"
+        if self.milliseconds:
+            ms = self.milliseconds
+            network = ms.get("encode", 0) + ms.get("network", 0) + ms.get("unpack", 0)
+            return (f"Neural ({self.field.card.path.name}): {network:.1f} ms network, "
+                    f"{ms.get('voxelize', 0):.0f} ms voxelize.")
+        return "Neural: starting..."
+
+
 class GIController:
     def __init__(self, ctx, source: str = "solver", settings: GISettings | None = None,
-                 compute_budget_ms: float = 40.0):
+                 compute_budget_ms: float = 40.0, neural_model: Path | None = None):
         self.ctx = ctx
+        self.neural_model = neural_model
         self.unavailable = unavailable_reasons()
         self.source = source if source not in self.unavailable else "off"
         self.settings = settings or GISettings()
@@ -139,6 +196,8 @@ class GIController:
         self._cpu_grid: ProbeGrid | None = None
         self._cpu_requested = None   # (scene version, settings) of the solve under way
         self._compute: ComputeSource | None = None
+        self._neural: NeuralSource | None = None
+        self.fallback: str | None = None   # why the neural source was left for the compute solver
         self._outgoing: list[ProbeGrid | None] = []   # grids for the render loop to show, oldest first
         self.ready_seconds: float | None = None        # how long the last finished solve took
 
@@ -178,7 +237,20 @@ class GIController:
                 self._cpu = self._cpu or SolverProcess()
                 self._cpu.request(self.scene, self.settings)
                 self._cpu_requested = key
-        elif self.source == "compute":
+        elif self.source == "neural":
+            if self._neural is None:
+                from viewer.neural import ModelError
+
+                try:
+                    self._neural = NeuralSource(self.neural_model)
+                except ModelError as exc:
+                    self.fallback = f"Neural model unusable: {exc}. Using the compute solver instead."
+                    self.source = "compute" if "compute" not in self.unavailable else "off"
+                    self._restart()
+                    return
+            self.fallback = None
+            self._neural.restart(self.scene, self.settings)
+        if self.source == "compute":
             self._compute = self._compute or ComputeSource(self.ctx)
             self._compute.restart(self.scene, self.settings)
 
@@ -195,6 +267,10 @@ class GIController:
             grid = self._compute.step(self.compute_budget_ms)
             if grid is not None:
                 self._outgoing.append(grid)
+        if self._neural is not None and self.source == "neural":
+            grid = self._neural.step()
+            if grid is not None:
+                self._outgoing.append(grid)
         if self._outgoing:
             grid = self._outgoing[-1]
             self._outgoing.clear()
@@ -208,6 +284,8 @@ class GIController:
             return self._cpu is not None and self._cpu.busy
         if self.source == "compute":
             return self._compute is not None and self._compute.busy
+        if self.source == "neural":
+            return self._neural is not None and self._neural.busy
         return False
 
     def status(self) -> tuple[str, float | None, str | None]:
@@ -229,10 +307,14 @@ class GIController:
             return "CPU solver: idle.", None, None
         if self.source == "compute":
             if self._compute is None:
-                return "Compute solver: idle.", None, None
+                return "Compute solver: idle.", None, self.fallback
             if self._compute.error:
                 return "Compute solver failed.", None, self._compute.error
-            return self._compute.status(), None, None
+            return self._compute.status(), None, self.fallback
+        if self.source == "neural" and self._neural is not None:
+            if self._neural.error:
+                return "Neural source failed.", None, self._neural.error
+            return self._neural.status(), None, None
         return "Not available.", None, None
 
     def close(self) -> None:
