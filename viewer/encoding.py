@@ -32,6 +32,9 @@ import numpy as np
 from viewer import sh
 from viewer.voxels import VoxelGrid
 
+VERSION = 1
+"""Bump when the features change: a model card records the version its network was trained on, and
+`viewer.neural` refuses a model of another version."""
 FEATURES = (
     "density",          # surface area in the cell / cell face area
     "normal_x", "normal_y", "normal_z",  # area-weighted normals / cell face area
