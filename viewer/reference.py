@@ -99,7 +99,8 @@ def to_mitsuba(scene: Scene, max_depth: int = -1) -> dict:
     - The BSDF is a two-sided diffuse: our surfaces reflect on both sides (Mitsuba's `diffuse` alone is
       black from behind); emission stays one-sided.
     - The sun is a `directional` emitter; Mitsuba's `direction` is where the light travels, -sun.direction.
-    - Emitters are sampled in proportion to their power (`sampling_weight`).
+    - Emitters are sampled in proportion to their power (`sampling_weight`); the sun's power is what
+      reaches into the scene's bounds (`_sun_lit_fraction`), not all that crosses its bounding disc.
     """
     mi, _, _ = _mitsuba()
     lo, hi = scene.bounds
@@ -120,10 +121,29 @@ def to_mitsuba(scene: Scene, max_depth: int = -1) -> dict:
             out[f"emitter_{k:04d}"] = _mesh(mi, scene, faces[chosen], f"emitter_{k:04d}", emitter)
     if scene.sun is not None and np.any(scene.sun.irradiance > 0):
         power = float(scene.sun.irradiance.mean()) * np.pi * radius ** 2  # through the bounding disc
+        power *= max(_sun_lit_fraction(mi, scene), 1e-3)
         out["sun"] = {"type": "directional", "direction": (-scene.sun.direction).tolist(),
                       "irradiance": {"type": "rgb", "value": scene.sun.irradiance.tolist()},
                       "sampling_weight": max(power, 1e-12)}
     return out
+
+
+def _sun_lit_fraction(mi, scene: Scene, count: int = 4096) -> float:
+    """Share of points spread over the scene's bounds that the sun reaches. A sun shining through a
+    small window lights a few percent of a room: weighted by its whole bounding disc it would take nearly
+    every light sample and next-event estimate, and leave the area lights to chance (measured on such a
+    room, 8^3 probes at 256 directions: two seeds differ by 21% relative RMS with the disc's weight, 8%
+    with this one). Any weight keeps the estimate unbiased; this one only moves samples to the light."""
+    if variant().startswith("scalar"):
+        return 1.0
+    lo, hi = scene.bounds
+    points = lo + (hi - lo) * np.random.default_rng(0x5E7).random((count, 3))
+    towards = np.broadcast_to(scene.sun.direction, points.shape)
+    occluders = mi.load_dict({"type": "scene", "surfaces": _mesh(mi, scene, np.arange(len(scene.faces)),
+                                                                 "occluders", None)}, parallel=False)
+    ray = mi.Ray3f(mi.Point3f(*(mi.Float(_aligned(points[:, a])) for a in range(3))),
+                   mi.Vector3f(*(mi.Float(_aligned(towards[:, a])) for a in range(3))))
+    return float(1.0 - np.mean(np.array(occluders.ray_test(ray), bool)))
 
 
 def _mesh(mi, scene: Scene, face_ids: np.ndarray, name: str, emitter: dict | None):
