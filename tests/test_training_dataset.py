@@ -1,0 +1,341 @@
+"""The neural GI dataset: procedural rooms are valid scenes, files round-trip, runs resume, and the
+ground truth sees the sun through a window."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from viewer import meshes, sh
+from viewer.training import dataset, procedural, truth
+from viewer.training.procedural import CORNELL_POWER, OBJECT_KINDS, WALL_NAMES, Ranges, random_scene
+from viewer.voxels import voxelize
+
+SEEDS = range(40)
+needs_mitsuba = pytest.mark.skipif(not truth.mitsuba_available(), reason="Mitsuba 3 is not installed")
+
+
+def scene_for(seed: int, ranges: Ranges = Ranges()):
+    return random_scene(np.random.default_rng([7, seed]), f"test-{seed}", ranges)
+
+
+def group_faces(scene, name):
+    return scene.face_group == scene.group_index(name)
+
+
+def covered(points: np.ndarray, triangles: np.ndarray, tolerance: float = 1e-9) -> np.ndarray:
+    """Whether each point (P, 3) lies on one of the triangles (T, 3, 3) (in its plane and inside)."""
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    n = np.cross(b - a, c - a)
+    d = points[:, None] - a[None]                                              # (P, T, 3)
+    in_plane = np.abs(np.einsum("ptc,tc->pt", d, n)) <= tolerance * np.linalg.norm(n, axis=1)
+    inside = np.ones(in_plane.shape, bool)
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ptc,tc->pt", np.cross(p1 - p0, points[:, None] - p0[None]), n) >= -tolerance
+    return np.any(in_plane & inside, axis=1)
+
+
+# ---- procedural scenes ---------------------------------------------------------------------------------
+
+def test_rooms_are_closed_except_the_front_and_the_window():
+    """Points spread over the five walls of the box lie on the wall meshes, unless they are in the
+    window's hole; walls face into the room."""
+    u = (np.arange(24) + 0.5) / 24 * 2 - 1
+    grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)
+    for seed in SEEDS:
+        scene, params = scene_for(seed)
+        frames = procedural.room_frames(np.array(params["room_half"]))
+        window = params["window"]
+        for name in WALL_NAMES:
+            f = frames[name]
+            points = f.centre + grid[:, :1] * f.half_u * f.u + grid[:, 1:] * f.half_v * f.v
+            mask = group_faces(scene, name)
+            on_wall = covered(points, scene.triangles[mask])
+            hole = np.zeros(len(points), bool)
+            if window is not None and window["wall"] == name:
+                (a, b), (ha, hb) = window["uv"], window["half"]
+                hole = (np.abs(grid[:, 0] * f.half_u - a) < ha) & (np.abs(grid[:, 1] * f.half_v - b) < hb)
+                assert hole.any(), f"seed {seed}: the window on the {name} is smaller than the test grid"
+            np.testing.assert_array_equal(on_wall, ~hole, err_msg=f"seed {seed} {name}")
+            inward = scene.face_normals[mask] @ f.normal
+            assert np.all(inward > 0.999), f"seed {seed}: {name} faces out"
+        # the front (z = +hz) is open: no face lies in that plane
+        assert not np.any(np.all(np.isclose(scene.triangles[..., 2], params["room_half"][2]), axis=1))
+
+
+def test_emitters_face_into_the_room_with_the_power_in_range():
+    ranges = Ranges()
+    for seed in SEEDS:
+        scene, params = scene_for(seed)
+        half = np.array(params["room_half"])
+        emitting = np.any(scene.emission > 0, axis=1)
+        assert 1 <= len(params["lights"]) <= 2
+        centroids = scene.triangles[emitting].mean(axis=1)
+        assert np.all(np.abs(centroids) < half), f"seed {seed}: a light outside the room"
+        # the front face points at the room's centre: the light goes in, not into the wall behind it
+        assert np.all(np.einsum("ij,ij->i", scene.face_normals[emitting], -centroids) > 0), f"seed {seed}"
+        power = np.pi * np.sum(scene.face_areas[emitting] * scene.emission[emitting].mean(axis=1))
+        lo, hi = ranges.light_power
+        assert lo * CORNELL_POWER * 0.999 <= power <= hi * CORNELL_POWER * 1.001, f"seed {seed}"
+        for light in params["lights"]:
+            assert all(ranges.light_half_extent[0] <= h <= ranges.light_half_extent[1] for h in light["half"])
+
+
+def test_objects_are_closed_inside_the_room_and_apart():
+    kinds, stacked = set(), 0
+    for seed in SEEDS:
+        scene, params = scene_for(seed)
+        half = np.array(params["room_half"])
+        assert Ranges().objects[0] <= len(params["objects"]) <= Ranges().objects[1]
+        solids = []
+        for name in scene.groups:
+            if name in WALL_NAMES or name.startswith("light"):
+                continue
+            mask = group_faces(scene, name)
+            vertices = np.unique(scene.triangles[mask].reshape(-1, 3), axis=0)
+            assert meshes.signed_volume((scene.vertices, scene.faces[mask])) > 0, f"{name} faces inwards"
+            assert np.all(np.abs(vertices[:, [0, 2]]) <= half[[0, 2]] - procedural.OBJECT_GAP + 1e-9)
+            assert vertices[:, 1].min() >= -half[1] - 1e-9
+            assert vertices[:, 1].max() < half[1] - procedural.WALL_GAP
+            albedo = scene.albedo[mask]
+            assert np.all((albedo >= 0.05) & (albedo <= 0.9))
+            solids.append((name, vertices))
+        for i, (a, va) in enumerate(solids):
+            for b, vb in solids[i + 1:]:
+                assert not meshes.overlap(va, vb), f"seed {seed}: {a} overlaps {b}"
+        for obj in params["objects"]:
+            kinds.add(obj["kind"])
+            stacked += "stacked" in obj
+    assert kinds == set(OBJECT_KINDS)
+    assert stacked > 0
+
+
+def test_walls_mostly_grey_albedo_in_range_and_rooms_scaled():
+    ranges = Ranges()
+    saturated = 0
+    for seed in SEEDS:
+        scene, params = scene_for(seed)
+        assert all(ranges.room_scale[0] <= h <= ranges.room_scale[1] for h in params["room_half"])
+        for name in WALL_NAMES:
+            colour = np.array(params["walls"][name])
+            assert np.all((colour >= ranges.albedo[0]) & (colour <= ranges.albedo[1]))
+            np.testing.assert_allclose(scene.albedo[group_faces(scene, name)], colour[None].repeat(
+                group_faces(scene, name).sum(), 0))
+            saturated += np.ptp(colour) > 2 * ranges.grey_tint
+    share = saturated / (len(SEEDS) * len(WALL_NAMES))
+    assert 0.1 < share < 0.45  # ranges.saturated_wall_probability = 0.25
+
+
+def test_scenes_voxelize_and_every_object_is_its_own_group():
+    for seed in range(8):
+        scene, params = scene_for(seed)
+        assert len(scene.groups) == len(set(scene.groups)) == 5 + len(params["objects"]) + len(params["lights"])
+        grid = voxelize(scene, 16)
+        assert grid.count > 0 and grid.lights.count > 0
+        assert np.all(np.isfinite(grid.position)) and np.all(np.isfinite(grid.emission))
+
+
+def test_seeds_reproduce_bit_identically_and_differ():
+    a, pa = scene_for(3)
+    b, pb = scene_for(3)
+    c, pc = scene_for(4)
+    for name in ("vertices", "faces", "albedo", "emission", "face_group"):
+        assert np.array_equal(getattr(a, name), getattr(b, name))
+    assert a.groups == b.groups and json.dumps(pa) == json.dumps(pb)
+    assert a.vertices.shape != c.vertices.shape or not np.array_equal(a.vertices, c.vertices)
+    assert pa["room_half"] != pc["room_half"]
+
+
+def test_ranges_outside_the_training_ones_are_honoured():
+    """The out-of-distribution study draws with other Ranges: every field it changes must show."""
+    wide = Ranges(room_scale=(1.4, 1.6), objects=(3, 3), object_half_width=(0.1, 0.15),
+                  window_probability=1.0, wall_light_probability=1.0, lights=(2, 2), object_kinds=("cone",))
+    for seed in range(6):
+        scene, params = scene_for(seed, wide)
+        assert all(1.4 <= h <= 1.6 for h in params["room_half"])
+        assert [o["kind"] for o in params["objects"]] == ["cone"] * 3
+        assert all(light["wall"] != "ceiling" for light in params["lights"]) and len(params["lights"]) == 2
+        assert params["window"] is not None and scene.sun is not None
+
+
+def test_sun_enters_only_through_the_window():
+    """The sun shines from behind the open front (so the window is its only way in), and the ray from
+    its target on the floor towards the sun leaves the room through the window."""
+    found = 0
+    for seed in range(60):
+        scene, params = scene_for(seed, Ranges(window_probability=1.0))
+        if params["window"] is None:
+            continue
+        found += 1
+        d = scene.sun.direction
+        assert d[2] <= 0 and d[1] > 0
+        target = np.array(params["window"]["sun"]["target"])
+        half = np.array(params["room_half"])
+        assert np.isclose(target[1], -half[1]) and np.all(np.abs(target[[0, 2]]) < half[[0, 2]])
+        assert exits_through_window(target[None], d, params)[0]
+        window = params["window"]
+        assert window["wall"] in ("ceiling", "back", "left-wall", "right-wall")
+        assert all(Ranges().window_half_extent[0] <= h <= Ranges().window_half_extent[1] for h in window["half"])
+    assert found > 50
+
+
+# ---- the dataset ---------------------------------------------------------------------------------------
+
+def test_jobs_make_the_paper_split_first_with_fixed_names():
+    jobs = dataset.jobs(dataset.Path("/x"), 1, 800, (8, 16), "mitsuba", 256, 32)
+    splits = [j.split for j in jobs]
+    assert splits == ["paper"] * 7 + ["val"] * 80 + ["train"] * 720
+    assert [j.path.name for j in jobs[:7]] == [f"{n}.npz" for n in dataset.PAPER_SCENES]
+    assert jobs[7].path.as_posix() == "/x/val/00000.npz" and jobs[-1].path.name == "00719.npz"
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    if not truth.mitsuba_available():
+        pytest.skip("Mitsuba 3 is not installed")
+    root = tmp_path_factory.mktemp("gi-tiny")
+    result = dataset.generate(root, count=3, seed=5, resolutions=(4,), directions=64, truth="mitsuba",
+                              workers=0, splits=("val", "train"), stream=open("/dev/null", "w"))
+    return root, result
+
+
+@needs_mitsuba
+def test_tiny_dataset_round_trips(tiny):
+    root, result = tiny
+    assert result["made"] == 3 and result["skipped"] == 0
+    manifest = json.loads((root / "manifest.json").read_text())
+    assert manifest["splits"]["train"] == {"count": 2, "done": 2}
+    assert manifest["splits"]["val"] == {"count": 1, "done": 1}
+    assert manifest["truth"] == "mitsuba" and manifest["versions"]["mitsuba"]
+    examples = list(dataset.iter_split(root, "train")) + list(dataset.iter_split(root, "val"))
+    assert [e.path.name for e in examples] == ["00000.npz", "00001.npz", "00000.npz"]
+    for example, (split, index) in zip(examples, [("train", 0), ("train", 1), ("val", 0)]):
+        expected, params = dataset.make_scene(split, index, 5)
+        for name in ("vertices", "faces", "albedo", "emission", "face_group"):
+            assert np.array_equal(getattr(example.scene, name), getattr(expected, name)), name
+        assert example.scene.groups == expected.groups and example.params == params
+        assert (example.scene.sun is None) == (expected.sun is None)
+        np.testing.assert_array_equal(example.lo, expected.bounds[0])
+        np.testing.assert_array_equal(example.hi, expected.bounds[1])
+        raw, filled, valid = example.raw[4], example.targets[4], example.valid[4]
+        assert raw.shape == filled.shape == example.direct[4].shape == (4, 4, 4, 9, 3)
+        assert valid.shape == (4, 4, 4) and valid.dtype == bool and valid.sum() > 32
+        assert np.all(np.isfinite(raw)) and np.all(np.isfinite(filled))
+        np.testing.assert_array_equal(filled[valid], raw[valid])
+        # a lit room: every valid probe receives light, and the light straight from the emitters is
+        # part of the total (the reflected rest carries positive L00 too)
+        assert np.all(raw[valid][:, 0].mean(axis=-1) > 0)
+        assert np.all(raw[valid][:, 0].mean(axis=-1) >= example.direct[4][valid][:, 0].mean(axis=-1) - 1e-3)
+
+
+@needs_mitsuba
+def test_resume_skips_finished_files_and_remakes_a_corrupt_one(tiny, tmp_path):
+    root = tmp_path / "copy"
+    shutil.copytree(tiny[0], root)
+    files = sorted(root.glob("*/*.npz"))
+    before = {p: p.stat().st_mtime_ns for p in files}
+    broken = root / "train" / "00001.npz"
+    data = broken.read_bytes()
+    broken.write_bytes(data[: len(data) // 2])
+    result = dataset.generate(root, count=3, seed=5, resolutions=(4,), directions=64, truth="mitsuba",
+                              workers=0, splits=("val", "train"), stream=open("/dev/null", "w"))
+    assert result["made"] == 1 and result["skipped"] == 2
+    for p in files:
+        if p != broken:
+            assert p.stat().st_mtime_ns == before[p], f"{p.name} was made again"
+    again = dataset.load_example(broken)
+    original = dataset.load_example(tiny[0] / "train" / "00001.npz")
+    np.testing.assert_allclose(again.raw[4], original.raw[4], rtol=1e-5, atol=1e-6)  # same seeds, same file
+    # other settings in the same folder are refused instead of mixed in
+    with pytest.raises(dataset.SceneError, match="other settings"):
+        dataset.generate(root, count=3, seed=6, resolutions=(4,), directions=64, truth="mitsuba",
+                         workers=0, splits=("train",), stream=open("/dev/null", "w"))
+
+
+def test_the_stored_scene_is_what_the_truth_saw():
+    scene, _ = dataset.make_scene("train", 2, 1)
+    arrays = dataset.scene_arrays(scene)
+    again = dataset.scene_from_arrays(arrays)
+    for name in ("vertices", "albedo", "emission"):
+        assert np.array_equal(getattr(again, name), getattr(scene, name)), name
+    assert again.camera == scene.camera
+
+
+def test_write_obj_loads_back_to_the_same_scene(tmp_path):
+    from viewer.scene import load
+
+    for index in range(3):
+        scene, _ = dataset.make_scene("train", index, 1)
+        dataset.write_obj(scene, tmp_path / f"{scene.name}.obj")
+        again = load(tmp_path / f"{scene.name}.obj")
+        assert again.groups == scene.groups and again.camera == scene.camera
+        for name in ("vertices", "faces", "albedo", "emission", "face_group"):
+            assert np.array_equal(getattr(again, name), getattr(scene, name)), name
+
+
+# ---- the truth -----------------------------------------------------------------------------------------
+
+def sunny_room():
+    """A room with a window and no objects (nothing else in the beam)."""
+    for seed in range(20):
+        scene, params = scene_for(seed, Ranges(window_probability=1.0, objects=(0, 0)))
+        if params["window"] is not None:
+            return dataset.quantized(scene), params
+    raise AssertionError("no window drawn")
+
+
+def exits_through_window(points, direction, params) -> np.ndarray:
+    """Whether rays from points towards the sun leave the room through the window (by 0.05 margin)."""
+    frames = procedural.room_frames(np.array(params["room_half"]))
+    f = frames[params["window"]["wall"]]
+    t = ((f.centre - points) @ f.normal) / (direction @ f.normal)
+    hit = points + t[:, None] * direction
+    (a, b), (ha, hb) = params["window"]["uv"], params["window"]["half"]
+    return (np.abs((hit - f.centre) @ f.u - a) < ha - 0.05) & (np.abs((hit - f.centre) @ f.v - b) < hb - 0.05)
+
+
+@needs_mitsuba
+def test_sunlight_comes_in_through_the_window():
+    from viewer import reference
+
+    scene, params = sunny_room()
+    sun = scene.sun
+    target = np.array(params["window"]["sun"]["target"])
+    centre = np.array(params["window"]["centre"])
+    in_beam = target + 0.5 * (centre - target)
+    lo, hi = scene.bounds
+    candidates = lo + (hi - lo) * np.random.default_rng(0).uniform(0.15, 0.85, (200, 3))
+    shade = candidates[~exits_through_window(candidates, sun.direction, params)]
+    shadowed = shade[np.argmax(np.linalg.norm(shade - target, axis=1))]  # far from the sunlit patch
+    assert exits_through_window(in_beam[None], sun.direction, params)[0]
+    points = np.stack([in_beam, shadowed])
+    with_sun = reference.probe_sh(scene, points, directions=256, seed=1, cache=False)
+    without = reference.probe_sh(scene.with_sun(None), points, directions=256, seed=1, cache=False)
+    delta = sh.project_delta(sun.direction, sun.irradiance)[0]  # L00 of the sun seen directly (RGB)
+    gain = with_sun[:, 0] - without[:, 0]
+    assert np.all(gain[0] > 0.9 * delta) and np.all(gain[0] < 1.3 * delta)  # the sun, plus its bounce light
+    assert np.all(gain[1] < 0.2 * delta)  # in the shade: only light bounced off the sunlit patch
+
+
+def test_solver_truth_splits_direct_and_reflected_light():
+    scene, _ = dataset.make_scene("train", 0, 1)
+    lo, hi = scene.bounds
+    arrays = truth.targets(scene, lo, hi, (4,), "solver", directions=32, seed=0, solver_voxels=8)
+    total, direct, valid = arrays["sh_4"], arrays["sh_4_direct"], arrays["valid_4"]
+    assert total.shape == direct.shape == (4, 4, 4, 9, 3) and valid.shape == (4, 4, 4)
+    np.testing.assert_array_equal(arrays["sh_4_filled"], total)  # the solver's probes come filled
+    reflected_l00 = (total - direct)[..., 0, :]
+    assert np.all(direct[..., 0, :] >= -1e-6) and np.all(reflected_l00 > 0)
+
+
+def test_command_line_help_and_bad_input(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        dataset.main(["--help"])
+    assert exit_info.value.code == 0
+    assert "--probes" in capsys.readouterr().out
+    assert dataset.main(["--out", "/tmp/never", "--probes", "8,x"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--probes" in err[0]

@@ -1,0 +1,115 @@
+"""Training targets for one scene: ground-truth probe SH and probe validity.
+
+Two sources of truth: Mitsuba 3 (`viewer.reference.probe_sh_parts`, the independent path tracer; the
+default) or the repository's own numpy solver (the steps of `viewer.gi.solve`, for machines without
+Mitsuba and for checks). Both give the incident light at each probe and, apart, its part straight from
+the emitters and the sun: the renderer shades that part itself, so its probes hold only the rest, the
+light reflected by surfaces.
+
+Validity follows the renderer's rule (`viewer.probes.project`): a probe that sees the back of surfaces
+in more than `ProbeSettings.invalid_backface_fraction` of its directions, marched through the 32^3
+voxels, is inside a solid object.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from viewer import sh
+from viewer.probes import ProbeGrid, ProbeSettings, fill_invalid
+from viewer.scene import Scene
+
+TRUTHS = ("mitsuba", "solver")
+VALIDITY_VOXELS = 32
+"""Voxel resolution at which probe validity is decided."""
+VALIDITY_DIRECTIONS = 128
+"""Directions per probe for the back-face fraction (a fraction, so fewer than the renderer's 512 do)."""
+
+
+def probe_validity(scene: Scene, lo, hi, resolutions, voxel_resolution: int = VALIDITY_VOXELS,
+                   directions: int = VALIDITY_DIRECTIONS) -> dict[int, np.ndarray]:
+    """{M: (M, M, M) bool}: False for probes inside solid geometry (the rule of `probes.project`)."""
+    from viewer.raymarch import BACKFACE, Tracer
+    from viewer.voxels import voxelize
+
+    tracer = Tracer.build(voxelize(scene, voxel_resolution))
+    dirs, _ = sh.sphere_directions(directions)
+    limit = ProbeSettings().invalid_backface_fraction
+    out = {}
+    for m in resolutions:
+        points = ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3)
+        hits = tracer.first_hits(np.repeat(points, len(dirs), axis=0), np.tile(dirs, (len(points), 1)))
+        backface = (hits.reshape(len(points), len(dirs)) == BACKFACE).mean(axis=1)
+        out[m] = (backface <= limit).reshape(m, m, m)
+    return out
+
+
+def mitsuba_available() -> bool:
+    from viewer import reference
+
+    try:
+        reference.variant()
+    except reference.ReferenceUnavailable:
+        return False
+    return True
+
+
+def mitsuba_sh(scene: Scene, lo, hi, resolution: int, directions: int, seed: int):
+    """(total, direct), each (M, M, M, 9, 3) float32: the incident-radiance SH from Mitsuba at the probe
+    centres, and its part straight from the emitters and the sun, from the same paths (not cached on
+    disk: every scene is new)."""
+    from viewer import reference
+
+    points = ProbeGrid.positions_for(lo, hi, resolution).reshape(-1, 3)
+    reflected, direct = reference.probe_sh_parts(scene, points, directions=directions, seed=seed)
+    shape = (resolution,) * 3 + (9, 3)
+    return (reflected + direct).reshape(shape), direct.reshape(shape)
+
+
+def solver_sh(scene: Scene, resolutions, directions: int, voxels: int) -> dict[int, tuple]:
+    """{M: (total, direct, valid)} from the numpy solver over scene.bounds: the steps of
+    `viewer.gi.solve`, with the bounces solved once for every M. Its probes come filled already
+    (`probes.project` calls `fill_invalid`), so raw and filled targets are the same array."""
+    from viewer import probes, transport
+    from viewer.gi import GISettings
+    from viewer.raymarch import Tracer
+    from viewer.voxels import voxelize
+
+    settings = GISettings(voxels=voxels, directions=directions)
+    grid = voxelize(scene, settings.voxels, settings.normal_mode)
+    tracer = Tracer.build(grid)
+    transition = transport.transition_matrix(grid, settings.kernel, tracer)
+    light = transport.solve(grid, scene.sun, transport.TransportSettings(settings.kernel, settings.bounces),
+                            transition=transition, tracer=tracer)
+    out = {}
+    for m in resolutions:
+        total, reflected = (probes.project(grid, light, scene.sun, scene.bounds, probes.ProbeSettings(
+            resolution=m, directions=directions, include_emitted=emitted), tracer) for emitted in (True, False))
+        out[m] = (total.coefficients, total.coefficients - reflected.coefficients, total.valid)
+    return out
+
+
+def targets(scene: Scene, lo, hi, resolutions, truth: str, directions: int, seed: int,
+            valid: dict[int, np.ndarray] | None = None, solver_voxels: int = 32) -> dict[str, np.ndarray]:
+    """The arrays `sh_{M}`, `sh_{M}_filled`, `sh_{M}_direct` and `valid_{M}` for every M; `valid` (from
+    `probe_validity`; Mitsuba only) may be computed elsewhere beforehand."""
+    if truth not in TRUTHS:
+        raise ValueError(f"truth must be one of {TRUTHS}, not {truth!r}")
+    if truth == "solver":
+        solved = solver_sh(scene, resolutions, directions, solver_voxels)
+    elif valid is None:
+        valid = probe_validity(scene, lo, hi, resolutions)
+    out = {}
+    for m in resolutions:
+        if truth == "solver":
+            total, direct, valid_m = solved[m]
+        else:
+            valid_m = valid[m]
+            total, direct = mitsuba_sh(scene, lo, hi, m, directions,
+                                       int(np.random.default_rng([seed, m]).integers(2**31)))
+        out[f"sh_{m}"] = np.asarray(total, np.float32)
+        out[f"sh_{m}_direct"] = np.asarray(direct, np.float32)
+        out[f"valid_{m}"] = np.asarray(valid_m, bool)
+        filled = total if truth == "solver" else fill_invalid(total, valid_m)  # the solver's come filled
+        out[f"sh_{m}_filled"] = np.asarray(filled, np.float32)
+    return out
