@@ -37,6 +37,9 @@ void main() {
     for (int i = 0; i < 7; ++i) {
         v_sh[i] = texelFetch(probe_sh[i], in_probe, 0);
     }
+    for (int i = 0; i < 7; ++i) {
+        v_sh[i] /= v_sh[6].w;   // the textures hold the SH premultiplied by the probe's weight (alpha)
+    }
     gl_Position = projection * vec4(v_eye_position, 1.0);
 }
 

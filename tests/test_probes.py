@@ -43,6 +43,51 @@ def test_texture_packing_keeps_27_coefficients_per_probe_in_gl_order():
     assert np.allclose(flat[z, y, x].reshape(9, 3), grid.coefficients[x, y, z])
 
 
+def test_texture_packing_premultiplies_each_probe_by_its_weight():
+    """Invalid probes are stored times INVALID_WEIGHT with the weight in the last alpha, so that a
+    trilinear fetch over its alpha is the validity-weighted interpolation (shaders/probe_grid.glsl)."""
+    grid = random_grid(m=3)
+    valid = np.ones((3, 3, 3), bool)
+    valid[2, 0, 1] = False
+    grid = ProbeGrid(grid.lo, grid.hi, grid.coefficients, valid)
+    flat = np.concatenate(grid.texture_data(), axis=-1)          # [z, y, x, 28]
+    assert flat[1, 0, 2, 27] == pytest.approx(probes.INVALID_WEIGHT) and flat[0, 0, 0, 27] == 1.0
+    assert np.allclose(flat[1, 0, 2, :27].reshape(9, 3), probes.INVALID_WEIGHT * grid.coefficients[2, 0, 1])
+
+
+def test_surface_irradiance_without_falloff_is_the_plain_interpolation_off_the_surface():
+    grid = random_grid()
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-0.9, 0.9, (20, 3))
+    normals = rng.normal(size=(20, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    offset = 0.5 * grid.spacing.min()
+    expected = grid.irradiance(points + offset * normals, normals)
+    assert np.allclose(grid.surface_irradiance(points, normals, 0.5, plane_falloff=0.0), expected, atol=1e-5)
+
+
+def test_surface_irradiance_fades_out_probes_behind_the_surface_and_invalid_ones():
+    """A wall at x = -0.2 facing +x, between two probe layers: the layer behind it (x = -0.25) sees
+    darkness, the ones in front (x = 0.25, 0.75) radiance 1. Plain interpolation at the normal-offset
+    point darkens the wall; the surface lookup keeps within 5% of the front layers. Invalid dark probes
+    in front of it are left out the same way by their validity weight alone."""
+    m = 4
+    c = np.zeros((m, m, m, 9, 3))
+    c[2:, :, :, 0, :] = 1.0 / sh.basis(np.array([[0.0, 0.0, 1.0]]))[0, 0]   # uniform radiance 1 for x > 0
+    grid = ProbeGrid([-1, -1, -1], [1, 1, 1], c, np.ones((m, m, m), bool))
+    point, normal = np.array([[-0.2, 0.1, 0.2]]), np.array([[1.0, 0.0, 0.0]])
+    front = np.pi                                                    # E = pi L for uniform radiance
+    assert grid.irradiance(point + 0.25 * normal, normal)[0, 0] < 0.65 * front
+    assert grid.surface_irradiance(point, normal, 0.5)[0, 0] > 0.95 * front
+    # the layer at x = 0.25 dark and invalid: with the plane falloff off, validity alone skips it
+    c[2] = 0.0
+    valid = np.ones((m, m, m), bool)
+    valid[2] = False
+    grid = ProbeGrid(grid.lo, grid.hi, c, valid)
+    assert grid.irradiance(point + 0.75 * normal, normal)[0, 0] < 0.65 * front
+    assert grid.surface_irradiance(point, normal, 1.5, plane_falloff=0.0)[0, 0] > 0.98 * front
+
+
 def test_fill_invalid_takes_the_mean_of_valid_neighbours_and_never_wraps():
     c = np.zeros((4, 4, 4, 9, 3))
     valid = np.ones((4, 4, 4), bool)

@@ -14,6 +14,9 @@ import numpy as np
 
 from viewer import sh
 
+INVALID_WEIGHT = 0.01
+"""Weight of an invalid probe against a valid one when the renderer interpolates at a surface."""
+
 
 @dataclass(frozen=True)
 class ProbeGrid:
@@ -86,11 +89,52 @@ class ProbeGrid:
     # ---- GPU layout ---------------------------------------------------------------------------------
     def texture_data(self) -> list[np.ndarray]:
         """Seven RGBA float32 volumes (M, M, M, 4) in GL order [z, y, x]: the 27 coefficients packed as
-        coefficient-major RGB triples (c0.rgb c1.r | c1.gb c2.rg | ...), the last texel's alpha unused."""
+        coefficient-major RGB triples (c0.rgb c1.r | c1.gb c2.rg | ...), each probe's premultiplied by its
+        weight w (1 if valid, INVALID_WEIGHT if not), and w in the last texel's alpha. A trilinear fetch
+        divided by its alpha is then the validity-weighted interpolation (shaders/probe_grid.glsl)."""
         m = self.resolution
-        flat = self.coefficients.transpose(2, 1, 0, 3, 4).reshape(m, m, m, 27)
-        flat = np.concatenate([flat, np.zeros((m, m, m, 1), np.float32)], axis=-1)
+        weight = self.probe_weights().transpose(2, 1, 0)[..., None].astype(np.float32)
+        flat = self.coefficients.transpose(2, 1, 0, 3, 4).reshape(m, m, m, 27) * weight
+        flat = np.concatenate([flat, weight], axis=-1)
         return [np.ascontiguousarray(flat[..., 4 * t:4 * t + 4]) for t in range(7)]
+
+    def probe_weights(self) -> np.ndarray:
+        """(M, M, M) the weight of each probe when the renderer interpolates at a surface: 1 for valid
+        probes, INVALID_WEIGHT for those inside solid geometry (kept above 0 so that a point whose probes
+        are all invalid still gets their filled-in values)."""
+        return np.where(self.valid, 1.0, INVALID_WEIGHT)
+
+    def surface_irradiance(self, points: np.ndarray, normals: np.ndarray, normal_offset: float = 0.5,
+                           plane_falloff: float = 3.0) -> np.ndarray:
+        """Irradiance (P, 3) at surface points with unit normals, as the renderer shades a surface
+        (shaders/probe_grid.glsl; `irradiance` is the plain interpolation, for points in free space).
+
+        The 8 probes around p + n * normal_offset (in probe spacings) are weighted by their trilinear
+        weight x `probe_weights` x exp(plane_falloff x the probe's distance in front of the surface
+        plane, in spacings), and renormalized: probes behind the surface, inside the solid it bounds,
+        fade out smoothly (the back-side weight of DDGI, Majercik et al. 2019), as do invalid ones.
+        """
+        p = np.asarray(points, np.float64).reshape(-1, 3)
+        n = np.asarray(normals, np.float64).reshape(-1, 3)
+        m, spacing = self.resolution, self.spacing
+        u = np.clip((p + normal_offset * spacing.min() * n - self.lo) / spacing - 0.5, 0.0, m - 1)
+        base = np.minimum(np.floor(u).astype(np.int64), max(m - 2, 0))
+        f = u - base
+        probe_weight = self.probe_weights()
+        total = np.zeros(len(p))
+        coefficients = np.zeros((len(p), 9, 3))
+        for corner in range(8):
+            b = np.array([corner & 1, (corner >> 1) & 1, (corner >> 2) & 1])
+            index = np.minimum(base + b, m - 1)
+            i, j, k = index.T
+            position = self.lo + (index + 0.5) * spacing
+            in_front = np.einsum("pc,pc->p", position - p, n) / spacing.min()
+            w = (np.prod(np.where(b, f, 1.0 - f), axis=1) * probe_weight[i, j, k]
+                 * np.exp(plane_falloff * in_front))
+            total += w
+            coefficients += w[:, None, None] * self.coefficients[i, j, k]
+        y = sh.basis(n) * sh.COSINE_LOBE
+        return np.einsum("pk,pkc->pc", y, coefficients / total[:, None, None])
 
     def with_coefficients(self, coefficients: np.ndarray) -> "ProbeGrid":
         return replace(self, coefficients=coefficients)

@@ -21,7 +21,7 @@ from viewer import sh
 from viewer.gpu.compute_scene import ComputeScene, even_ranges, vec4s
 from viewer.gpu.probe_textures import ProbeTextures
 from viewer.gpu.programs import ProgramLibrary
-from viewer.probes import ProbeGrid, ProbeSettings
+from viewer.probes import INVALID_WEIGHT, ProbeGrid, ProbeSettings
 
 HIT_MEMORY_LIMIT = 64 << 20
 """Bytes of stored first hits (4 per probe and direction) above which the gather pass marches again."""
@@ -132,7 +132,7 @@ class ComputeProbes:
         self._dispatch("compute_probe_store", (-(-self.count // 64), 1),
                        {12: b["emitted"], 14: b["waves"], 15: b["indirect"]}, self._store_defines(),
                        probe_resolution=self.settings.resolution, dering=tuple(float(f) for f in factors),
-                       texel_limit=65504.0 if half else 3.0e38)
+                       texel_limit=65504.0 if half else 3.0e38, invalid_weight=INVALID_WEIGHT)
 
     # ---- reading back --------------------------------------------------------------------------------
     def grid(self, include_emitted: bool = True) -> ProbeGrid:

@@ -61,6 +61,14 @@ class RenderSettings:
     """Add the probe grid's indirect light (when a grid was given)."""
     probe_normal_offset: float = 0.5
     """Probes are sampled this many probe spacings off the surface along its normal (leak reduction)."""
+    probe_plane_falloff: float = 3.0
+    """Leak reduction: each of the 8 probes around the sample point weighs exp(this x its distance in
+    front of the shaded surface's plane, in probe spacings), besides its trilinear weight and its
+    validity (shaders/probe_grid.glsl): a probe one spacing behind another gets e^-3 (5%) of its
+    weight, so probes inside the solid behind a face, and those too near a rotated face (they see its
+    voxel staircase), fade out smoothly. Against Mitsuba on the boxes' faces: relative RMS error 0.15
+    -> 0.09 (cornell); 4 and more crease the faces where the sample point crosses a probe layer.
+    0: plain trilinear interpolation (ProbeGrid.irradiance)."""
     light_samples: int = 32
     """Points on the area emitters for direct light; each has a shadow cube, so the penumbra is made of
     this many hard shadows."""
@@ -102,6 +110,8 @@ class RenderSettings:
     def __post_init__(self):
         if self.tonemap not in TONEMAPS:
             raise ValueError(f"tonemap must be one of {', '.join(TONEMAPS)}, not {self.tonemap!r}")
+        if not 0.0 <= self.probe_plane_falloff <= 20.0:
+            raise ValueError(f"probe_plane_falloff must be in [0, 20], not {self.probe_plane_falloff}")
         if self.voxel_color not in VOXEL_COLORS:
             raise ValueError(f"voxel_color must be one of {', '.join(VOXEL_COLORS)}, not {self.voxel_color!r}")
 
@@ -261,10 +271,7 @@ class Renderer:
         buffers.clear()
         program = self.programs.get("indirect_half")
         units = self._probe_textures.use(PROBE_UNIT)
-        offset = self.settings.probe_normal_offset * float(np.min(self.probes.spacing))
-        set_uniforms(program, view_proj=gl_bytes(view_proj), probe_sh=units,
-                     probe_lo=tuple(self._probe_textures.lo), probe_hi=tuple(self._probe_textures.hi),
-                     probe_normal_offset=offset)
+        set_uniforms(program, view_proj=gl_bytes(view_proj), probe_sh=units, **self._probe_uniforms(self.probes))
         self._depth_prepass(view_proj, buffers.framebuffer, self.mesh)
         self.mesh.render(program)
         self.ctx.depth_func = "<"
@@ -362,15 +369,21 @@ class Renderer:
         units = self._probe_textures.use(PROBE_UNIT)
         self._emitter_shadows.use(ATLAS_UNIT)
         self._sun_shadow.use(SUN_UNIT)
-        offset = s.probe_normal_offset * float(np.min(probes.spacing)) if probes is not None else 0.0
-        set_uniforms(program, view_proj=gl_bytes(view_proj), probe_sh=units,
-                     probe_lo=tuple(self._probe_textures.lo), probe_hi=tuple(self._probe_textures.hi),
-                     probe_normal_offset=offset,
+        set_uniforms(program, view_proj=gl_bytes(view_proj), probe_sh=units, **self._probe_uniforms(probes),
                      shadow_bias=float(s.shadow_bias),
                      **self._emitter_shadows.uniforms(ATLAS_UNIT), **self._sun_shadow.uniforms(SUN_UNIT), **extra)
         self._depth_prepass(view_proj, framebuffer, mesh)
         mesh.render(program)
         self.ctx.depth_func = "<"
+
+    def _probe_uniforms(self, probes: ProbeGrid | None) -> dict:
+        """probe_grid.glsl's uniforms: the grid's box, and the normal offset and plane falloff in world
+        units."""
+        s = self.settings
+        spacing = float(np.min(probes.spacing)) if probes is not None else 1.0
+        return dict(probe_lo=tuple(self._probe_textures.lo), probe_hi=tuple(self._probe_textures.hi),
+                    probe_normal_offset=s.probe_normal_offset * spacing,
+                    probe_plane_falloff=s.probe_plane_falloff / spacing)
 
     def _depth_prepass(self, view_proj: np.ndarray, framebuffer: moderngl.Framebuffer, mesh) -> None:
         """Lay down the depth first, so the expensive surface shader runs once per visible pixel
