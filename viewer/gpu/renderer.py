@@ -23,6 +23,7 @@ framebuffer (the window's screen, or an offscreen image, see viewer/gpu/offscree
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -159,6 +160,11 @@ class Renderer:
         self._half: HalfIndirectBuffers | None = None
         self._baked: BakedDirectLight | None = None
         self._baked_key = None
+        self.timer = None
+        """A viewer.gpu.pass_timer.PassTimer to time each pass with, or None."""
+
+    def _timed(self, name: str):
+        return self.timer(name) if self.timer is not None else nullcontext()
 
     # ---- inputs ------------------------------------------------------------------------------------
     def set_scene(self, scene: Scene) -> None:
@@ -228,29 +234,38 @@ class Renderer:
         if self.scene is None:
             raise RuntimeError("Renderer.draw: no scene (call set_scene first)")
         camera = camera or self.scene.camera
-        self._ensure_shadows()
+        with self._timed("shadows and bake"):
+            self._ensure_shadows()
+            if self._baked_applies(view):
+                self._ensure_baked()
         lo, hi = self.bounds
         view_proj = view_projection(camera, target.aspect, lo, hi)
         ctx = self.ctx
         target.framebuffer.use()
-        target.framebuffer.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
+        with self._timed("clear"):
+            target.framebuffer.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         if view == "voxels":
             self._draw_voxels(view_proj)
         elif self._baked_applies(view):
             if self._half_applies(target, view):
-                self._draw_half_indirect(target, view_proj)
+                with self._timed("indirect (low resolution)"):
+                    self._draw_half_indirect(target, view_proj)
                 target.framebuffer.use()
-            self._draw_surfaces(view_proj, SURFACE_VIEWS[view], target.framebuffer, baked=True,
-                                half=self._half_applies(target, view))
+            with self._timed("surfaces"):
+                self._draw_surfaces(view_proj, SURFACE_VIEWS[view], target.framebuffer, baked=True,
+                                    half=self._half_applies(target, view))
         elif self._interleaved(target, view):
-            self._draw_interleaved(target, view_proj, SURFACE_VIEWS[view])
+            with self._timed("surfaces (interleaved)"):
+                self._draw_interleaved(target, view_proj, SURFACE_VIEWS[view])
         else:
-            self._draw_surfaces(view_proj, SURFACE_VIEWS[view], target.framebuffer)
+            with self._timed("surfaces"):
+                self._draw_surfaces(view_proj, SURFACE_VIEWS[view], target.framebuffer)
             if view == "probes":
                 self._draw_probes(camera, target.aspect)
-        target.resolve()
+        with self._timed("resolve"):
+            target.resolve()
 
     def _baked_applies(self, view: str) -> bool:
         return self.settings.baked_direct and view in ("final", "direct")
@@ -313,7 +328,8 @@ class Renderer:
         target.texture.use(location=HDR_UNIT)
         set_uniforms(program, hdr_image=HDR_UNIT, exposure_scale=float(2.0 ** s.exposure),
                      output_viewport=tuple(float(v) for v in framebuffer.viewport))
-        self._present_arrays[key].render(moderngl.TRIANGLES, vertices=3)
+        with self._timed("present"):
+            self._present_arrays[key].render(moderngl.TRIANGLES, vertices=3)
 
     def _ensure_shadows(self) -> None:
         s = self.settings
