@@ -198,7 +198,7 @@ def tiny(tmp_path_factory):
         pytest.skip("Mitsuba 3 is not installed")
     root = tmp_path_factory.mktemp("gi-tiny")
     result = dataset.generate(root, count=3, seed=5, resolutions=(4,), directions=64, truth="mitsuba",
-                              workers=0, splits=("val", "train"), stream=open("/dev/null", "w"))
+                              splits=("val", "train"), stream=open("/dev/null", "w"))
     return root, result
 
 
@@ -241,7 +241,7 @@ def test_resume_skips_finished_files_and_remakes_a_corrupt_one(tiny, tmp_path):
     data = broken.read_bytes()
     broken.write_bytes(data[: len(data) // 2])
     result = dataset.generate(root, count=3, seed=5, resolutions=(4,), directions=64, truth="mitsuba",
-                              workers=0, splits=("val", "train"), stream=open("/dev/null", "w"))
+                              splits=("val", "train"), stream=open("/dev/null", "w"))
     assert result["made"] == 1 and result["skipped"] == 2
     for p in files:
         if p != broken:
@@ -252,7 +252,7 @@ def test_resume_skips_finished_files_and_remakes_a_corrupt_one(tiny, tmp_path):
     # other settings in the same folder are refused instead of mixed in
     with pytest.raises(dataset.SceneError, match="other settings"):
         dataset.generate(root, count=3, seed=6, resolutions=(4,), directions=64, truth="mitsuba",
-                         workers=0, splits=("train",), stream=open("/dev/null", "w"))
+                         splits=("train",), stream=open("/dev/null", "w"))
 
 
 def test_the_stored_scene_is_what_the_truth_saw():
