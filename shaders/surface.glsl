@@ -13,8 +13,12 @@
 // of a 2x2 block sums a different quarter of the emitter samples and writes the pieces that
 // interleave_resolve.glsl recombines: everything but the reflected direct light, the direct irradiance,
 // albedo / pi, and the surface's plane (inverse view depth and its screen-space gradient).
-// BAKED (1: direct irradiance read from the lightmaps of viewer/gpu/direct_bake.py). HALF_INDIRECT (1: indirect irradiance upsampled from a half-resolution
-// target, see indirect_half.glsl, with weights that keep only texels on this fragment's plane).
+// BAKED (1: direct irradiance read from the lightmaps of viewer/gpu/direct_bake.py). HALF_INDIRECT (1:
+// indirect irradiance upsampled from a half-resolution target, see indirect_half.glsl, with weights that
+// keep only texels on this fragment's plane). DISPLAY (1: write the sRGB-encoded display value, exposure
+// and tone curve applied as present.glsl does (display_value, tonemap.glsl, with its TONE_CURVE and RAW):
+// one pass into an 8-bit image instead of a float image and a full-screen tone-mapping pass, which cost
+// about a third of a frame on llvmpipe).
 
 #define VIEW_FINAL 0
 #define VIEW_DIRECT 1
@@ -36,6 +40,9 @@
 #endif
 #ifndef HALF_INDIRECT
 #define HALF_INDIRECT 0
+#endif
+#ifndef DISPLAY
+#define DISPLAY 0
 #endif
 
 #if defined VERTEX_SHADER
@@ -149,7 +156,7 @@ void main() {
 #if VIEW == VIEW_ALBEDO
     vec3 result = v_albedo;
 #elif VIEW == VIEW_NORMALS
-    vec3 result = srgb_to_linear(n * 0.5 + 0.5);  // present.glsl encodes sRGB: this shows n/2 + 1/2 as is
+    vec3 result = srgb_to_linear(n * 0.5 + 0.5);  // the sRGB encoding undoes this: it shows n/2 + 1/2 as is
 #else
     vec3 result = vec3(0.0);
 #if INTERLEAVE
@@ -178,7 +185,11 @@ void main() {
 #endif
 #endif
 #endif
+#if DISPLAY
+    frag_color = vec4(linear_to_srgb(display_value(result)), 1.0);
+#else
     frag_color = vec4(result, 1.0);
+#endif
 }
 
 #endif

@@ -233,6 +233,7 @@ def test_a_sun_lit_scene_edits_the_sun():
 # ---- the viewport draws only when something changed ---------------------------------------------------
 
 def test_viewport_redraws_on_change_only_and_previews_while_interacting(ctx, cornell):
+    from viewer.gpu.offscreen import capture
     from viewer.gpu.renderer import RenderSettings, Renderer
     from viewer.ui.viewport import Viewport
 
@@ -247,8 +248,13 @@ def test_viewport_redraws_on_change_only_and_previews_while_interacting(ctx, cor
     try:
         assert viewport.frame(camera, "final", (1,), screen) and viewport.settled
         assert not viewport.frame(camera, "final", (1,), screen)
-        renderer.settings.exposure = 2.0                       # present only: no redraw
-        assert not viewport.frame(camera, "final", (1,), screen)
+        presented = viewport.read(screen)
+        renderer.settings.exposure = 2.0                       # tone-mapped as it is drawn: a redraw
+        assert viewport.frame(camera, "final", (1,), screen)
+        assert viewport.read(screen).mean() > presented.mean() + 10
+        # what the window shows is what a capture with the same settings gives
+        np.testing.assert_array_equal(viewport.read(screen), capture(cornell, None, size=(80, 60), samples=0,
+                                                                     settings=renderer.settings, ctx=ctx))
         moved = Camera((0.5, 0.0, 3.9), camera.target)
         assert viewport.frame(moved, "final", (1,), screen, preview=True) and not viewport.settled
         assert drawn_sizes[-1] == (40, 30)

@@ -17,7 +17,7 @@ from viewer import sh
 from viewer.gpu.offscreen import OffscreenRenderer, capture, run_capture
 from viewer.gpu.programs import SHADERS, ShaderError
 from viewer.gpu.renderer import VIEWS, RenderSettings, Renderer
-from viewer.gpu.targets import HdrTarget
+from viewer.gpu.targets import DisplayTarget, HdrTarget
 from viewer.probes import ProbeGrid
 from viewer.scene import load
 from viewer.voxels import voxelize
@@ -322,3 +322,26 @@ def test_box_faces_are_not_darkened_by_the_probes_inside_the_boxes(ctx, cornell)
     probes = ProbeGrid(lo, hi, probes.coefficients, np.ones((m, m, m), bool))
     faces, floor = box_face_and_floor_radiance(ctx, cornell, probes, RenderSettings())
     assert np.percentile(faces, 5) > 0.9 * floor, (np.percentile(faces, 5), floor)
+
+
+@pytest.mark.parametrize("settings", [RenderSettings(light_samples=8), RenderSettings(
+    light_samples=8, tonemap="reinhard", exposure=1.0, baked_direct=False, half_indirect=False)])
+def test_display_image_is_the_hdr_image_tone_mapped(ctx, cornell, settings):
+    """Into a display target the surface views are tone-mapped as they are shaded (one pass); the
+    voxels and probes views go through an HDR image and the tone-mapping pass. Both give the bytes of
+    the HDR image tone-mapped, so a window, a PNG capture and the HDR image agree."""
+    offscreen = OffscreenRenderer(SIZE, settings, samples=0, ctx=ctx)
+    reference = DisplayTarget(ctx, SIZE)
+    try:
+        offscreen.renderer.set_scene(cornell)
+        offscreen.renderer.set_probes(constant_probes(cornell, (0.2, 0.1, 0.05)))
+        for view in ("final", "direct", "indirect", "albedo", "normals", "probes"):
+            image = offscreen.render(view=view)
+            offscreen.renderer.draw(offscreen.hdr, None, view)
+            offscreen.renderer.present(offscreen.hdr, reference, view)
+            np.testing.assert_array_equal(image, reference.read(), err_msg=view)
+        # the exact path's interleaved direct light is recombined by a filter: through the HDR image
+        assert offscreen.renderer.fused(offscreen.display, "final") == settings.baked_direct
+    finally:
+        reference.release()
+        offscreen.release()

@@ -40,20 +40,28 @@ context lets a GPU solver run on the same context the renderer uses."""
 
 
 class OffscreenRenderer:
-    """A renderer with its own headless context and targets of one size."""
+    """A renderer with its own headless context and targets of one size: a display target (the 8-bit
+    image a window would show, drawn as the window draws it) and, when asked for, an HDR target."""
 
     def __init__(self, size: tuple[int, int] = (512, 512), settings: RenderSettings | None = None,
                  samples: int = 4, ctx: moderngl.Context | None = None):
         self._owns_context = ctx is None
         self.ctx = ctx or create_context()
         self.size = (int(size[0]), int(size[1]))
+        self.samples = min(int(samples), self.ctx.max_samples)
         self.renderer = Renderer(self.ctx, settings)
-        self.hdr = HdrTarget(self.ctx, self.size, samples=min(samples, self.ctx.max_samples))
-        self.display = DisplayTarget(self.ctx, self.size)
+        self.display = DisplayTarget(self.ctx, self.size, samples=self.samples)
+        self._hdr: HdrTarget | None = None
 
     @property
     def settings(self) -> RenderSettings:
         return self.renderer.settings
+
+    @property
+    def hdr(self) -> HdrTarget:
+        if self._hdr is None:
+            self._hdr = HdrTarget(self.ctx, self.size, samples=self.samples)
+        return self._hdr
 
     def render_hdr(self, camera: Camera | None = None, view: str = "final") -> np.ndarray:
         """(H, W, 3) float32 linear values (radiance, or the debug quantity of `view`)."""
@@ -62,26 +70,35 @@ class OffscreenRenderer:
 
     def render(self, camera: Camera | None = None, view: str = "final") -> np.ndarray:
         """(H, W, 3) uint8 sRGB display image."""
-        self.renderer.draw(self.hdr, camera, view)
-        self.renderer.present(self.hdr, self.display.framebuffer, view)
+        self.renderer.draw(self.display, camera, view)
         return self.display.read()
 
     def frame_time(self, camera: Camera | None = None, view: str = "final", frames: int = 7) -> float:
-        """Median milliseconds of a frame (draw + present, waited for with glFinish) after a warm-up."""
-        self.render(camera, view)
-        times = []
-        for _ in range(frames):
-            start = time.perf_counter()
-            self.renderer.draw(self.hdr, camera, view)
-            self.renderer.present(self.hdr, self.display.framebuffer, view)
-            self.ctx.finish()
-            times.append(1e3 * (time.perf_counter() - start))
-        return float(np.median(times))
+        """Median milliseconds of a frame (a draw into the display target and its blit to another
+        framebuffer of that size, as the window does, waited for with glFinish) after a warm-up."""
+        return float(np.median(self.frame_times(camera, view, frames)))
+
+    def frame_times(self, camera: Camera | None = None, view: str = "final", frames: int = 7) -> list[float]:
+        """Milliseconds of each of `frames` frames (see frame_time)."""
+        screen = DisplayTarget(self.ctx, self.size)
+        try:
+            self.render(camera, view)
+            times = []
+            for _ in range(frames):
+                start = time.perf_counter()
+                self.renderer.draw(self.display, camera, view)
+                self.renderer.present(self.display, screen.resolved, view)
+                self.ctx.finish()
+                times.append(1e3 * (time.perf_counter() - start))
+        finally:
+            screen.release()
+        return times
 
     def release(self) -> None:
         self.renderer.release()
-        self.hdr.release()
         self.display.release()
+        if self._hdr is not None:
+            self._hdr.release()
         if self._owns_context:
             self.ctx.release()
 

@@ -33,11 +33,11 @@ import numpy as np
 from viewer.gpu.direct_bake import BakedDirectLight
 from viewer.gpu.camera import clip_range, gl_bytes, perspective, view_matrix, view_projection
 from viewer.gpu.lights import emitter_samples
-from viewer.gpu.mesh import SceneMesh, cube
+from viewer.gpu.mesh import SceneMesh, cube, in_draw_order
 from viewer.gpu.probe_textures import ProbeTextures, empty_grid
 from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
 from viewer.gpu.shadows import EmitterShadows, SunShadow
-from viewer.gpu.targets import HalfIndirectBuffers, HdrTarget, InterleaveBuffers
+from viewer.gpu.targets import DisplayTarget, HalfIndirectBuffers, HdrTarget, InterleaveBuffers
 from viewer.probes import ProbeGrid
 from viewer.scene import Camera, Scene
 from viewer.voxels import VoxelGrid
@@ -160,6 +160,7 @@ class Renderer:
         self._half: HalfIndirectBuffers | None = None
         self._baked: BakedDirectLight | None = None
         self._baked_key = None
+        self._scratch: HdrTarget | None = None
         self.timer = None
         """A viewer.gpu.pass_timer.PassTimer to time each pass with, or None."""
 
@@ -176,7 +177,8 @@ class Renderer:
             self._baked, self._baked_key = None, None
         self.scene = scene
         self.bounds = scene.bounds   # (lo, hi); Scene.bounds scans the faces, so not once per frame
-        self.mesh = SceneMesh(self.ctx, scene)
+        self._draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
+        self.mesh = SceneMesh(self.ctx, self._draw_scene)
         self._shadow_key = None
 
     def set_probes(self, probes: ProbeGrid | None) -> None:
@@ -227,13 +229,21 @@ class Renderer:
             self._shadow_key = None
 
     # ---- drawing -----------------------------------------------------------------------------------
-    def draw(self, target: HdrTarget, camera: Camera | None = None, view: str = "final") -> None:
-        """Draw linear HDR values for `view` into the target (resolved, ready to present or read)."""
+    def draw(self, target: HdrTarget | DisplayTarget, camera: Camera | None = None, view: str = "final") -> None:
+        """Draw `view` into the target, resolved, ready to present or read: linear HDR values into an
+        HdrTarget; the tone-mapped, sRGB-encoded image into a DisplayTarget (in one pass where the view
+        allows it, see `fused`, else through an HDR image and the tone-mapping pass: the same pixels)."""
         if view not in VIEWS:
             raise ValueError(f"view must be one of {', '.join(VIEWS)}, not {view!r}")
         if self.scene is None:
             raise RuntimeError("Renderer.draw: no scene (call set_scene first)")
         camera = camera or self.scene.camera
+        if isinstance(target, DisplayTarget) and not self.fused(target, view):
+            hdr = self._scratch_hdr(target.size, target.samples)
+            self.draw(hdr, camera, view)
+            self.present(hdr, target, view)
+            return
+        display = isinstance(target, DisplayTarget)
         with self._timed("shadows and bake"):
             self._ensure_shadows()
             if self._baked_applies(view):
@@ -254,18 +264,32 @@ class Renderer:
                     self._draw_half_indirect(target, view_proj)
                 target.framebuffer.use()
             with self._timed("surfaces"):
-                self._draw_surfaces(view_proj, SURFACE_VIEWS[view], target.framebuffer, baked=True,
-                                    half=self._half_applies(target, view))
+                self._draw_surfaces(view_proj, view, target.framebuffer, baked=True,
+                                    half=self._half_applies(target, view), display=display)
         elif self._interleaved(target, view):
             with self._timed("surfaces (interleaved)"):
-                self._draw_interleaved(target, view_proj, SURFACE_VIEWS[view])
+                self._draw_interleaved(target, view_proj, view)
         else:
             with self._timed("surfaces"):
-                self._draw_surfaces(view_proj, SURFACE_VIEWS[view], target.framebuffer)
+                self._draw_surfaces(view_proj, view, target.framebuffer, display=display)
             if view == "probes":
                 self._draw_probes(camera, target.aspect)
         with self._timed("resolve"):
             target.resolve()
+
+    def fused(self, target: HdrTarget | DisplayTarget, view: str) -> bool:
+        """Whether `view` is drawn into a display target in one pass, tone mapping as it shades (the
+        surface views; the voxels, probes and interleaved views go through an HDR image)."""
+        return (isinstance(target, DisplayTarget) and view in SURFACE_VIEWS and view != "probes"
+                and not (not self._baked_applies(view) and self._interleaved(target, view)))
+
+    def _scratch_hdr(self, size: tuple[int, int], samples: int) -> HdrTarget:
+        """An HDR image for the views drawn into a display target through the tone-mapping pass."""
+        if self._scratch is None or (self._scratch.size, self._scratch.samples) != (tuple(size), samples):
+            if self._scratch is not None:
+                self._scratch.release()
+            self._scratch = HdrTarget(self.ctx, size, samples=samples)
+        return self._scratch
 
     def _baked_applies(self, view: str) -> bool:
         return self.settings.baked_direct and view in ("final", "direct")
@@ -295,7 +319,7 @@ class Renderer:
         s = self.settings
         return s.interleave and target.samples <= 1 and view in ("final", "direct") and s.light_samples >= 8
 
-    def _draw_interleaved(self, target: HdrTarget, view_proj: np.ndarray, mode: int) -> None:
+    def _draw_interleaved(self, target: HdrTarget, view_proj: np.ndarray, view: str) -> None:
         """Surfaces into the interleave buffers, then the recombining filter into the target."""
         if self._interleave is None or self._interleave.size != target.size:
             if self._interleave is not None:
@@ -304,7 +328,7 @@ class Renderer:
         buffers = self._interleave
         buffers.framebuffer.use()
         buffers.framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        self._draw_surfaces(view_proj, mode, buffers.framebuffer, interleave=True)
+        self._draw_surfaces(view_proj, view, buffers.framebuffer, interleave=True)
         target.framebuffer.use()
         self.ctx.disable(moderngl.DEPTH_TEST)
         program = self.programs.get("interleave_resolve")
@@ -312,13 +336,29 @@ class Renderer:
         self._resolve_array.render(moderngl.TRIANGLES, vertices=3)
         self.ctx.enable(moderngl.DEPTH_TEST)
 
-    def present(self, target: HdrTarget, framebuffer: moderngl.Framebuffer, view: str = "final") -> None:
-        """Exposure, tone curve and sRGB from the target's HDR texture into `framebuffer`'s viewport
-        (which may be larger than the target: the image is then scaled up bilinearly)."""
+    def present(self, target: HdrTarget | DisplayTarget, framebuffer: moderngl.Framebuffer | DisplayTarget,
+                view: str = "final") -> None:
+        """Show the target in `framebuffer`'s viewport (which may be larger than the target: the image is
+        then scaled up bilinearly). An HdrTarget goes through exposure, tone curve and sRGB (the
+        tone-mapping pass); a DisplayTarget is already tone-mapped and encoded: copied as it is (a blit,
+        ~1 ms at 1280x720 on llvmpipe) where the sizes match."""
+        if isinstance(framebuffer, DisplayTarget):
+            if isinstance(target, DisplayTarget):
+                raise ValueError("present: a display target into a display target (copy it instead)")
+            framebuffer = framebuffer.resolved
+        if isinstance(target, DisplayTarget) and tuple(framebuffer.viewport) == (0, 0, *target.size):
+            with self._timed("present"):
+                self.ctx.copy_framebuffer(framebuffer, target.resolved)
+            return
+        self._tone_map(target, framebuffer, view)
+
+    def _tone_map(self, target: HdrTarget | DisplayTarget, framebuffer: moderngl.Framebuffer, view: str) -> None:
+        """The full-screen pass of present.glsl from the target's texture into `framebuffer`'s viewport."""
         s = self.settings
         raw = view in ("albedo", "normals") or (view == "voxels" and not self._voxel_radiance_shown())
         same_size = tuple(framebuffer.viewport[2:]) == target.size
-        defines = dict(TONE_CURVE=TONEMAPS[s.tonemap], RAW=int(raw), SAME_SIZE=int(same_size))
+        defines = dict(TONE_CURVE=TONEMAPS[s.tonemap], RAW=int(raw), SAME_SIZE=int(same_size),
+                       ENCODED=int(isinstance(target, DisplayTarget)))
         program = self.programs.get("present", **defines)
         key = tuple(sorted(defines.items()))
         if key not in self._present_arrays:
@@ -356,7 +396,7 @@ class Renderer:
         if key != self._baked_key:
             if self._baked is not None:
                 self._baked.release()
-            self._baked = BakedDirectLight(self.ctx, self.scene, self.settings.lightmap_texel)
+            self._baked = BakedDirectLight(self.ctx, self._draw_scene, self.settings.lightmap_texel)
             program = self.programs.get("direct_bake")
             self._emitter_shadows.use(ATLAS_UNIT)
             self._sun_shadow.use(SUN_UNIT)
@@ -367,8 +407,9 @@ class Renderer:
             self._baked_key = key
         return self._baked
 
-    def _draw_surfaces(self, view_proj: np.ndarray, mode: int, framebuffer: moderngl.Framebuffer,
-                       interleave: bool = False, baked: bool = False, half: bool = False) -> None:
+    def _draw_surfaces(self, view_proj: np.ndarray, view: str, framebuffer: moderngl.Framebuffer,
+                       interleave: bool = False, baked: bool = False, half: bool = False,
+                       display: bool = False) -> None:
         s = self.settings
         probes = self.probes if s.indirect else None
         mesh = self.mesh
@@ -380,15 +421,22 @@ class Renderer:
         if half:
             lo, hi = self.bounds
             extra.update(self._half.use(HALF_UNIT), plane_tolerance=1e-3 * float(np.linalg.norm(hi - lo)))
-        program = self.programs.get("surface", VIEW=mode, INDIRECT=int(probes is not None),
-                                    INTERLEAVE=int(interleave), BAKED=int(baked), HALF_INDIRECT=int(half))
+        defines = dict(VIEW=SURFACE_VIEWS[view], INDIRECT=int(probes is not None), INTERLEAVE=int(interleave),
+                       BAKED=int(baked), HALF_INDIRECT=int(half), DISPLAY=int(display))
+        if display:   # tone mapping as present.glsl does it (tonemap.glsl)
+            defines.update(TONE_CURVE=TONEMAPS[s.tonemap], RAW=int(view in ("albedo", "normals")))
+            extra.update(exposure_scale=float(2.0 ** s.exposure))
+        program = self.programs.get("surface", **defines)
         units = self._probe_textures.use(PROBE_UNIT)
         self._emitter_shadows.use(ATLAS_UNIT)
         self._sun_shadow.use(SUN_UNIT)
         set_uniforms(program, view_proj=gl_bytes(view_proj), probe_sh=units, **self._probe_uniforms(probes),
                      shadow_bias=float(s.shadow_bias),
                      **self._emitter_shadows.uniforms(ATLAS_UNIT), **self._sun_shadow.uniforms(SUN_UNIT), **extra)
-        self._depth_prepass(view_proj, framebuffer, mesh)
+        if baked:   # a cheap shader (two fetches): early z on the draw order costs less than a pre-pass
+            self.ctx.depth_func = "<"
+        else:
+            self._depth_prepass(view_proj, framebuffer, mesh)
         mesh.render(program)
         self.ctx.depth_func = "<"
 
@@ -457,7 +505,7 @@ class Renderer:
 
     def release(self) -> None:
         for obj in (self.mesh, self._emitter_shadows, self._sun_shadow, self._probe_textures, self._baked,
-                    self._half):
+                    self._half, self._scratch):
             if obj is not None:
                 obj.release()
         self._release_instances("_probe_instances")

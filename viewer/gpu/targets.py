@@ -1,7 +1,9 @@
-"""Render targets: a float HDR buffer the renderer draws into and an 8-bit sRGB image it presents to.
+"""Render targets: a float HDR buffer of linear radiance, and an 8-bit sRGB display image.
 
-The HDR target is RGBA32F (RGBA16F on request) with a depth buffer, optionally multisampled; `resolve`
-averages the samples into `texture`, which the tone-mapping pass and `read` use.
+The renderer draws into either. The HDR target is RGBA32F (RGBA16F on request) with a depth buffer,
+optionally multisampled; `resolve` averages the samples into `texture`, which the tone-mapping pass and
+`read` use. The display target holds what a window shows (tone-mapped, sRGB-encoded), drawn in one pass
+where the view allows it.
 """
 
 from __future__ import annotations
@@ -50,21 +52,48 @@ class HdrTarget:
 
 
 class DisplayTarget:
-    """An RGBA8 image holding sRGB-encoded display values."""
+    """An 8-bit image of sRGB-encoded display values (RGBA8) with a depth buffer, optionally
+    multisampled: what the window and PNG captures show. The renderer draws the main views into it in
+    one pass, tone mapping and encoding in the surface shader. Presenting it at its own size is a blit
+    (a memory copy on llvmpipe, ~1 ms at 1280x720; from an sRGB-format texture the blit converts and
+    costs ~5 ms, so the encoding stays in the shader)."""
 
-    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]):
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], samples: int = 0):
+        self.ctx = ctx
         self.size = (int(size[0]), int(size[1]))
+        self.samples = int(samples)
         self.texture = ctx.texture(self.size, 4)
-        self.framebuffer = ctx.framebuffer([self.texture])
+        self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)   # for presenting at another size
+        self.texture.repeat_x = self.texture.repeat_y = False
+        self.resolved = ctx.framebuffer([self.texture])
+        """The single-sampled image (the same framebuffer as `framebuffer` without multisampling)."""
+        if self.samples > 1:
+            color = ctx.renderbuffer(self.size, 4, samples=self.samples)
+            depth = ctx.depth_renderbuffer(self.size, samples=self.samples)
+            self.framebuffer = ctx.framebuffer([color], depth)
+            self._owned = [color, depth, self.resolved]
+        else:
+            depth = ctx.depth_renderbuffer(self.size)
+            self.framebuffer = ctx.framebuffer([self.texture], depth)
+            self._owned = [depth, self.resolved]
+
+    @property
+    def aspect(self) -> float:
+        return self.size[0] / self.size[1]
+
+    def resolve(self) -> None:
+        """Average the samples into `texture` (nothing to do without multisampling)."""
+        if self.samples > 1:
+            self.ctx.copy_framebuffer(self.resolved, self.framebuffer)
 
     def read(self) -> np.ndarray:
         """(H, W, 3) uint8, top row first."""
-        data = np.frombuffer(self.framebuffer.read(components=4), np.uint8)
+        data = np.frombuffer(self.texture.read(), np.uint8)
         return data.reshape(self.size[1], self.size[0], 4)[::-1, :, :3].copy()
 
     def release(self) -> None:
-        self.framebuffer.release()
-        self.texture.release()
+        for obj in (*self._owned, self.framebuffer, self.texture):
+            obj.release()
 
 
 class InterleaveBuffers:

@@ -1,10 +1,11 @@
 """The 3D view inside the window: when to draw the scene, at what resolution, and presenting it.
 
-A full-resolution frame of the renderer costs hundreds of milliseconds on a software GL (llvmpipe), so
+A full-resolution frame of the renderer costs tens of milliseconds on a software GL (llvmpipe), so
 the scene is drawn only when something it depends on changed (camera, view, scene, probes, render
-settings), and while the user is moving the camera or dragging a slider it is drawn at a reduced
+settings, exposure and tone curve included: the renderer tone-maps as it shades, into an 8-bit sRGB
+DisplayTarget), and while the user is moving the camera or dragging a slider it is drawn at a reduced
 "preview" resolution; the first frame after that replaces the preview with a full-resolution image.
-Presenting (exposure, tone curve) is cheap and happens every frame, so exposure sliders respond at once.
+Presenting that image is a blit (a bilinear pass for a preview) and happens every frame.
 """
 
 from __future__ import annotations
@@ -16,11 +17,8 @@ import numpy as np
 
 from viewer.gpu.programs import ShaderError
 from viewer.gpu.renderer import Renderer
-from viewer.gpu.targets import HdrTarget
+from viewer.gpu.targets import DisplayTarget
 from viewer.scene import Camera
-
-PRESENT_ONLY = ("exposure", "tonemap")
-"""RenderSettings fields that only the present pass reads: changing them needs no redraw."""
 
 
 class Viewport:
@@ -33,18 +31,18 @@ class Viewport:
         self.preview_scale = preview_scale
         """Resolution while things move, as a fraction of the full-quality one."""
         self.samples = samples
-        self._targets: dict[str, HdrTarget] = {}
+        self._targets: dict[str, DisplayTarget] = {}
         self._key = None              # what the view should show now
         self._drawn: tuple | None = None   # (key, quality) of the image in `_shown`
-        self._shown: HdrTarget | None = None
+        self._shown: DisplayTarget | None = None
         self.error: str | None = None
         """The last draw's shader error (the previous image stays up until a draw succeeds)."""
 
     def _settings_key(self) -> tuple:
         s = self.renderer.settings
-        return tuple(getattr(s, f) for f in s.__dataclass_fields__ if f not in PRESENT_ONLY)
+        return tuple(getattr(s, f) for f in s.__dataclass_fields__)
 
-    def _target(self, quality: str, window_size: tuple[int, int]) -> HdrTarget:
+    def _target(self, quality: str, window_size: tuple[int, int]) -> DisplayTarget:
         scale = self.render_scale * (self.preview_scale if quality == "preview" else 1.0)
         size = (max(1, round(window_size[0] * scale)), max(1, round(window_size[1] * scale)))
         target = self._targets.get(quality)
@@ -53,7 +51,7 @@ class Viewport:
                 if target is self._shown:
                     self._shown, self._drawn = None, None
                 target.release()
-            target = HdrTarget(self.ctx, size, samples=min(self.samples, self.ctx.max_samples))
+            target = DisplayTarget(self.ctx, size, samples=min(self.samples, self.ctx.max_samples))
             self._targets[quality] = target
         return target
 
