@@ -1,4 +1,4 @@
-"""The command line: `python -m viewer [capture|sample] ...` (see ../shared/DESIGN.md).
+"""The command line: `python -m viewer [capture|sample|bench] ...` (see ../shared/DESIGN.md).
 
 Exit status 0 on success, 2 for bad input (one line on stderr, no traceback), 1 for an internal error.
 """
@@ -90,16 +90,22 @@ def build_parser() -> argparse.ArgumentParser:
     capture.add_argument("--fov", type=float, help="vertical field of view, degrees")
     capture.add_argument("--exposure", type=float, default=0.0, help="exposure in EV")
     _gi_arguments(capture)
+
+    bench = sub.add_parser("bench", help="every GI method's time, memory and error against Mitsuba: CSV, charts")
+    from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
+
+    bench_arguments(bench)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] not in ("view", "sample", "capture", "-h", "--help"):
+    if not argv or argv[0] not in ("view", "sample", "capture", "bench", "-h", "--help"):
         argv = ["view", *argv]
     try:
         args = build_parser().parse_args(argv)
-        return {"view": run_view, "sample": run_sample, "capture": run_capture}[args.command](args)
+        return {"view": run_view, "sample": run_sample, "capture": run_capture,
+                "bench": run_bench}[args.command](args)
     except (InputError, SceneError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -187,6 +193,12 @@ def run_capture(args) -> int:
         return offscreen.run_capture(args)
     except offscreen.CaptureError as exc:
         raise InputError(str(exc)) from None
+
+
+def run_bench(args) -> int:
+    from viewer.bench import run
+
+    return run.run(args)
 
 
 def run_view(args) -> int:

@@ -1,0 +1,69 @@
+"""`python -m viewer bench`: the quick mode (what CI runs) writes a CSV, charts and a report whose numbers
+mean what they say; the Pareto front is the set of entries nothing beats in both time and error."""
+
+import csv
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+from viewer.bench.pareto import Entry, budget_sentences, front
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def bench(*args):
+    return subprocess.run([sys.executable, "-m", "viewer", "bench", *map(str, args)], capture_output=True,
+                          text=True, cwd=ROOT, timeout=600)
+
+
+def test_quick_mode_writes_sane_numbers_charts_and_report_and_resumes(tmp_path):
+    result = bench("--quick", "--out", tmp_path)
+    assert result.returncode == 0, result.stderr
+    with open(tmp_path / "data" / "benchmark.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    methods = {r["method"] for r in rows}
+    assert {"ambient", "mitsuba", "numpy"} <= methods
+    for r in rows:
+        ms, error = float(r["ms"]), float(r["relative_rmse"])
+        assert math.isfinite(ms) and ms > 0, r
+        assert math.isfinite(error) and 0.0 <= error <= 5.0, r
+        assert int(r["memory_bytes"]) >= int(r["texture_bytes"]) > 0, r
+    mitsuba = sorted((int(r["setting"][1:]), float(r["relative_rmse"])) for r in rows if r["method"] == "mitsuba")
+    errors = [e for _, e in mitsuba]
+    assert len(errors) >= 3 and errors == sorted(errors, reverse=True), mitsuba  # more directions, less noise
+    assert errors[-1] < 0.08  # 256 directions: a few percent (the reference itself has 4096)
+    solvers = [float(r["relative_rmse"]) for r in rows if r["method"] in ("numpy", "compute")]
+    assert all(e < 0.4 for e in solvers)  # coarse grids (8^3 probes), but far better than a constant
+    ambient = float(next(r["relative_rmse"] for r in rows if r["method"] == "ambient"))
+    assert ambient > max(solvers)
+    for chart in ("benchmark_time.png", "benchmark_memory.png", "benchmark_scenes.png"):
+        assert (tmp_path / "images" / chart).stat().st_size > 10_000
+    report = (tmp_path / "BENCHMARK.md").read_text()
+    assert "| method | setting |" in report and "relative RMSE" in report
+
+    again = bench("--quick", "--out", tmp_path, "--only", "mitsuba:*")
+    assert again.returncode == 0, again.stderr
+    assert "0 to measure" in again.stderr
+    with open(tmp_path / "data" / "benchmark.csv", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == len(rows)
+
+
+def entry(family, ms, error, field=True):
+    return Entry(family, "s", field, ms, error, 1024, {})
+
+
+def test_front_keeps_what_nothing_beats_in_both_time_and_error():
+    fast_rough, slow_fine = entry("a", 10, 0.5), entry("b", 1000, 0.04)
+    beaten = entry("c", 2000, 0.05)          # slower and worse than b
+    middle = entry("d", 100, 0.1)
+    points_only = entry("mitsuba", 5, 0.01, field=False)  # no field: drawn, never on the front
+    assert front([beaten, slow_fine, points_only, middle, fast_rough]) == [fast_rough, middle, slow_fine]
+    text = " ".join(budget_sentences([beaten, slow_fine, middle, fast_rough]))
+    assert "From 10 ms up to 100 ms" in text and "From 1.0 s and more" in text
+
+
+def test_a_folder_without_scene_files_is_bad_input(tmp_path):
+    result = bench(tmp_path, "--out", tmp_path)
+    assert result.returncode == 2
+    assert "no scene files" in result.stderr and "Traceback" not in result.stderr

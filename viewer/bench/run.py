@@ -1,0 +1,230 @@
+"""`python -m viewer bench [SCENES...]`: every method's time and error against Mitsuba, as CSV, charts
+and docs/BENCHMARK.md.
+
+For every scene and every method of `viewer.bench.methods.registry()`: the milliseconds to produce the GI
+from the loaded scene (median of 3 runs; one run for methods over SLOW_SECONDS), the relative RMSE of its
+incident-radiance SH against a high-sample Mitsuba reference at free-space points, and the memory the
+renderer keeps (probe textures, model). One CSV row per (scene, method, setting), appended as soon as it
+is measured: an interrupted run starts again where it stopped. Then the charts (viewer.bench.pareto) and
+the generated parts of the report.
+
+    python -m viewer bench                      the built-in scenes and the public Cornell box (~an hour)
+    python -m viewer bench assets/ my.glb       the scene files of a folder, a file
+    python -m viewer bench --quick              one scene, a handful of methods (CI, under a minute)
+    python -m viewer bench --charts-only        charts and report from the CSV as it stands
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import fnmatch
+import os
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+SLOW_SECONDS = 20.0
+"""A method whose first run takes longer than this runs once; faster ones run three times (median)."""
+REPEATS = 3
+POINTS, POINTS_SEED, MARGIN, REFERENCE_DIRECTIONS = 500, 1, 0.06, 4096
+"""The evaluation points and reference of docs/ACCURACY.md (so the cached Mitsuba results are shared)."""
+COLUMNS = ("scene", "method", "setting", "field", "ms", "repeats", "relative_rmse", "texture_bytes",
+           "model_bytes", "memory_bytes", "load_average", "measured")
+"""CSV columns. load_average: the 1-minute load when the row was measured (the machine is shared)."""
+QUICK_SCENES = ("cornell",)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scenes", nargs="*", metavar="SCENE",
+                        help="built-in names, scene files or folders of them (default: the built-ins and "
+                             "the public CornellBox-Original)")
+    parser.add_argument("--quick", action="store_true",
+                        help="one scene, a handful of methods (CI); writes under out/bench-quick unless --out")
+    parser.add_argument("--out", type=Path,
+                        help="folder for data/benchmark.csv, images/ and BENCHMARK.md (default: docs/)")
+    parser.add_argument("--only", action="append", metavar="PATTERN",
+                        help="methods whose name (family:setting) matches this glob, e.g. 'compute:*' (repeatable)")
+    parser.add_argument("--list", action="store_true", help="list the methods and exit")
+    parser.add_argument("--charts-only", dest="charts_only", action="store_true",
+                        help="measure nothing: charts and report from the CSV")
+
+
+@dataclass(frozen=True)
+class Paths:
+    csv: Path
+    images: Path
+    report: Path
+
+    @staticmethod
+    def under(folder: Path) -> "Paths":
+        return Paths(folder / "data" / "benchmark.csv", folder / "images", folder / "BENCHMARK.md")
+
+
+def scene_sources(names: list[str], quick: bool) -> list[str]:
+    """Scene arguments -> sources for viewer.scene.load (a folder gives its scene files, sorted)."""
+    from viewer.bench.accuracy import PUBLIC_BOX
+    from viewer.cli import InputError
+    from viewer.scene import SUPPORTED_SUFFIXES, builtin_names
+
+    if not names:
+        if quick:
+            return list(QUICK_SCENES)
+        first = ["cornell", "paper-test"] + ([str(PUBLIC_BOX)] if PUBLIC_BOX.exists() else [])
+        return first + [n for n in builtin_names() if n not in first]
+    sources = []
+    for name in names:
+        path = Path(name)
+        if path.is_dir():
+            found = sorted(str(p) for p in path.iterdir() if p.suffix.lower() in SUPPORTED_SUFFIXES)
+            if not found:
+                raise InputError(f"{name}: no scene files ({', '.join(SUPPORTED_SUFFIXES)}) in this folder")
+            sources += found
+        else:
+            sources.append(name)
+    return sources
+
+
+# ---- the CSV ----------------------------------------------------------------------------------------
+
+def read_rows(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def append_row(path: Path, row: dict) -> None:
+    """One row, written and flushed at once (an interrupted run keeps everything it measured)."""
+    new = not path.exists()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a", newline="") as fh:
+        writer = csv.DictWriter(fh, COLUMNS)
+        if new:
+            writer.writeheader()
+        writer.writerow(row)
+
+
+def key(row: dict) -> tuple[str, str, str]:
+    return row["scene"], row["method"], row["setting"]
+
+
+# ---- measuring ----------------------------------------------------------------------------------------
+
+def measure(produce, scene, points, truth) -> tuple[float, int, float]:
+    """Median milliseconds, repeats, and mean relative RMSE (Mitsuba's estimates differ run to run)."""
+    from viewer.bench.accuracy import relative_rmse
+    from viewer.probes import ProbeGrid
+
+    seconds, errors = [], []
+    while len(seconds) < (1 if seconds and seconds[0] > SLOW_SECONDS else REPEATS):
+        clock = time.perf_counter()
+        result = produce(scene, points)
+        seconds.append(time.perf_counter() - clock)
+        estimate = result.interpolate(points) if isinstance(result, ProbeGrid) else result
+        errors.append(relative_rmse(np.asarray(estimate, np.float64), truth))
+    return 1000.0 * statistics.median(seconds), len(seconds), float(np.mean(errors))
+
+
+class Progress:
+    """One line per step on stderr: a bar, the step, its result, elapsed time."""
+
+    def __init__(self, total: int):
+        self.total, self.done, self.start = total, 0, time.perf_counter()
+
+    def step(self, text: str) -> None:
+        self.done += 1
+        filled = int(24 * self.done / max(self.total, 1))
+        elapsed = time.perf_counter() - self.start
+        print(f"[{'#' * filled}{'.' * (24 - filled)}] {self.done}/{self.total} {elapsed / 60:5.1f} min  {text}",
+              file=sys.stderr, flush=True)
+
+
+def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
+    """Measure every (scene, method) not yet in the CSV; returns notes (skipped methods)."""
+    from viewer import reference
+    from viewer import scene as scenes
+    from viewer.bench.methods import MethodUnavailable
+    from viewer.bench.points import free_space_points
+
+    done = {key(r) for r in read_rows(paths.csv)}
+    loaded = [scenes.load(s) for s in sources]
+    todo = [(scene, m) for scene in loaded for m in methods.values() if (scene.name, m.family, m.setting) not in done]
+    progress = Progress(len(todo))
+    print(f"bench: {len(loaded)} scenes x {len(methods)} methods, {len(todo)} to measure "
+          f"({len(loaded) * len(methods) - len(todo)} already in {paths.csv})", file=sys.stderr, flush=True)
+    producers, notes = {}, []
+    for scene in loaded:
+        pending = [m for s, m in todo if s is scene]
+        if not pending:
+            continue
+        points = free_space_points(scene, POINTS, margin=MARGIN, seed=POINTS_SEED)
+        truth = reference.probe_sh(scene, points, directions=REFERENCE_DIRECTIONS).astype(np.float64)
+        for method in pending:
+            if method.name not in producers:
+                try:
+                    producers[method.name] = method.prepare()
+                except MethodUnavailable as exc:
+                    producers[method.name] = None
+                    notes.append(f"`{method.name}` skipped: {exc}")
+            if producers[method.name] is None:
+                progress.step(f"{scene.name} {method.name}: skipped")
+                continue
+            ms, repeats, error = measure(producers[method.name], scene, points, truth)
+            append_row(paths.csv, {
+                "scene": scene.name, "method": method.family, "setting": method.setting, "field": int(method.field),
+                "ms": f"{ms:.1f}", "repeats": repeats, "relative_rmse": f"{error:.5f}",
+                "texture_bytes": method.texture_bytes, "model_bytes": method.model_bytes,
+                "memory_bytes": method.memory_bytes, "load_average": f"{os.getloadavg()[0]:.2f}",
+                "measured": time.strftime("%Y-%m-%d %H:%M:%S")})
+            progress.step(f"{scene.name} {method.name}: {ms:.0f} ms (x{repeats}), rel. RMSE {error:.3f}")
+    return notes
+
+
+def select(methods: dict, patterns: list[str] | None) -> dict:
+    if not patterns:
+        return methods
+    return {n: m for n, m in methods.items() if any(fnmatch.fnmatchcase(n, p) for p in patterns)}
+
+
+def run(args) -> int:
+    from viewer import scene as scenes
+    from viewer.bench import methods as registry
+    from viewer.bench import pareto
+
+    methods = select(registry.registry(args.quick), args.only)
+    if args.list:
+        for name, m in methods.items():
+            print(f"{name:40s} {m.memory_bytes / 1024:10.1f} KiB  {m.about}")
+        return 0
+    out = args.out or (ROOT / "out" / "bench-quick" if args.quick else ROOT / "docs")
+    paths = Paths.under(Path(out))
+    sources = scene_sources(args.scenes, args.quick)
+    start = time.perf_counter()
+    notes = [] if args.charts_only else run_benchmark(sources, methods, paths)
+    names = [scenes.load(s).name for s in sources]
+    rows = [r for r in read_rows(paths.csv) if r["scene"] in names]
+    if not rows:
+        print(f"bench: no rows for these scenes in {paths.csv}", file=sys.stderr)
+        return 0
+    summary = pareto.publish(rows, names, paths, notes, args.quick)
+    print(summary, file=sys.stderr)
+    print(f"bench: {time.perf_counter() - start:.0f} s; wrote {paths.csv}, {paths.images}, {paths.report}",
+          file=sys.stderr)
+    return 0
+
+
+def main(argv=None) -> int:
+    """`python -m viewer.bench.run ...` is `python -m viewer bench ...` (one place parses the command line)."""
+    from viewer import cli
+
+    return cli.main(["bench", *(sys.argv[1:] if argv is None else argv)])
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
