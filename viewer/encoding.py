@@ -135,15 +135,18 @@ def emitter_sh(lights, points: np.ndarray) -> np.ndarray:
     if len(area) == 0:
         return out
     d = source.astype(np.float32)[None, :, :] - points.astype(np.float32)[:, None, :]  # (P, E, 3) to the light
-    r2 = np.einsum("pek,pek->pe", d, d)
-    w = d * (1.0 / np.sqrt(np.maximum(r2, 1e-12)))[..., None]
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    r2 = x * x + y * y + z * z
+    inv_r = 1.0 / np.sqrt(np.maximum(r2, 1e-12))
+    x, y, z = x * inv_r, y * inv_r, z * inv_r
     n = normal.astype(np.float32)
-    cos_e = np.maximum(-(w[..., 0] * n[:, 0] + w[..., 1] * n[:, 1] + w[..., 2] * n[:, 2]), 0.0)
+    cos_e = np.maximum(-(x * n[:, 0] + y * n[:, 1] + z * n[:, 2]), 0.0)
     solid_angle = cos_e * (area / (r2 + area * NEAR_FIELD)).astype(np.float32)
-    y = _basis32(w) * solid_angle[None]  # (9, P, E)
-    # einsum, not a BLAS product: multi-threaded BLAS on tiny matrices stalls when the cores are busy
-    # (20 ms instead of 1 ms here with the renderer's threads running)
-    return np.einsum("kpe,ec->pkc", y, radiance.astype(np.float32))
+    basis = _basis32(np.stack([x, y, z], axis=-1)) * solid_angle  # (9, P, E)
+    # Three weighted sums, not a (9P x E) by (E x 3) matrix product: multi-threaded BLAS on that shape
+    # stalls for ~20 ms when the renderer keeps both cores busy.
+    rgb = radiance.astype(np.float32)
+    return np.stack([(basis * rgb[:, c]).sum(axis=2).T for c in range(3)], axis=-1)
 
 
 def _basis32(w: np.ndarray) -> np.ndarray:

@@ -145,7 +145,7 @@ def train(model: ProbeNet, train_set: Samples, val_set: Samples, settings: Train
             loss.backward()
             optimizer.step()
             schedule.step()
-            running += float(sh_loss) * len(pick)
+            running += float(sh_loss.detach()) * len(pick)
             seen += len(pick)
         val_mse, val_rel = evaluate(model, val_set)
         history.epochs.append(epoch)

@@ -1,0 +1,212 @@
+"""Model no bigger than the scene needs: ProbeNet from ~1k to ~1M parameters and at two probe
+resolutions, error against size and against inference time; the smallest model within 10% of the best
+error is exported to models/probenet.onnx with its card.
+
+    python -m viewer.training.sweep --data data/gi-v1 [--epochs 24] [--final-epochs 60]
+
+For every configuration: train (runs/sweep/<name>/), export to ONNX, time onnxruntime on the encoded
+Cornell box (median of 20 runs, one thread), and measure the relative RMSE of `sample --method neural`
+against Mitsuba at 500 free-space points of every evaluation scene (the same points and references as
+docs/ACCURACY.md). Writes docs/data/neural_sweep.json, docs/images/neural_sweep.png and the sweep table
+of docs/ACCURACY.md; the chosen configuration is trained again for --final-epochs and shipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from viewer import encoding, reference
+from viewer import scene as scenes
+from viewer.bench.accuracy import PUBLIC_BOX, relative_rmse
+from viewer.bench.points import free_space_points
+from viewer.neural import NeuralField
+from viewer.voxels import voxelize
+
+ROOT = Path(__file__).resolve().parents[2]
+EVALUATION_SCENES = ("cornell", "paper-test", "paper-train-1", "paper-train-2", "paper-train-3",
+                     "paper-train-4", "paper-train-5")
+WITHIN = 0.10
+"""The shipped model is the smallest whose error is within this fraction of the best one's."""
+
+
+@dataclass(frozen=True)
+class Candidate:
+    width: int
+    hidden: int
+    levels: int
+    probes: int
+
+    @property
+    def name(self) -> str:
+        return f"probenet-w{self.width}-h{self.hidden}-l{self.levels}-m{self.probes}"
+
+
+CANDIDATES = (
+    Candidate(2, 4, 2, 16), Candidate(4, 8, 3, 16), Candidate(8, 16, 3, 16), Candidate(16, 32, 3, 16),
+    Candidate(32, 64, 3, 16), Candidate(8, 16, 3, 8), Candidate(16, 32, 3, 8),
+)
+
+
+def evaluation_set(points: int = 500) -> list[tuple[scenes.Scene, np.ndarray, np.ndarray]]:
+    """(scene, free-space points, Mitsuba SH) for every evaluation scene (references cached on disk)."""
+    out = []
+    sources = list(EVALUATION_SCENES) + ([str(PUBLIC_BOX)] if PUBLIC_BOX.exists() else [])
+    for source in sources:
+        scene = scenes.load(source)
+        p = free_space_points(scene, points, margin=0.06, seed=1)
+        out.append((scene, p, reference.probe_sh(scene, p, directions=4096)))
+    return out
+
+
+def measure(model_path: Path, evaluation) -> dict:
+    """Relative RMSE per scene against Mitsuba, and onnxruntime milliseconds on the Cornell box."""
+    field = NeuralField(model_path)
+    errors = {}
+    for scene, points, truth in evaluation:
+        grid = field.solve(scene, include_emitted=True)
+        errors[scene.name] = relative_rmse(grid.interpolate(points), truth)
+    return {"errors": errors, **time_inference(field)}
+
+
+def time_inference(field: NeuralField, repeats: int = 20) -> dict:
+    """Median milliseconds of the neural update on the Cornell box: encode, onnxruntime, unpack."""
+    scene = scenes.load("cornell")
+    voxels = voxelize(scene, field.card.voxels)
+    lo, hi = scene.bounds
+    parts: dict[str, list[float]] = {"encode": [], "network": [], "unpack": []}
+    for i in range(repeats + 3):
+        timings: dict[str, float] = {}
+        field.predict(voxels, scene.sun, lo, hi, include_emitted=False, timings=timings)
+        if i >= 3:
+            for k in parts:
+                parts[k].append(1000 * timings[k])
+    ms = {k: float(np.median(v)) for k, v in parts.items()}
+    return {"ms": ms, "ms_total": float(np.median(np.sum([parts[k] for k in parts], axis=0)))}
+
+
+def run_candidate(candidate: Candidate, data: Path, epochs: int, runs: Path, evaluation, force: bool = False) -> dict:
+    from viewer.training import export as exporter
+    from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
+    from viewer.training.samples import load_split
+    from viewer.training.train import TrainSettings, train
+
+    run = runs / f"{candidate.name}-e{epochs}"
+    result_path = run / "result.json"
+    if result_path.exists() and not force:
+        return json.loads(result_path.read_text())
+    m = candidate.probes
+    train_set, val_set = load_split(data, "train", m), load_split(data, "val", m)
+    config = ProbeNetConfig(width=candidate.width, hidden=candidate.hidden, levels=candidate.levels)
+    model = ProbeNet(config)
+    start = time.perf_counter()
+    history = train(model, train_set, val_set, TrainSettings(epochs=epochs), run=run)
+    seconds = time.perf_counter() - start
+    scene = scenes.load("paper-test")
+    lo, hi = scene.bounds
+    inputs = encoding.encode(voxelize(scene, 32), scene.sun, lo, hi, m).inputs
+    training = {"data": str(data), "scenes": len(train_set), "epochs": epochs, "seconds": seconds,
+                "command": f"python -m viewer.training.sweep --data {data}"}
+    path = run / f"{candidate.name}.onnx"
+    exporter.export(run, path, m, inputs, training, {"val_relative_rmse_probes": history.val_relative_rmse[-1]})
+    result = {"candidate": candidate.__dict__, "name": candidate.name, "parameters": parameter_count(model),
+              "epochs": epochs, "train_seconds": seconds, "val_relative_rmse": history.val_relative_rmse[-1],
+              "onnx": str(path), **measure(path, evaluation)}
+    result["worst_error"] = max(result["errors"].values())
+    result["mean_error"] = float(np.mean(list(result["errors"].values())))
+    result_path.write_text(json.dumps(result, indent=1))
+    return result
+
+
+def choose(results: list[dict]) -> dict:
+    """The smallest model (parameters) whose mean error is within WITHIN of the best mean error."""
+    best = min(r["mean_error"] for r in results)
+    eligible = [r for r in results if r["mean_error"] <= best * (1 + WITHIN)]
+    return min(eligible, key=lambda r: (r["parameters"], r["mean_error"]))
+
+
+def plot(results: list[dict], chosen: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=110)
+    for ax, key, label in ((axes[0], "parameters", "parameters"), (axes[1], "ms_total", "neural update, ms (1 thread)")):
+        for probes, marker in ((16, "o"), (8, "s")):
+            rows = sorted((r for r in results if r["candidate"]["probes"] == probes), key=lambda r: r[key])
+            if rows:
+                ax.plot([r[key] for r in rows], [100 * r["mean_error"] for r in rows], marker=marker,
+                        label=f"{probes}^3 probes, mean")
+                ax.scatter([r[key] for r in rows], [100 * r["worst_error"] for r in rows], marker=marker,
+                           facecolors="none", edgecolors="grey", label=f"{probes}^3 probes, worst scene")
+        ax.scatter([chosen[key]], [100 * chosen["mean_error"]], s=160, facecolors="none", edgecolors="red",
+                   label="shipped")
+        ax.set_xscale("log")
+        ax.set_xlabel(label)
+        ax.set_ylabel("rel. RMSE vs Mitsuba (%)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle("ProbeNet: error against size and time")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m viewer.training.sweep", description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=Path("data/gi-v1"))
+    parser.add_argument("--epochs", type=int, default=24)
+    parser.add_argument("--final-epochs", type=int, default=60)
+    parser.add_argument("--runs", type=Path, default=Path("runs/sweep"))
+    parser.add_argument("--only", help="comma-separated candidate names")
+    parser.add_argument("--no-ship", action="store_true", help="do not retrain and export the chosen model")
+    args = parser.parse_args(argv)
+    evaluation = evaluation_set()
+    results = []
+    for candidate in CANDIDATES:
+        if args.only and candidate.name not in args.only.split(","):
+            continue
+        result = run_candidate(candidate, args.data, args.epochs, args.runs, evaluation)
+        results.append(result)
+        print(f"{candidate.name}: {result['parameters']} parameters, mean {100 * result['mean_error']:.1f}%, "
+              f"worst {100 * result['worst_error']:.1f}%, {result['ms_total']:.1f} ms", file=sys.stderr)
+    chosen = choose(results)
+    out = ROOT / "docs" / "data" / "neural_sweep.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"results": results, "chosen": chosen["name"], "within": WITHIN}, indent=1))
+    plot(results, chosen, ROOT / "docs" / "images" / "neural_sweep.png")
+    print(f"chosen: {chosen['name']}", file=sys.stderr)
+    if not args.no_ship:
+        ship(Candidate(**chosen["candidate"]), args, evaluation)
+    return 0
+
+
+def ship(candidate: Candidate, args, evaluation) -> None:
+    """Train the chosen configuration longer and export it as models/probenet.onnx with its card."""
+    import shutil
+
+    final = run_candidate(candidate, args.data, args.final_epochs, args.runs, evaluation)
+    target = ROOT / "models" / "probenet.onnx"
+    target.parent.mkdir(exist_ok=True)
+    shutil.copy(final["onnx"], target)
+    card = json.loads(Path(final["onnx"]).with_suffix(".json").read_text())
+    card["name"], card["file"] = "probenet", "probenet.onnx"
+    card["metrics"].update({"relative_rmse_vs_mitsuba": final["errors"], "worst_relative_rmse": final["worst_error"],
+                            "mean_relative_rmse": final["mean_error"], "milliseconds_cornell": final["ms"],
+                            "evaluation": "500 free-space points per scene, Mitsuba 4096 directions "
+                                          "(viewer.bench.points.free_space_points, seed 1)"})
+    card["selection"] = f"smallest of the sweep within {int(100 * WITHIN)}% of the best mean error (docs/ACCURACY.md)"
+    target.with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n")
+    print(f"shipped {target} ({final['parameters']} parameters, worst scene {100 * final['worst_error']:.1f}%)",
+          file=sys.stderr)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
