@@ -125,6 +125,34 @@ def test_stepping_with_a_small_budget_gives_the_blocking_result(ctx):
     solver.release()
 
 
+def test_a_step_starts_no_slice_that_would_not_fit_its_budget(monkeypatch):
+    """The scheduler of ComputeSolver.step on a simulated clock: a pass of 1000 items at 0.1 ms each,
+    in 8 ms steps. After the first slice (one unit: the cost is not known yet) every step ends within
+    its budget, and the pass is done in about 100 ms / (SLICE_SHARE-ish x 8 ms) steps, not in one."""
+    from viewer.gpu import compute_solver
+
+    clock = [0.0]
+    monkeypatch.setattr(compute_solver.time, "perf_counter", lambda: clock[0])
+    done = []
+
+    def run(first, end):
+        clock[0] += 1e-4 * (end - first)
+        done.extend(range(first, end))
+
+    solver = ComputeSolver.__new__(ComputeSolver)
+    solver.ctx = type("NoGL", (), {"finish": lambda self: None})()
+    solver.seconds, solver._item_seconds, solver.version, solver.converged = {}, {}, 0, False
+    solver._work = solver._sliced("pass", 1000, 4, run)
+    steps = []
+    while not solver.converged:
+        start = clock[0]
+        solver.step(budget_ms=8.0)
+        steps.append(1e3 * (clock[0] - start))
+    assert done == list(range(1000))
+    assert max(steps[1:]) <= 8.0 + 1e-9, steps
+    assert 12 <= len(steps) <= 25, steps
+
+
 def test_a_light_change_restarts_without_tracing_the_geometry_again(ctx):
     scene = load("cornell")
     settings = GISettings(voxels=12, probes=6)

@@ -15,8 +15,9 @@ probes are projected again (cheap: their first hits are stored) and written into
 textures, so the picture brightens bounce by bounce.
 
 Progressive: `step(budget_ms)` runs slices of the current pass (ranges of receivers, probes or bitset
-rows, sized to about half the budget from the time the last slice took) until the budget is spent,
-so a viewer calling it once per frame never stalls. `restart` starts over when the scene or a light
+rows, sized from the time per item of the last slice to fit the time left) until the budget is spent,
+and leaves a slice that would not fit to the next step, so a viewer calling it once per frame keeps
+its frame rate. `restart` starts over when the scene or a light
 changes, keeping the visibility bitset and the probe hits while the geometry is the same. The passes
 themselves live in compute_transport.py (voxels) and compute_probes.py (probes).
 """
@@ -40,6 +41,9 @@ from viewer.transport import KERNELS, TransportSettings
 from viewer.voxels import VoxelGrid, voxelize
 
 _KEEP = object()
+SLICE_SHARE = 0.7
+"""While stepping, a slice is sized to take this share of the step's time left (the time per item varies
+along a pass: the visibility table's rows shorten, receivers differ in their senders)."""
 
 
 @dataclass(frozen=True)
@@ -87,7 +91,7 @@ class ComputeSolver:
         self.probes: ComputeProbes | None = None
         self.sun, self.settings = sun, settings
         self._probes_ready = False
-        self._slices: dict[str, int] = {}
+        self._item_seconds: dict[str, float] = {}   # per pass: seconds per item of its last slice
         self.restart(voxels, sun, settings, bounds)
 
     # ---- control -------------------------------------------------------------------------------------
@@ -144,13 +148,17 @@ class ComputeSolver:
         """Seconds of each update of the probes (projection, fill, textures)."""
 
     def step(self, budget_ms: float = 8.0) -> bool:
-        """Work for about `budget_ms` (at least one slice); True if the probe textures changed."""
+        """Work for at most about `budget_ms` (at least one slice); True if the probe textures changed.
+        Slices are sized from the time per item of the pass's last slice to fit the time left, and a
+        slice that would not fit waits for the next step, so a viewer calling this once a frame keeps
+        its frame rate."""
         if self.converged:
             return False
         self._budget = budget_ms / 1000.0
+        self._deadline = time.perf_counter() + self._budget
+        self._slices_run, self._out_of_time = 0, False
         version = self.version
-        deadline = time.perf_counter() + self._budget
-        while not self.converged and time.perf_counter() < deadline:
+        while not self.converged and not self._out_of_time and time.perf_counter() < self._deadline:
             self._advance()
         return self.version != version
 
@@ -274,14 +282,20 @@ class ComputeSolver:
 
     def _sliced(self, name: str, total: int, unit: int, run, most: int | None = None):
         """Run `run(first, end)` over 0..total in slices: whole passes (up to `most` items) when blocking,
-        else sized to take about half the step budget."""
+        else multiples of `unit` items sized to take SLICE_SHARE of the step's time left (one unit
+        the first time a pass runs, when its cost is not known yet)."""
         start = 0
         while start < total:
-            if self._budget is None:
-                size = most or total
-            else:
-                size = self._slices.get(name, unit)
-                size = min(size, most) if most else size
+            size = most or total
+            if self._budget is not None:
+                left = self._deadline - time.perf_counter()
+                per_item = self._item_seconds.get(name)
+                if per_item is not None and self._slices_run and per_item * unit > left:
+                    self._out_of_time = True   # not even one unit fits: the next step goes on from here
+                    yield
+                    continue
+                fits = unit if per_item is None else int(SLICE_SHARE * left / max(per_item, 1e-9))
+                size = max(unit, min(fits // unit * unit, most or total))
             end = min(total, start + size)
             clock = time.perf_counter()
             run(start, end)
@@ -289,8 +303,8 @@ class ComputeSolver:
             elapsed = time.perf_counter() - clock
             self.seconds[name] = self.seconds.get(name, 0.0) + elapsed
             if self._budget is not None:
-                scale = min(2.0, max(0.25, 0.5 * self._budget / max(elapsed, 1e-6)))
-                self._slices[name] = max(unit, int(size * scale) // unit * unit)
+                self._item_seconds[name] = elapsed / (end - start)
+                self._slices_run += 1
             start = end
             yield
 

@@ -42,7 +42,8 @@ class ComputeSource:
 
     Voxelizing runs off the render thread; the solver then steps on the render thread's context for
     `budget_ms` a frame. Its probes are read back (a few hundred kB) and handed to the renderer at most
-    every `publish_interval` seconds while converging, and once more when converged.
+    every `publish_interval` seconds while converging, and once more when converged, in a frame without
+    a solver step.
     """
 
     def __init__(self, ctx, publish_interval: float = 1.0, debounce: float = 0.2):
@@ -68,7 +69,7 @@ class ComputeSource:
     @property
     def busy(self) -> bool:
         return self.error is None and (self._waiting or self.voxelizing is not None
-                                       or (self.solver is not None and not self.solver.converged))
+                                       or (self.solver is not None and (not self.solver.converged or self._unpublished)))
 
     def step(self, budget_ms: float) -> ProbeGrid | None:
         """Work for about `budget_ms`; returns new probes when it is time to show them."""
@@ -89,12 +90,14 @@ class ComputeSource:
                 self.voxelizing = BackgroundTask("voxelize", voxelize, scene, settings.voxels, settings.normal_mode)
             if self.solver is None or self._waiting or self.voxelizing is not None:
                 return None
+            if self._unpublished and (self.solver.converged or now - self._published_at >= self.publish_interval):
+                # A frame of its own: the read-back, the upload and the redraw they cause are not added
+                # to a solver step's budget.
+                self._unpublished, self._published_at = False, now
+                return self.solver.probe_grid(include_emitted=False)
             if not self.solver.converged:
                 self._unpublished |= self.solver.step(budget_ms)
                 self.steps += 1
-            if self._unpublished and (self.solver.converged or now - self._published_at >= self.publish_interval):
-                self._unpublished, self._published_at = False, now
-                return self.solver.probe_grid(include_emitted=False)
         except Exception as exc:  # e.g. a compute shader that does not compile: shown in the panel
             self.error = f"{type(exc).__name__}: {exc}"
         return None
@@ -180,15 +183,22 @@ class NeuralSource:
         return "Neural: starting..."
 
 
+COMPUTE_BUDGET_MS = 20.0
+"""The compute solver's share of a frame: with the blit of the view and the panel it keeps frames under
+33 ms (30 per second) while the solver works; its probes are published, and the view redrawn, in frames
+without a solver step (docs/PERFORMANCE.md, `python -m viewer.bench.frame --progressive`)."""
+
+
 class GIController:
     def __init__(self, ctx, source: str = "solver", settings: GISettings | None = None,
-                 compute_budget_ms: float = 40.0, neural_model: Path | None = None):
+                 compute_budget_ms: float = COMPUTE_BUDGET_MS, neural_model: Path | None = None):
         self.ctx = ctx
         self.neural_model = neural_model
         self.unavailable = unavailable_reasons()
         self.source = source if source not in self.unavailable else "off"
         self.settings = settings or GISettings()
         self.compute_budget_ms = compute_budget_ms
+        """Milliseconds of compute-solver work per frame (ComputeSolver.step)."""
         self.scene: Scene | None = None
         self._scene_version = -1
         self._cpu: SolverProcess | None = None
