@@ -151,7 +151,11 @@ def _gltf_material(path: Path, name: str, faces, visual, gltf: dict):
         raise SceneError(f"{path}: malformed glTF material {index} ({_one_line(exc)})") from None
     texture = getattr(material, "baseColorTexture", None)
     if texture is not None:
-        pixels = np.asarray(texture.convert("RGB"), np.float64).reshape(-1, 3) / 255.0
+        try:  # trimesh hands over anything the JSON held (a list becomes an array); PIL decodes lazily
+            pixels = np.asarray(texture.convert("RGB"), np.float64).reshape(-1, 3) / 255.0
+        except Exception as exc:  # PIL raises OSError, SyntaxError, zlib.error, ... on bad image data
+            raise SceneError(f"{path}: unreadable base-colour texture in glTF material {index} "
+                             f"({_one_line(exc)})") from None
         albedo = albedo * _srgb_to_linear(pixels).mean(axis=0)
     return albedo, emission, str(spec.get("name") or f"material-{index}")
 

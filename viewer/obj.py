@@ -60,9 +60,9 @@ def read(path: Path) -> Scene:
             current = _material_index(material_names, " ".join(words[1:]) or "default")
         elif key == "mtllib":
             rest = raw.split("#", 1)[0].strip()[len("mtllib"):].strip()
-            libraries = [rest] if (path.parent / rest).is_file() else rest.split()
+            libraries = [rest] if _is_file(path.parent / rest) else rest.split()
             for name in libraries:
-                if (path.parent / name).is_file():
+                if _is_file(path.parent / name):
                     materials.update(read_mtl(path.parent / name))
     if not faces:
         raise SceneError(f"{path}: no faces found")
@@ -82,6 +82,15 @@ def _lines(path: Path):
     if "\x00" in text:
         raise SceneError(f"{path}: not a text file (binary data in an OBJ/MTL)")
     return text.splitlines()
+
+
+def _is_file(path: Path) -> bool:
+    """A material library that cannot even be looked up (a name too long for the file system, say) is
+    skipped like a missing one, not an error: the geometry is still good."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def _material_index(names: list[str], name: str) -> int:

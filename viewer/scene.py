@@ -85,6 +85,13 @@ class Scene:
             raise SceneError(f"{self.name}: vertex positions contain NaN or infinity")
         if f.min() < 0 or f.max() >= len(v):
             raise SceneError(f"{self.name}: face indices out of range (0..{len(v) - 1})")
+        # Voxelizing weighs every triangle by its area: none may overflow, and some must be non-zero.
+        with np.errstate(over="ignore", invalid="ignore"):
+            doubled_area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+        if not np.all(np.isfinite(doubled_area)):
+            raise SceneError(f"{self.name}: vertex coordinates too large (triangle areas overflow)")
+        if not np.any(doubled_area > 0):
+            raise SceneError(f"{self.name}: every triangle is degenerate (zero area)")
         albedo = np.broadcast_to(np.asarray(self.albedo, np.float64), f.shape).copy()
         emission = np.broadcast_to(np.asarray(self.emission, np.float64), f.shape).copy()
         if not (np.all(np.isfinite(albedo)) and np.all(np.isfinite(emission))):
