@@ -4,6 +4,15 @@
 [z, y, x]. Texel (i, j, k) of a texture over [lo, hi] has its centre at probe (i, j, k), so hardware
 trilinear filtering is the same interpolation as `ProbeGrid.interpolate`. moderngl's 3D textures repeat
 by default, which would blend the outermost probes with the opposite side of the box: clamp instead.
+
+Half floats hold at most 65504 with 11 significant bits. A very bright lamp (radiance 1e5 and up) puts
+probe coefficients above that, and clipping each coefficient separately would change the SH's shape
+(the DC term clipped, the others not: negative, black irradiance on one side). So every texel is scaled
+by one power of two per grid, `texel_scale`, that brings the largest texel to between HALF_TARGET / 2
+and HALF_TARGET; since the weight in the last alpha is scaled with the coefficients and the shaders
+divide by the interpolated weight (shaders/probe_grid.glsl), the scale cancels there, exactly. The same
+scale lifts dim grids (by up to HALF_TARGET) away from the half floats' subnormal range.
+docs/STABILITY.md measures both ends.
 """
 
 from __future__ import annotations
@@ -14,6 +23,21 @@ import numpy as np
 from viewer.probes import ProbeGrid
 
 TEXTURE_COUNT = 7
+HALF_TARGET = 2.0 ** 14
+"""Largest texel magnitude after scaling: a power of two with headroom below the half-float maximum."""
+
+
+def texel_volumes(probes: ProbeGrid, dtype: str = "f2") -> tuple[list[np.ndarray], float]:
+    """The seven volumes of `ProbeGrid.texture_data()` in the texture's type, and the power of two they
+    were multiplied by (1 for float32 textures). Non-finite coefficients become 0 rather than Inf or NaN
+    texels that trilinear filtering would spread to the neighbouring probes."""
+    volumes = [np.nan_to_num(v, nan=0.0, posinf=0.0, neginf=0.0) for v in probes.texture_data()]
+    if dtype != "f2":
+        return [np.ascontiguousarray(v, np.float32) for v in volumes], 1.0
+    largest = max(float(np.abs(v).max()) for v in volumes)
+    scale = 1.0 if largest == 0.0 else float(2.0 ** np.clip(np.floor(np.log2(HALF_TARGET / largest)), -120, 120))
+    limit = float(np.finfo(np.float16).max)  # only round-off can reach it now
+    return [np.ascontiguousarray(np.clip(v * scale, -limit, limit), np.float16) for v in volumes], scale
 
 
 def empty_grid() -> ProbeGrid:
@@ -27,13 +51,14 @@ class ProbeTextures:
         self.dtype = dtype
         self.textures: list[moderngl.Texture3D] = []
         self.resolution = 0
+        self.texel_scale = 1.0
+        """The power of two every texel carries (see the module's docstring)."""
         self.update(probes)
 
     def update(self, probes: ProbeGrid) -> None:
         """Upload new coefficients (reusing the textures when the resolution is unchanged)."""
         m = probes.resolution
-        volumes = probes.texture_data()
-        numpy_type = np.float16 if self.dtype == "f2" else np.float32
+        volumes, self.texel_scale = texel_volumes(probes, self.dtype)
         if m != self.resolution:
             self.release()
             for _ in range(TEXTURE_COUNT):
@@ -42,9 +67,8 @@ class ProbeTextures:
                 texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
                 self.textures.append(texture)
             self.resolution = m
-        limit = np.finfo(numpy_type).max  # half floats overflow to infinity above 65504
         for texture, volume in zip(self.textures, volumes):
-            texture.write(np.ascontiguousarray(np.clip(volume, -limit, limit), numpy_type).tobytes())
+            texture.write(volume.tobytes())
         self.lo, self.hi = probes.lo.astype(np.float32), probes.hi.astype(np.float32)
 
     def use(self, first_unit: int) -> list[int]:
