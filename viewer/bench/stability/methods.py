@@ -1,0 +1,140 @@
+"""The methods the stability suite compares, in one registry: name -> callable(scene, settings) -> ProbeGrid.
+
+Every method answers the same question as `python -m viewer sample`: the incident-radiance SH field over
+the scene (`include_emitted=True`, as compared with Mitsuba) or its indirect part only (False, what the
+renderer shades from probes). A new method is one entry, e.g. for the neural field:
+
+    METHODS["neural"] = Method(neural_probes, "the ONNX network, one shot")
+
+A method that cannot run here (no GL context, no model file) raises `MethodUnavailable`; the studies
+record it as skipped, with its reason, and go on.
+"""
+
+from __future__ import annotations
+
+import atexit
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from viewer import gi, reference, reference_cache
+from viewer.bench.points import free_space_points
+from viewer.probes import ProbeGrid
+from viewer.scene import Scene
+
+
+class MethodUnavailable(RuntimeError):
+    """The method cannot run on this machine; the message says why."""
+
+
+@dataclass(frozen=True)
+class MethodSettings:
+    gi: gi.GISettings = gi.GISettings(voxels=16, probes=16, directions=256)
+    """Resolution and options (a method ignores what does not apply to it, e.g. the kernel)."""
+    include_emitted: bool = True
+    """With the light straight from emitters and sun (as `sample`), or the indirect light only."""
+
+
+@dataclass(frozen=True)
+class Method:
+    solve: Callable[[Scene, MethodSettings], ProbeGrid]
+    about: str
+    """One line for the report."""
+    leak_reduction: bool = True
+    """Whether `gi.invalid_backface_fraction` (probe validity and fill) means anything to it."""
+
+
+def _numpy(kernel: str):
+    def solve(scene: Scene, settings: MethodSettings) -> ProbeGrid:
+        return gi.solve(scene, replace(settings.gi, kernel=kernel), include_emitted=settings.include_emitted)
+    return solve
+
+
+_context = None
+
+
+def gl_context():
+    """One headless GL context for the whole run (MethodUnavailable without EGL/GL 4.3)."""
+    global _context
+    if _context is None:
+        from viewer.gpu.context import GLUnavailable, create_context
+
+        try:
+            _context = create_context()
+        except GLUnavailable as exc:
+            raise MethodUnavailable(str(exc)) from None
+        atexit.register(_context.release)
+    return _context
+
+
+def _compute(scene: Scene, settings: MethodSettings) -> ProbeGrid:
+    from viewer.gpu.compute_solver import solve_probes
+
+    return solve_probes(gl_context(), scene, replace(settings.gi, kernel="physical"),
+                        include_emitted=settings.include_emitted)
+
+
+AMBIENT_POINTS = 128
+AMBIENT_DIRECTIONS = 512
+
+
+def truth_sh(scene: Scene, points: np.ndarray, directions: int = 1024, include_emitted: bool = True,
+             seed: int = 0) -> np.ndarray:
+    """Mitsuba's incident-radiance SH (P, 9, 3) at points, or its reflected part only (the indirect light,
+    `reference.probe_sh_parts`), both cached on disk."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    if include_emitted:
+        return reference.probe_sh(scene, points, directions=directions, seed=seed)
+    tag = f"stability-reflected|{reference.CACHE_VERSION}|{reference.variant()}"
+    digest = reference_cache.key(tag, scene, [points], dict(directions=int(directions), seed=int(seed)))
+    return reference_cache.load_or_compute(
+        "probe_sh_reflected", digest, lambda: reference.probe_sh_parts(scene, points, directions, seed=seed)[0])
+
+
+def mean_incident_radiance(scene: Scene, include_emitted: bool = True) -> np.ndarray:
+    """(3,) the SH DC coefficient of the incident radiance (or of its indirect part) averaged over
+    free-space points, from Mitsuba."""
+    points = free_space_points(scene, AMBIENT_POINTS, margin=0.06, seed=11)
+    return truth_sh(scene, points, AMBIENT_DIRECTIONS, include_emitted)[:, 0].mean(axis=0)
+
+
+def _ambient(scene: Scene, settings: MethodSettings) -> ProbeGrid:
+    """A constant ambient light: one probe whose only SH term is the scene's mean (DC) radiance."""
+    coefficients = np.zeros((1, 1, 1, 9, 3), np.float32)
+    coefficients[0, 0, 0, 0] = mean_incident_radiance(scene, settings.include_emitted)
+    lo, hi = scene.bounds
+    return ProbeGrid(lo, hi, coefficients, np.ones((1, 1, 1), bool))
+
+
+def _path_traced_probes(scene: Scene, settings: MethodSettings) -> ProbeGrid:
+    """Mitsuba at every probe centre: perfect probes, so what is left is the grid's own interpolation."""
+    lo, hi = scene.bounds
+    m = settings.gi.probes
+    points = ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3)
+    coefficients = truth_sh(scene, points, PROBE_DIRECTIONS, settings.include_emitted)
+    return ProbeGrid(lo, hi, coefficients.reshape(m, m, m, 9, 3), np.ones((m, m, m), bool))
+
+
+PROBE_DIRECTIONS = 1024
+
+
+METHODS: dict[str, Method] = {
+    "physical": Method(_numpy("physical"), "numpy solver, form factor with visibility (the reference solver)"),
+    "paper": Method(_numpy("paper"), "numpy solver, the paper's eq. 25 kernel (receiver cosine, no visibility)"),
+    "compute": Method(_compute, "compute-shader solver (GLSL, physical kernel), as the viewer runs it"),
+    "ambient": Method(_ambient, "constant ambient: Mitsuba's mean incident radiance as one SH DC term",
+                      leak_reduction=False),
+    "mitsuba-probes": Method(_path_traced_probes, "oracle: Mitsuba at the probe centres, interpolated like any "
+                             "grid (the floor that the probe resolution sets)", leak_reduction=False),
+}
+"""Every method the studies run, in report order. The neural field joins with one entry."""
+
+
+def run(name: str, scene: Scene, settings: MethodSettings = MethodSettings()) -> ProbeGrid:
+    return METHODS[name].solve(scene, settings)
+
+
+def without_leak_reduction(settings: MethodSettings) -> MethodSettings:
+    """Every probe valid: no probe is found inside a solid and filled from its neighbours."""
+    return replace(settings, gi=replace(settings.gi, invalid_backface_fraction=1.0))
