@@ -1,11 +1,13 @@
 """The benchmark's rows -> the Pareto front of error against time (and against memory), the charts, and
 the generated tables of BENCHMARK.md.
 
-An entry (method, setting) is on the front when no other entry is both faster and more accurate. The
-front is taken over the methods that produce a field (a probe grid the renderer can sample anywhere);
-Mitsuba traced straight at the evaluation points answers only there, so it is drawn as its own curve
-and kept off the front. Aggregated over scenes: the mean milliseconds and the mean relative RMSE of
-the entries measured on every scene.
+An entry (method, setting) is on the front when no other entry is both faster and more accurate. Fronts
+are taken over the methods that produce a field (a probe grid the renderer can sample anywhere); Mitsuba
+traced straight at the evaluation points answers only there, so it is drawn as its own curve and kept
+off every front. Two fronts: over every field method (a Mitsuba bake of the probes included), and over
+the viewer's own GI sources (the solvers and the network), which is what a user of the viewer chooses
+from. Aggregated over scenes: the mean milliseconds and mean relative RMSE of the entries measured on
+every scene.
 """
 
 from __future__ import annotations
@@ -27,6 +29,10 @@ STYLES = {
 }
 """Marker and colour per method family; a family not listed here gets the next of EXTRA_STYLES."""
 EXTRA_STYLES = [("*", "#e377c2"), ("h", "#bcbd22"), ("p", "#17becf")]
+SAME = 0.01
+"""Errors within 1% of each other count as the same accuracy when saying what beats a default."""
+VIEWER_FAMILIES = ("compute", "compute-paper", "numpy", "numpy-paper", "neural")
+"""The GI sources the viewer itself offers (its panel and `sample --method`)."""
 DEFAULTS = {"compute": "N32 M24 conv", "numpy": "N32 M24 conv", "neural": "models/probenet.onnx"}
 """The product's GI sources at their shipped defaults (viewer.gi.GISettings, the shipped model)."""
 
@@ -71,19 +77,23 @@ def per_scene(rows: list[dict], scene: str) -> list[Entry]:
     return aggregate([r for r in rows if r["scene"] == scene], [scene])[0]
 
 
-def front(entries: list[Entry], cost=lambda e: e.ms) -> list[Entry]:
-    """The field entries that no other field entry beats in both cost and error, cheapest first."""
+def front(entries: list[Entry], cost=lambda e: e.ms, families: tuple[str, ...] | None = None) -> list[Entry]:
+    """The field entries (of `families`, or all) that no other such entry beats in both cost and error,
+    cheapest first."""
     best, out = np.inf, []
-    for e in sorted((e for e in entries if e.field), key=lambda e: (cost(e), e.error)):
+    chosen = (e for e in entries if e.field and (families is None or e.family in families))
+    for e in sorted(chosen, key=lambda e: (cost(e), e.error)):
         if e.error < best:
             out.append(e)
             best = e.error
     return out
 
 
-def dominated_by(entry: Entry, entries: list[Entry]) -> Entry | None:
-    """The fastest field entry at least as accurate and faster (None: the entry is on the front)."""
-    better = [e for e in entries if e.field and e is not entry and e.ms < entry.ms and e.error <= entry.error]
+def dominated_by(entry: Entry, entries: list[Entry], families: tuple[str, ...] | None = None) -> Entry | None:
+    """The fastest field entry (of `families`, or any) faster and as accurate (within SAME); None: none is."""
+    better = [e for e in entries if e.field and e is not entry and e.ms < entry.ms
+              and e.error <= entry.error * (1.0 + SAME)
+              and (families is None or e.family in families)]
     return min(better, key=lambda e: e.ms) if better else None
 
 
@@ -97,27 +107,41 @@ def _style(family: str, extra: dict) -> tuple[str, str]:
     return extra[family]
 
 
-def _plot(ax, entries: list[Entry], cost, xlabel: str, labels: bool) -> None:
+def _plot(ax, entries: list[Entry], cost, xlabel: str, unit=None) -> None:
+    """Every entry as a marker of its family, the two fronts as step lines. With `unit` (a formatter of the
+    cost) the front points get keys (1, 2, ... on the front of every method, a, b, ... on the viewer's)
+    listed beside the axes: labels written next to the points overlap where the front is dense."""
     extra: dict = {}
     for family in dict.fromkeys(e.family for e in entries):
         members = sorted((e for e in entries if e.family == family), key=cost)
         marker, colour = _style(family, extra)
         x, y = [cost(e) for e in members], [e.error for e in members]
-        if family == "mitsuba":
-            ax.plot(x, y, linestyle="--", marker=marker, color=colour, label="mitsuba at the points (no field)")
+        if family == "mitsuba":  # one curve of its own (a line where the cost varies along it)
+            ax.plot(x, y, linestyle="--" if len(set(x)) > 1 else "none", marker=marker, color=colour, label="mitsuba at the points (no field)")
         else:
             ax.scatter(x, y, marker=marker, color=colour, s=36, label=family, zorder=3)
-    on_front = front(entries, cost)
-    if on_front:
-        x = [cost(e) for e in on_front]
-        y = [e.error for e in on_front]
-        right = ax.get_xlim()[1] if len(on_front) > 0 else x[-1]
-        ax.step(x + [max(right, x[-1])], y + [y[-1]], where="post", color="black", linewidth=1.0,
-                alpha=0.7, label="Pareto front", zorder=2)
-        if labels:
-            for k, e in enumerate(on_front):
-                ax.annotate(e.label, (cost(e), e.error), textcoords="offset points", fontsize=7,
-                            xytext=(6, 4 if k % 2 == 0 else -10))
+    right = ax.get_xlim()[1]
+    keys: dict[int, list[str]] = {}
+    for families, colour, style, label, names in (
+            (None, "black", "-", "Pareto front, every field method", "123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ"),
+            (VIEWER_FAMILIES, "#1f77b4", "--", "front of the viewer's own sources", "abcdefghijklmnopqrstuvwxyz")):
+        on_front = front(entries, cost, families)
+        if not on_front:
+            continue
+        x, y = [cost(e) for e in on_front], [e.error for e in on_front]
+        ax.step(x + [max(right, x[-1])], y + [y[-1]], where="post", color=colour, linestyle=style,
+                linewidth=1.0, alpha=0.8, label=label, zorder=2)
+        for e, name in zip(on_front, names):
+            keys.setdefault(id(e), [e]).append(name)
+    if unit is not None:
+        listed = sorted(keys.values(), key=lambda k: cost(k[0]))
+        for k, (e, *names) in enumerate(listed):
+            ax.annotate("/".join(names), (cost(e), e.error), textcoords="offset points", fontsize=8,
+                        xytext=(4, 3) if k % 2 == 0 else (-4, -11), ha="left" if k % 2 == 0 else "right",
+                        fontweight="bold", color="#1f77b4" if names[0].islower() else "black")
+        lines = [f"{'/'.join(names):>4s} {e.label:26s} {unit(cost(e)):>8s} {e.error:6.1%}" for e, *names in listed]
+        ax.text(1.02, 0.0, "front points\n" + "\n".join(lines), transform=ax.transAxes, fontsize=7,
+                family="monospace", va="bottom")
     ax.axhline(GOAL, color="grey", linestyle=":", linewidth=0.8)
     ax.annotate(f"{GOAL:.0%} goal ", (1.0, GOAL), xycoords=("axes fraction", "data"), fontsize=7, ha="right",
                 va="bottom", color="grey")
@@ -132,6 +156,10 @@ def _memory(e: Entry) -> float:
     return e.memory / 1024.0
 
 
+def _kib(kib: float) -> str:
+    return f"{kib / 1024:.1f} MiB" if kib >= 1024 else f"{kib:.1f} KiB"
+
+
 def charts(rows: list[dict], scenes: list[str], folder: Path) -> list[Path]:
     """benchmark_time.png and benchmark_memory.png (aggregated), benchmark_scenes.png (one panel a scene)."""
     import matplotlib
@@ -143,10 +171,11 @@ def charts(rows: list[dict], scenes: list[str], folder: Path) -> list[Path]:
     entries, present = aggregate(rows, scenes)
     title = f"mean over {len(present)} scene{'s' * (len(present) != 1)}: {', '.join(present)}"
     written = []
-    for name, cost, xlabel in (("benchmark_time.png", lambda e: e.ms, "milliseconds to produce the GI (median)"),
-                               ("benchmark_memory.png", _memory, "memory kept for rendering, KiB (textures + model)")):
-        fig, ax = plt.subplots(figsize=(12, 6.5))
-        _plot(ax, entries, cost, xlabel, labels=True)
+    for name, cost, xlabel, unit in (
+            ("benchmark_time.png", lambda e: e.ms, "milliseconds to produce the GI (median)", _ms),
+            ("benchmark_memory.png", _memory, "memory kept for rendering, KiB (textures + model)", _kib)):
+        fig, ax = plt.subplots(figsize=(13, 7))
+        _plot(ax, entries, cost, xlabel, unit)
         ax.margins(x=0.12)
         ax.set_title(title, fontsize=9)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
@@ -158,7 +187,7 @@ def charts(rows: list[dict], scenes: list[str], folder: Path) -> list[Path]:
     rows_of_panels = -(-len(present) // columns)
     fig, axes = plt.subplots(rows_of_panels, columns, figsize=(5 * columns, 3.8 * rows_of_panels), squeeze=False)
     for ax, scene in zip(axes.flat, present):
-        _plot(ax, per_scene(rows, scene), lambda e: e.ms, "ms", labels=False)
+        _plot(ax, per_scene(rows, scene), lambda e: e.ms, "ms")
         ax.set_title(scene, fontsize=9)
     for ax in list(axes.flat)[len(present):]:
         ax.axis("off")
@@ -175,41 +204,57 @@ def _ms(ms: float) -> str:
     return f"{ms / 1000:.1f} s" if ms >= 1000 else f"{ms:.0f} ms"
 
 
-def budget_sentences(entries: list[Entry]) -> list[str]:
-    """Which field method to choose at which time budget, from the front; then the shipped defaults."""
-    on_front = front(entries)
-    lines = []
-    if on_front:
-        lines.append(f"Under {_ms(on_front[0].ms)} no method here produces a field.")
+def budget_sentences(entries: list[Entry], families: tuple[str, ...] | None = None) -> list[str]:
+    """Which field method (of `families`, or any) to choose at which time budget, from the front."""
+    on_front = front(entries, families=families)
+    lines = [f"Under {_ms(on_front[0].ms)}: none of them gives a field."] if on_front else []
     for k, e in enumerate(on_front):
-        upto = f"up to {_ms(on_front[k + 1].ms)}" if k + 1 < len(on_front) else "and more"
-        lines.append(f"From {_ms(e.ms)} {upto}: **{e.label}** ({e.error:.1%} relative RMSE).")
+        upto = f"to {_ms(on_front[k + 1].ms)}" if k + 1 < len(on_front) else "and more"
+        lines.append(f"{_ms(e.ms)} {upto}: **{e.label}** ({e.error:.1%} relative RMSE).")
+    return lines
+
+
+def defaults_sentences(entries: list[Entry]) -> list[str]:
+    """Where the viewer's shipped defaults stand: on which front, or what beats them."""
+    lines = []
     for family, setting in DEFAULTS.items():
         entry = next((e for e in entries if e.family == family and e.setting == setting), None)
         if entry is None:
             continue
-        beaten = dominated_by(entry, entries)
-        where = ("on the front" if beaten is None else
-                 f"off the front: {beaten.label} is as accurate or better ({beaten.error:.1%}) in {_ms(beaten.ms)}")
-        lines.append(f"The shipped default {entry.label}: {_ms(entry.ms)}, {entry.error:.1%}, {where}.")
+        own, any_ = dominated_by(entry, entries, VIEWER_FAMILIES), dominated_by(entry, entries)
+        where = ("on both fronts" if any_ is None else
+                 f"off the viewer's front: {own.label} is as accurate ({own.error:.1%}) in {_ms(own.ms)}"
+                 if own is not None else
+                 f"on the viewer's front; a Mitsuba bake, {any_.label}, is as accurate ({any_.error:.1%}) in "
+                 f"{_ms(any_.ms)} on this machine")
+        lines.append(f"Shipped default **{entry.label}**: {_ms(entry.ms)}, {entry.error:.1%}, {where}.")
     return lines
 
 
-def tables(rows: list[dict], scenes: list[str]) -> tuple[str, str, str]:
-    """Markdown: the front, the budget sentences, every entry (per-scene errors)."""
+def _front_table(on_front: list[Entry]) -> str:
+    lines = ["| method | setting | ms (mean) | rel. RMSE (mean) | memory KiB |", "|---|---|---|---|---|"]
+    lines += [f"| {e.family} | {e.setting} | {e.ms:.0f} | {e.error:.3f} | {e.memory / 1024:.1f} |" for e in on_front]
+    return "\n".join(lines)
+
+
+def tables(rows: list[dict], scenes: list[str]) -> tuple[str, str]:
+    """Markdown: the two fronts with their budget sentences; every entry (per-scene errors)."""
     entries, present = aggregate(rows, scenes)
-    on_front = front(entries)
-    front_lines = ["| method | setting | ms (mean) | rel. RMSE (mean) | memory KiB |", "|---|---|---|---|---|"]
-    front_lines += [f"| {e.family} | {e.setting} | {e.ms:.0f} | {e.error:.3f} | {e.memory / 1024:.1f} |"
-                    for e in on_front]
-    budget = "\n".join(f"- {line}" for line in budget_sentences(entries))
+    on_front, own_front = front(entries), front(entries, families=VIEWER_FAMILIES)
+    fronts = "\n".join([
+        "The viewer's own GI sources (" + ", ".join(VIEWER_FAMILIES) + "):", "", _front_table(own_front), "",
+        *(f"- {line}" for line in budget_sentences(entries, VIEWER_FAMILIES)), "",
+        "Every method that produces a field (a Mitsuba bake of the probes included):", "", _front_table(on_front), "",
+        *(f"- {line}" for line in budget_sentences(entries)), "",
+        *(f"- {line}" for line in defaults_sentences(entries))])
     head = "| method | setting | ms (mean) | rel. RMSE (mean) | " + " | ".join(present) + " | memory KiB | front |"
     every = [head, "|" + "---|" * (len(present) + 6)]
     for e in sorted(entries, key=lambda e: (e.family, e.ms)):
         errors = " | ".join(f"{e.errors[s]:.3f}" for s in present)
+        mark = "all" if e in on_front else ("viewer" if e in own_front else "")
         every.append(f"| {e.family} | {e.setting} | {e.ms:.0f} | {e.error:.3f} | {errors} | "
-                     f"{e.memory / 1024:.1f} | {'yes' if e in on_front else ''} |")
-    return "\n".join(front_lines), budget, "\n".join(every)
+                     f"{e.memory / 1024:.1f} | {mark} |")
+    return fronts, "\n".join(every)
 
 
 def machine(rows: list[dict]) -> str:
@@ -243,9 +288,9 @@ def machine(rows: list[dict]) -> str:
 def publish(rows: list[dict], scenes: list[str], paths, notes: list[str], quick: bool) -> str:
     """Charts and the generated blocks of the report; returns the front as text for the terminal."""
     charts(rows, scenes, paths.images)
-    front_table, budget, every = tables(rows, scenes)
+    fronts, every = tables(rows, scenes)
     title = "# Benchmark: every GI method, time and memory against error"
     replace_block(paths.report, "<!-- bench-machine -->", machine(rows) + ("\n\nQuick mode." if quick else ""), title)
-    replace_block(paths.report, "<!-- bench-front -->", front_table + "\n\n" + budget, title)
+    replace_block(paths.report, "<!-- bench-front -->", fronts, title)
     replace_block(paths.report, "<!-- bench-table -->", every + "".join(f"\n\n- {n}" for n in notes), title)
-    return front_table + "\n" + budget
+    return fronts
