@@ -60,7 +60,7 @@ def test_front_keeps_what_nothing_beats_in_both_time_and_error():
     points_only = entry("mitsuba", 5, 0.01, field=False)  # no field: drawn, never on the front
     assert front([beaten, slow_fine, points_only, middle, fast_rough]) == [fast_rough, middle, slow_fine]
     text = " ".join(budget_sentences([beaten, slow_fine, middle, fast_rough]))
-    assert "From 10 ms up to 100 ms" in text and "From 1.0 s and more" in text
+    assert "10 ms to 100 ms: **a s**" in text and "1.0 s and more: **b s**" in text
 
 
 def test_a_folder_without_scene_files_is_bad_input(tmp_path):
