@@ -32,7 +32,7 @@ import numpy as np
 from viewer import sh
 from viewer.voxels import VoxelGrid
 
-VERSION = 1
+VERSION = 2
 """Bump when the features change: a model card records the version its network was trained on, and
 `viewer.neural` refuses a model of another version."""
 FEATURES = (
@@ -75,9 +75,13 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int) -> Encoding:
     cell = np.clip(np.floor((voxels.position - lo) / spacing).astype(np.int64), 0, m - 1)
     flat = (cell[:, 0] * m + cell[:, 1]) * m + cell[:, 2]
     cells = m ** 3
+    corners = _splat(voxels.position, lo, spacing, m)
 
     def gather(values: np.ndarray) -> np.ndarray:
-        return np.bincount(flat, values, minlength=cells)
+        """Trilinear splat onto the cell centres: voxels and lattice cells rarely line up (cubic
+        voxels, a lattice over the scene's bounds), and nearest-cell binning leaves whole layers of a
+        wall empty where no voxel centre falls."""
+        return sum(np.bincount(index, values * weight, minlength=cells) for index, weight in corners)
 
     area = voxels.area
     density = gather(area)
@@ -104,6 +108,21 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int) -> Encoding:
     extent = hi - lo
     inputs[:, 18:21] = (extent / extent.max())[:, None]
     return Encoding(inputs=inputs.reshape(3, CHANNELS, m, m, m), scale=scale.astype(np.float32), lo=lo, hi=hi)
+
+
+def _splat(points: np.ndarray, lo: np.ndarray, spacing: np.ndarray, m: int):
+    """[(flat cell index (P,), weight (P,))] for the 8 cell centres around each point (weights sum to
+    1; clamped at the lattice's faces, so a wall on the scene's bounds stays in the boundary layer)."""
+    u = np.clip((points - lo) / spacing - 0.5, 0.0, m - 1)
+    i0 = np.minimum(np.floor(u).astype(np.int64), max(m - 2, 0))
+    f = u - i0
+    out = []
+    for corner in range(8):
+        bits = [(corner >> a) & 1 for a in range(3)]
+        index = [i0[:, a] + bits[a] for a in range(3)]
+        weight = np.prod([f[:, a] if bits[a] else 1.0 - f[:, a] for a in range(3)], axis=0)
+        out.append((np.minimum((index[0] * m + index[1]) * m + index[2], m ** 3 - 1), weight))
+    return out
 
 
 def emitting_patches(cell: np.ndarray, voxels: VoxelGrid):
@@ -161,9 +180,9 @@ def _basis32(w: np.ndarray) -> np.ndarray:
     return out
 
 
-SUN_BLOCKING_DENSITY = 0.5
+SUN_BLOCKING_DENSITY = 0.3
 """A lattice cell whose surface density (area / cell face area) passes this blocks the sun: a wall
-through the cell has density about 1."""
+through the cell has density about 1, split between two layers at worst (0.5 + 0.5) by the splat."""
 
 
 def sun_sh(sun, density: np.ndarray, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray) -> np.ndarray:
@@ -182,8 +201,11 @@ def sun_visibility(density: np.ndarray, direction: np.ndarray, spacing: np.ndarr
     A sweep through the lattice slice by slice along the sun's dominant axis, starting at the side that
     faces the sun: a cell sees the sun if the cell one slice towards it (bilinearly, along the sun's
     direction) sees it and is not blocked (surface density above SUN_BLOCKING_DENSITY). Outside the
-    lattice is outside the scene: open sky. A cell's own surface does not shade it (a probe next to a
-    wall is lit by the sun on its side of the wall). M slices of M^2 cells: well under a millisecond."""
+    lattice is outside the scene: open sky, but a ray leaves the lattice through one of its boundary
+    cells, and surfaces on the scene's bounds (the walls of a room) lie in those cells: a ray that
+    leaves through a boundary cell holding a surface is blocked. An inner cell's own surface does not
+    shade it (a probe next to a box is lit on its side of the box). M slices of M^2 cells: well under
+    a millisecond."""
     m = density.shape[0]
     axis = int(np.argmax(np.abs(direction)))
     others = [b for b in range(3) if b != axis]
@@ -192,6 +214,8 @@ def sun_visibility(density: np.ndarray, direction: np.ndarray, spacing: np.ndarr
     shift = [direction[b] / abs(direction[axis]) * spacing[axis] / spacing[b] for b in others]
     open_ = np.moveaxis(density <= SUN_BLOCKING_DENSITY, axis, 0).astype(np.float32)
     visible = np.ones_like(open_)
+    first = m - 1 if towards_sun > 0 else 0
+    visible[first] = open_[first]  # the slice facing the sun: only its surfaces stand between it and the sky
     order = range(m - 2, -1, -1) if towards_sun > 0 else range(1, m)
     j, k = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
     x, y = j + shift[0], k + shift[1]
@@ -205,7 +229,9 @@ def sun_visibility(density: np.ndarray, direction: np.ndarray, spacing: np.ndarr
             for dy, wy in ((0, 1 - fy), (1, fy)):
                 xi, yi = x0 + dx, y0 + dy
                 inside = (xi >= 0) & (xi < m) & (yi >= 0) & (yi < m)
-                value = np.where(inside, passed[np.clip(xi, 0, m - 1), np.clip(yi, 0, m - 1)], 1.0)
+                # leaving sideways: through the boundary cell of this slice, open unless it holds a wall
+                edge = open_[i, np.clip(xi, 0, m - 1), np.clip(yi, 0, m - 1)]
+                value = np.where(inside, passed[np.clip(xi, 0, m - 1), np.clip(yi, 0, m - 1)], edge)
                 total += wx * wy * value
         visible[i] = total
     return np.moveaxis(visible, 0, axis)

@@ -94,7 +94,7 @@ def time_inference(field: NeuralField, repeats: int = 20) -> dict:
 def run_candidate(candidate: Candidate, data: Path, epochs: int, runs: Path, evaluation, force: bool = False) -> dict:
     from viewer.training import export as exporter
     from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
-    from viewer.training.samples import load_split
+    from viewer.training.samples import ENCODING_VOXELS, load_split
     from viewer.training.train import TrainSettings, train
 
     run = runs / f"{candidate.name}-e{epochs}"
@@ -110,7 +110,7 @@ def run_candidate(candidate: Candidate, data: Path, epochs: int, runs: Path, eva
     seconds = time.perf_counter() - start
     scene = scenes.load("paper-test")
     lo, hi = scene.bounds
-    inputs = encoding.encode(voxelize(scene, 32), scene.sun, lo, hi, m).inputs
+    inputs = encoding.encode(voxelize(scene, ENCODING_VOXELS), scene.sun, lo, hi, m).inputs
     training = {"data": str(data), "scenes": len(train_set), "epochs": epochs, "seconds": seconds,
                 "command": f"python -m viewer.training.sweep --data {data}"}
     path = run / f"{candidate.name}.onnx"
