@@ -288,6 +288,11 @@ def _irradiance_terms(dr, lane: _Lane) -> list:
     return [np.pi * lane.reflected[c] + lane.light_weight[c] * cosine for c in range(3)]
 
 
+def _indirect_irradiance_terms(dr, lane: _Lane) -> list:
+    """`_irradiance_terms` without the light samples: the reflected light only."""
+    return [np.pi * lane.reflected[c] for c in range(3)]
+
+
 def _basis(d) -> list:
     """`viewer.sh.basis` in plain arithmetic, so that it runs inside a Dr.Jit kernel (same order and
     constants, DESIGN.md; tests check the two agree)."""
@@ -369,20 +374,25 @@ def probe_sh_parts(scene: Scene, points, directions: int = 1024, spp: int = 1, m
 
 
 def irradiance(scene: Scene, points, normals, spp: int = 1024, max_depth: int = -1, seed: int = 0,
-               cache: bool = True) -> np.ndarray:
+               cache: bool = True, indirect_only: bool = False) -> np.ndarray:
     """Irradiance E(p, n) = integral L(p, w) max(0, n.w) dw (P, 3) at surface points (P, 3) with unit
     normals (P, 3), from `spp` cosine-distributed rays and light samples per point. The rays start a
-    little off the surface along n (1e-5 of the scene size), so the surface itself is not hit."""
+    little off the surface along n (1e-5 of the scene size), so the surface itself is not hit.
+    indirect_only: without the light arriving straight from emitters and the sun (what the renderer's
+    probe grid holds)."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     n = n / np.linalg.norm(n, axis=1, keepdims=True)
     seed = int(seed) % 2**31
     params = dict(spp=int(spp), max_depth=int(max_depth), seed=seed)
-    return _cached("irradiance", scene, [p, n], params, cache,
-                   lambda: _irradiance(scene, p, n, int(spp), int(max_depth), int(seed)))
+    kind = "irradiance"
+    if indirect_only:
+        params["indirect_only"], kind = True, "indirect-irradiance"
+    return _cached(kind, scene, [p, n], params, cache,
+                   lambda: _irradiance(scene, p, n, int(spp), int(max_depth), int(seed), indirect_only))
 
 
-def _irradiance(scene, points, normals, spp, max_depth, seed):
+def _irradiance(scene, points, normals, spp, max_depth, seed, indirect_only=False):
     mscene = _load(scene, max_depth)
     lo, hi = scene.bounds
     offset = 1e-5 * max(float(np.linalg.norm(hi - lo)), 1e-6)
@@ -391,8 +401,9 @@ def _irradiance(scene, points, normals, spp, max_depth, seed):
         batch_seed = seed * 1_000_003 + start
         n = normals[start:stop]
         dirs = _cosine_hemisphere(_lattice(stop - start, spp, batch_seed), n)       # (B, S, 3)
-        out[start:stop] = _estimate(mscene, points[start:stop] + offset * n, dirs, _irradiance_terms,
-                                    normals=n, seed=batch_seed)
+        terms = _indirect_irradiance_terms if indirect_only else _irradiance_terms
+        out[start:stop] = _estimate(mscene, points[start:stop] + offset * n, dirs, terms, normals=n,
+                                    seed=batch_seed)
     return out.astype(np.float32)
 
 
