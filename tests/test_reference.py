@@ -89,6 +89,9 @@ def test_white_furnace_surface_irradiance_is_two_pi():
     normals = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
     e = reference.irradiance(FURNACE, points, normals, spp=4096, cache=False)
     np.testing.assert_allclose(e, 2 * np.pi, rtol=0.02)
+    # Half of L = 2 is the walls' own emission (1), half the light they reflect: indirect E = pi.
+    indirect = reference.irradiance(FURNACE, points, normals, spp=4096, cache=False, indirect_only=True)
+    np.testing.assert_allclose(indirect, np.pi, rtol=0.02)
 
 
 # ---- a sun on a floor -------------------------------------------------------------------------------
