@@ -25,6 +25,8 @@ def main(argv=None) -> int:
     parser.add_argument("--methods", nargs="+", choices=tuple(METHODS), metavar="NAME",
                         help=f"only these methods: {', '.join(METHODS)}")
     parser.add_argument("--no-write", dest="write", action="store_false", help="print only; leave docs/ alone")
+    parser.add_argument("--charts-only", dest="charts_only", action="store_true",
+                        help="redraw the charts and blocks from the saved results (docs/data/stability/*.json)")
     args = parser.parse_args(argv)
     config = RunConfig(quick=args.quick, methods=tuple(args.methods or METHODS))
     if args.write:
@@ -32,7 +34,10 @@ def main(argv=None) -> int:
     for name in args.only or STUDIES:
         module = importlib.import_module(f"viewer.bench.stability.{name}")
         start = time.perf_counter()
-        result = module.run(config)
+        result = report.load(name) if args.charts_only else module.run(config)
+        if result is None:
+            print(f"{name}: no saved results to redraw")
+            continue
         print(f"\n## {report.TITLES[name]} ({time.perf_counter() - start:.0f} s)\n")
         if result.rows:
             print(format_table(result))

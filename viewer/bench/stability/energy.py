@@ -16,7 +16,7 @@ import numpy as np
 from viewer import gi, reference
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
-from viewer.bench.stability.common import RunConfig, StudyResult, radiance, try_method
+from viewer.bench.stability.common import RunConfig, StudyResult, radiance, style, try_method
 from viewer.bench.stability.methods import MethodSettings
 
 COLUMNS = [("scene", "scene", "{}"), ("albedo", "albedo", "{:.2f}"), ("method", "method", "{}"),
@@ -90,9 +90,9 @@ def chart(result: StudyResult, path) -> None:
     for ax, prefix, title in ((axes[0], "furnace", "White furnace: L = 1 / (1 - albedo)"),
                               (axes[1], "lit-room", "Closed lit room vs Mitsuba")):
         rows = [r for r in result.rows if r["scene"].startswith(prefix)]
-        for method in dict.fromkeys(r["method"] for r in rows):
+        for method in dict.fromkeys(r["method"] for r in rows if not r["method"].startswith("Mitsuba")):
             mine = sorted((r for r in rows if r["method"] == method), key=lambda r: r["albedo"])
-            ax.plot([r["albedo"] for r in mine], [r["mean"] for r in mine], "o-", label=method)
+            ax.plot([r["albedo"] for r in mine], [r["mean"] for r in mine], label=method, **style(method))
         ax.axhline(1.0, color="k", lw=0.8)
         ax.set_xlabel("albedo")
         ax.set_ylabel("mean radiance / truth")

@@ -122,7 +122,8 @@ def chart(result: StudyResult, path) -> None:
     import matplotlib.pyplot as plt
 
     rows = [r for r in result.rows if r["scene"] == "two-rooms" and r["method"] != "Mitsuba (truth)"]
-    labels = [f"{r['method']}\n{r['size']}\n{r['reduction']}" for r in rows]
+    labels = [f"{r['method']}\n{r['size']}" + (f"\nreduction {r['reduction']}" if r["reduction"] != "-" else "")
+              for r in rows]
     x = np.arange(len(rows))
     fig, ax = plt.subplots(figsize=(max(6, 0.75 * len(rows) + 2), 4.2))
     for offset, key, label in ((-0.27, "dark", "dark room, free space"),

@@ -4,8 +4,11 @@ prose around them is written by hand and stays), plus a CSV per study for other 
 from __future__ import annotations
 
 import csv
+import json
 import math
 from pathlib import Path
+
+import numpy as np
 
 from viewer.bench.report import replace_block
 from viewer.bench.stability.common import StudyResult, format_table
@@ -67,14 +70,34 @@ def write_csv(result: StudyResult) -> Path:
     return path
 
 
+def save(result: StudyResult) -> None:
+    """Everything the chart and the block need, as JSON (`load` reads it back for --charts-only)."""
+    DATA.mkdir(parents=True, exist_ok=True)
+    plain = lambda x: x.tolist() if isinstance(x, np.ndarray) else float(x) if isinstance(x, np.floating) else x
+    record = dict(name=result.name, columns=result.columns, rows=[{k: plain(v) for k, v in r.items()} for r in result.rows],
+                  notes=result.notes, summary=result.summary,
+                  series={k: {n: [float(x) for x in v] for n, v in d.items()} for k, d in result.series.items()})
+    (DATA / f"{result.name}.json").write_text(json.dumps(record, allow_nan=True))
+
+
+def load(name: str) -> StudyResult | None:
+    path = DATA / f"{name}.json"
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    return StudyResult(record["name"], [tuple(c) for c in record["columns"]], record["rows"], record["notes"],
+                       record["summary"], record["series"])
+
+
 def write(result: StudyResult, chart) -> None:
-    """The study's CSV, chart (PNG, when it has rows) and block in docs/STABILITY.md."""
+    """The study's CSV and JSON, chart (PNG, when it has rows) and block in docs/STABILITY.md."""
     import matplotlib
 
     matplotlib.use("Agg")
     chart_file = None
     if result.rows:
         write_csv(result)
+        save(result)
         IMAGES.mkdir(parents=True, exist_ok=True)
         chart_file = IMAGES / f"{result.name}.png"
         chart(result, chart_file)

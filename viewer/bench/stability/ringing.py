@@ -19,7 +19,7 @@ import numpy as np
 from viewer import gi, sh
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
-from viewer.bench.stability.common import DC_TO_RADIANCE, RunConfig, StudyResult, try_method
+from viewer.bench.stability.common import RunConfig, StudyResult, style, try_method
 from viewer.bench.stability.methods import MethodSettings
 
 COLUMNS = [("emitter", "emitter", "{}"), ("light", "light", "{}"), ("method", "method", "{}"),
@@ -100,7 +100,7 @@ def chart(result: StudyResult, path) -> None:
         mine = [r for r in rows if r["light"] == light]
         for method in dict.fromkeys(r["method"] for r in mine):
             m = [r for r in mine if r["method"] == method]
-            ax.plot([r["dering"] for r in m], [100 * r["probes_negative"] for r in m], "o-", label=method)
+            ax.plot([r["dering"] for r in m], [100 * r["probes_negative"] for r in m], label=method, **style(method))
         ax.set_xlabel("deringing strength (poussin window)")
         ax.set_title(f"small bright lamp: {light}", fontsize=10)
         ax.grid(alpha=0.3)

@@ -20,7 +20,7 @@ import numpy as np
 from viewer import gi
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
-from viewer.bench.stability.common import RunConfig, StudyResult, axis_irradiance, try_method
+from viewer.bench.stability.common import RunConfig, StudyResult, axis_irradiance, style, try_method
 from viewer.bench.stability.methods import MethodSettings, truth_sh
 
 COLUMNS = [("method", "method", "{}"), ("size", "voxels / probes", "{}"), ("change", "frame-to-frame change", "{:.3f}"),
@@ -95,10 +95,12 @@ def chart(result: StudyResult, path) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for label, values in result.series.items():
-        style = "k-" if label.startswith("Mitsuba") else "-"
         t = np.linspace(0, 1, len(values["mean"]))
-        axes[0].plot(t, values["mean"], style, marker="o", ms=3, label=label)
-        axes[1].plot(t[1:-1], values["jerk"], style, marker="o", ms=3, label=label)
+        keywords = dict(style(label), ms=4, label=label)
+        if label.endswith("32 / 24"):
+            keywords.update(alpha=0.6, ls="-.")
+        axes[0].plot(t, values["mean"], **keywords)
+        axes[1].plot(t[1:-1], values["jerk"], **keywords)
     axes[0].set_ylabel("mean indirect irradiance (six normals, all points)")
     axes[0].set_title("Indirect light per frame", fontsize=10)
     axes[1].set_ylabel("||E(t+1) - 2 E(t) + E(t-1)|| / ||E(t)||")
