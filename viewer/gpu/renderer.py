@@ -3,7 +3,10 @@
 Per fragment (shaders/surface.glsl): outgoing = albedo / pi * (E_direct + E_indirect) + emission, with
 E_direct from fixed samples on the area emitters and the sun, shadowed by shadow maps
 (viewer/gpu/shadows.py), and E_indirect the cosine-lobe convolution of the probe grid's SH, which holds
-indirect incident radiance only. `present` applies exposure, a tone curve and the sRGB encoding.
+indirect incident radiance only, interpolated with DDGI-style weights against leaks (validity, and a
+smooth fade of the probes behind the surface: shaders/probe_grid.glsl). Exposure, a tone curve and the
+sRGB encoding make the display image: in the surface pass itself when drawing into a DisplayTarget (the
+window's and the PNG captures' path), or by `present` from an HdrTarget of linear radiance.
 Without multisampling the direct light is interleaved over 2x2 pixel blocks and recombined by a filter
 (RenderSettings.interleave, shaders/interleave_resolve.glsl): the renderer's largest cost on a CPU
 rasterizer.
@@ -17,14 +20,13 @@ among the texels of the same plane. On llvmpipe, 1280x720 Cornell box, 16 light 
 from ~160-180 ms to ~35-40 ms; against the exact path, the median pixel differs by 0.06%, 99% of lit
 pixels by less than 4.5% (penumbra texels and face edges).
 
-The renderer does not know where its pixels go: it draws into any HdrTarget and presents into any
-framebuffer (the window's screen, or an offscreen image, see viewer/gpu/offscreen.py).
+The renderer does not know where its pixels go: it draws into any HdrTarget or DisplayTarget and
+presents into any framebuffer (the window's screen, or an offscreen image, see viewer/gpu/offscreen.py).
 """
 
 from __future__ import annotations
 
 from contextlib import nullcontext
-from dataclasses import dataclass
 from pathlib import Path
 
 import moderngl
@@ -36,85 +38,15 @@ from viewer.gpu.lights import emitter_samples
 from viewer.gpu.mesh import SceneMesh, cube, in_draw_order
 from viewer.gpu.probe_textures import ProbeTextures, empty_grid
 from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
+from viewer.gpu.render_settings import TONEMAPS, VIEWS, VOXEL_COLORS, RenderSettings  # noqa: F401 (re-exported)
 from viewer.gpu.shadows import EmitterShadows, SunShadow
 from viewer.gpu.targets import DisplayTarget, HalfIndirectBuffers, HdrTarget, InterleaveBuffers
 from viewer.probes import ProbeGrid
 from viewer.scene import Camera, Scene
 from viewer.voxels import VoxelGrid
 
-VIEWS = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
 SURFACE_VIEWS = {"final": 0, "direct": 1, "indirect": 2, "albedo": 3, "normals": 4, "probes": 0}
-TONEMAPS = {"none": 0, "reinhard": 1, "aces": 2}
-VOXEL_COLORS = ("albedo", "radiance")
 PROBE_UNIT, ATLAS_UNIT, SUN_UNIT, HDR_UNIT, INTERLEAVE_UNIT, BAKED_UNIT, HALF_UNIT = 0, 7, 8, 9, 10, 14, 16
-
-
-@dataclass
-class RenderSettings:
-    """How a frame is drawn; the renderer reads these on every draw, so a UI can change them live."""
-
-    exposure: float = 0.0
-    """Exposure in stops (EV): linear radiance is scaled by 2^exposure before the tone curve."""
-    tonemap: str = "aces"
-    """Tone curve: `aces` (Narkowicz's ACES fit), `reinhard` (x / (1 + x)), or `none` (clamp to [0, 1],
-    like an 8-bit Mitsuba image: use it to compare against the reference)."""
-    indirect: bool = True
-    """Add the probe grid's indirect light (when a grid was given)."""
-    probe_normal_offset: float = 0.5
-    """Probes are sampled this many probe spacings off the surface along its normal (leak reduction)."""
-    probe_plane_falloff: float = 3.0
-    """Leak reduction: each of the 8 probes around the sample point weighs exp(this x its distance in
-    front of the shaded surface's plane, in probe spacings), besides its trilinear weight and its
-    validity (shaders/probe_grid.glsl): a probe one spacing behind another gets e^-3 (5%) of its
-    weight, so probes inside the solid behind a face, and those too near a rotated face (they see its
-    voxel staircase), fade out smoothly. Against Mitsuba on the boxes' faces: relative RMS error 0.15
-    -> 0.09 (cornell); 4 and more crease the faces where the sample point crosses a probe layer.
-    0: plain trilinear interpolation (ProbeGrid.irradiance)."""
-    light_samples: int = 32
-    """Points on the area emitters for direct light; each has a shadow cube, so the penumbra is made of
-    this many hard shadows."""
-    shadow_tile: int = 256
-    """Texels along one face of an emitter sample's shadow cube."""
-    shadow_bias: float = 0.5
-    """Normal offset of the shadow lookup, in shadow-map texels at the receiver's distance."""
-    sun_shadow_size: int = 2048
-    """Texels along the sun's shadow map."""
-    voxel_color: str = "albedo"
-    """`voxels` view: colour cubes by `albedo` or by outgoing `radiance` (when a radiance was given)."""
-    probe_radius: float = 0.15
-    """`probes` view: sphere radius as a fraction of the probe spacing."""
-    interleave: bool = True
-    """Interleaved direct light: each pixel of a 2x2 block shades a quarter of the emitter samples and a
-    3x3 plane-aware tent filter recombines them (on llvmpipe about 45% less work for the direct light;
-    the penumbra gets smoother, shadow edges blur by about a pixel). Applies to the `final` and
-    `direct` views of targets without multisampling, with 8 light samples or more, when `baked_direct` is
-    off."""
-    baked_direct: bool = True
-    """Direct light baked once per scene and light setting into a lightmap atlas
-    (viewer/gpu/direct_bake.py) and read with one bilinear fetch per fragment, instead of summing the
-    emitter samples per fragment: the same shadows and penumbrae, linear between texels `lightmap_texel`
-    apart. Applies to the `final` and `direct` views (interleave then has nothing to do). False: the
-    exact per-fragment sum."""
-    lightmap_texel: float = 0.02
-    """Lightmap texel spacing of the baked direct light, in scene units (metres for the Cornell box)."""
-    half_indirect: bool = True
-    """`final` view: the probe grid is sampled per fragment at a lower resolution (`indirect_divisor`)
-    and upsampled bilinearly among the texels on the same plane (indirect light is smooth over a probe
-    spacing): on llvmpipe the probe grid's seven trilinear fetches and SH convolution cost about 30 ms per
-    1280x720 frame at full resolution. False: per fragment at full resolution (the `indirect` view always
-    is)."""
-    indirect_divisor: int = 4
-    """With `half_indirect`: the probe grid is sampled at 1/indirect_divisor of the width and height (4:
-    about 10 ms less per 1280x720 frame than 2 on llvmpipe; faces only a few pixels wide get the nearest
-    texels' light)."""
-
-    def __post_init__(self):
-        if self.tonemap not in TONEMAPS:
-            raise ValueError(f"tonemap must be one of {', '.join(TONEMAPS)}, not {self.tonemap!r}")
-        if not 0.0 <= self.probe_plane_falloff <= 20.0:
-            raise ValueError(f"probe_plane_falloff must be in [0, 20], not {self.probe_plane_falloff}")
-        if self.voxel_color not in VOXEL_COLORS:
-            raise ValueError(f"voxel_color must be one of {', '.join(VOXEL_COLORS)}, not {self.voxel_color!r}")
 
 
 class Renderer:
@@ -123,8 +55,8 @@ class Renderer:
         renderer = Renderer(ctx)                      # compiles the shaders (ShaderError if broken)
         renderer.set_scene(scene)                     # again whenever the scene changes
         renderer.set_probes(probes)                   # whenever the GI changes; None: GI off
-        target = HdrTarget(ctx, (width, height))      # float radiance (+ depth), any size
-        renderer.draw(target, camera, view="final")
+        target = DisplayTarget(ctx, (width, height))  # 8-bit sRGB (+ depth), any size; or an HdrTarget
+        renderer.draw(target, camera, view="final")   # for linear radiance
         renderer.present(target, window_framebuffer, view="final")
 
     `settings` (RenderSettings) may be changed between frames; shadow maps are rebuilt when a setting

@@ -1,0 +1,81 @@
+"""How the renderer draws a frame (RenderSettings), and the views and tone curves it knows.
+
+The renderer (viewer/gpu/renderer.py) reads these on every draw, so a UI can change them live; they
+are re-exported from there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+VIEWS = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
+TONEMAPS = {"none": 0, "reinhard": 1, "aces": 2}
+VOXEL_COLORS = ("albedo", "radiance")
+
+
+@dataclass
+class RenderSettings:
+    """How a frame is drawn; the renderer reads these on every draw, so a UI can change them live."""
+
+    exposure: float = 0.0
+    """Exposure in stops (EV): linear radiance is scaled by 2^exposure before the tone curve."""
+    tonemap: str = "aces"
+    """Tone curve: `aces` (Narkowicz's ACES fit), `reinhard` (x / (1 + x)), or `none` (clamp to [0, 1],
+    like an 8-bit Mitsuba image: use it to compare against the reference)."""
+    indirect: bool = True
+    """Add the probe grid's indirect light (when a grid was given)."""
+    probe_normal_offset: float = 0.5
+    """Probes are sampled this many probe spacings off the surface along its normal (leak reduction)."""
+    probe_plane_falloff: float = 3.0
+    """Leak reduction: each of the 8 probes around the sample point weighs exp(this x its distance in
+    front of the shaded surface's plane, in probe spacings), besides its trilinear weight and its
+    validity (shaders/probe_grid.glsl): a probe one spacing behind another gets e^-3 (5%) of its
+    weight, so probes inside the solid behind a face, and those too near a rotated face (they see its
+    voxel staircase), fade out smoothly. Against Mitsuba on the boxes' faces: relative RMS error 0.15
+    -> 0.09 (cornell); 4 and more crease the faces where the sample point crosses a probe layer.
+    0: plain trilinear interpolation (ProbeGrid.irradiance)."""
+    light_samples: int = 32
+    """Points on the area emitters for direct light; each has a shadow cube, so the penumbra is made of
+    this many hard shadows."""
+    shadow_tile: int = 256
+    """Texels along one face of an emitter sample's shadow cube."""
+    shadow_bias: float = 0.5
+    """Normal offset of the shadow lookup, in shadow-map texels at the receiver's distance."""
+    sun_shadow_size: int = 2048
+    """Texels along the sun's shadow map."""
+    voxel_color: str = "albedo"
+    """`voxels` view: colour cubes by `albedo` or by outgoing `radiance` (when a radiance was given)."""
+    probe_radius: float = 0.15
+    """`probes` view: sphere radius as a fraction of the probe spacing."""
+    interleave: bool = True
+    """Interleaved direct light: each pixel of a 2x2 block shades a quarter of the emitter samples and a
+    3x3 plane-aware tent filter recombines them (on llvmpipe about 45% less work for the direct light;
+    the penumbra gets smoother, shadow edges blur by about a pixel). Applies to the `final` and
+    `direct` views of targets without multisampling, with 8 light samples or more, when `baked_direct` is
+    off."""
+    baked_direct: bool = True
+    """Direct light baked once per scene and light setting into a lightmap atlas
+    (viewer/gpu/direct_bake.py) and read with one bilinear fetch per fragment, instead of summing the
+    emitter samples per fragment: the same shadows and penumbrae, linear between texels `lightmap_texel`
+    apart. Applies to the `final` and `direct` views (interleave then has nothing to do). False: the
+    exact per-fragment sum."""
+    lightmap_texel: float = 0.02
+    """Lightmap texel spacing of the baked direct light, in scene units (metres for the Cornell box)."""
+    half_indirect: bool = True
+    """`final` view: the probe grid is sampled per fragment at a lower resolution (`indirect_divisor`)
+    and upsampled bilinearly among the texels on the same plane (indirect light is smooth over a probe
+    spacing): on llvmpipe the probe grid's seven trilinear fetches and SH convolution cost about 30 ms per
+    1280x720 frame at full resolution. False: per fragment at full resolution (the `indirect` view always
+    is)."""
+    indirect_divisor: int = 4
+    """With `half_indirect`: the probe grid is sampled at 1/indirect_divisor of the width and height (4:
+    about 10 ms less per 1280x720 frame than 2 on llvmpipe; faces only a few pixels wide get the nearest
+    texels' light)."""
+
+    def __post_init__(self):
+        if self.tonemap not in TONEMAPS:
+            raise ValueError(f"tonemap must be one of {', '.join(TONEMAPS)}, not {self.tonemap!r}")
+        if not 0.0 <= self.probe_plane_falloff <= 20.0:
+            raise ValueError(f"probe_plane_falloff must be in [0, 20], not {self.probe_plane_falloff}")
+        if self.voxel_color not in VOXEL_COLORS:
+            raise ValueError(f"voxel_color must be one of {', '.join(VOXEL_COLORS)}, not {self.voxel_color!r}")
