@@ -108,11 +108,13 @@ class NeuralField:
         return self.card.probes
 
     def predict(self, voxels: VoxelGrid, sun, lo, hi, include_emitted: bool = True,
-                timings: dict | None = None) -> ProbeGrid:
+                timings: dict | None = None, resolution: int | None = None) -> ProbeGrid:
         """Probes over [lo, hi]: all the incident light (`include_emitted`, as `sample` and Mitsuba see
-        it) or the light reflected by surfaces alone (what the renderer samples)."""
+        it) or the light reflected by surfaces alone (what the renderer samples). `resolution` other
+        than the card's runs the same convolutional network on another lattice (for timing; its
+        accuracy there is not what the card measured)."""
         clock = time.perf_counter()
-        enc = encoding.encode(voxels, sun, lo, hi, self.resolution)
+        enc = encoding.encode(voxels, sun, lo, hi, resolution or self.resolution)
         encoded = time.perf_counter()
         out = self.session.run(None, {self.input_name: enc.inputs})[0]  # (3, 19, M, M, M)
         ran = time.perf_counter()

@@ -42,7 +42,8 @@ def export_onnx(model: ProbeNet, path: Path, resolution: int) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         torch.onnx.export(model, (example,), str(path), input_names=["inputs"], output_names=["probes"],
-                          dynamic_axes={"inputs": {0: "passes"}, "probes": {0: "passes"}}, dynamo=False)
+                          dynamic_axes={"inputs": {0: "passes", 2: "m", 3: "m", 4: "m"},
+                                        "probes": {0: "passes", 2: "m", 3: "m", 4: "m"}}, dynamo=False)
 
 
 def max_difference(model: ProbeNet, path: Path, inputs: np.ndarray) -> float:
@@ -73,7 +74,7 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
         "outputs": {"name": "probes", "channels": OUTPUTS,
                     "layout": "0-8 SH of all incident light, 9-17 SH of the light reflected by surfaces, "
                               "18 validity logit (> 0: outside solid geometry)"},
-        "probes": {"resolution": resolution, "box": "scene bounds", "centres": "lo + (i + 0.5) (hi - lo) / M",
+        "probes": {"resolution": resolution, "runs_at": "any M divisible by 2^levels (trained at resolution)", "box": "scene bounds", "centres": "lo + (i + 0.5) (hi - lo) / M",
                    "sh_order": "00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22 (DESIGN.md)", "index": "[x, y, z]"},
         "training": training,
         "metrics": metrics,

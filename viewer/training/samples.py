@@ -56,6 +56,26 @@ class Samples:
         return (normalized * self.scale[:, :, None, None, None, None]).transpose(0, 3, 4, 5, 2, 1)
 
 
+PAPER_TRAINING = ("paper-train-1", "paper-train-2", "paper-train-3", "paper-train-4", "paper-train-5")
+"""The paper's five training layouts join the procedural rooms in training; `paper-test` (held out) and
+`cornell` (paper-test without its new sphere and pink wall) never do."""
+
+
+def training_split(root: Path, resolution: int, quiet: bool = False) -> "Samples":
+    """The procedural `train` split plus the paper's training layouts."""
+    train = load_split(root, "train", resolution, quiet=quiet)
+    paper = load_split(root, "paper", resolution, quiet=quiet)
+    return concat(train, paper, keep=[n for n in paper.names if n in PAPER_TRAINING])
+
+
+def concat(a: "Samples", b: "Samples", keep=None) -> "Samples":
+    """a followed by b's scenes named in `keep` (all of b by default)."""
+    index = [i for i, n in enumerate(b.names) if keep is None or n in keep]
+    return Samples(np.concatenate([a.inputs, b.inputs[index]]), np.concatenate([a.targets, b.targets[index]]),
+                   np.concatenate([a.valid, b.valid[index]]), np.concatenate([a.scale, b.scale[index]]),
+                   list(a.names) + [b.names[i] for i in index])
+
+
 def encode_scene(path: str, resolution: int) -> dict[str, np.ndarray]:
     from viewer.training.dataset import load_example
 
@@ -79,7 +99,8 @@ def split_files(root: Path, split: str) -> list[Path]:
 def load_split(root: Path, split: str, resolution: int, workers: int = 2, quiet: bool = False) -> Samples:
     """The encoded split, from the cache when it matches the dataset's files, else encoded now."""
     arrays = encoded_split(root, split, "probenet", encode_scene, resolution, workers, quiet)
-    return Samples(arrays["inputs"], arrays["targets"], arrays["valid"], arrays["scale"], list(arrays["names"]))
+    return Samples(arrays["inputs"], arrays["targets"], arrays["valid"], arrays["scale"],
+                   [str(n) for n in arrays["names"]])
 
 
 def encoded_split(root: Path, split: str, tag: str, encoder, resolution: int, workers: int = 2,

@@ -75,7 +75,7 @@ def measure(model_path: Path, evaluation) -> dict:
     return {"errors": errors, **time_inference(field)}
 
 
-def time_inference(field: NeuralField, repeats: int = 20) -> dict:
+def time_inference(field: NeuralField, repeats: int = 20, resolution: int | None = None) -> dict:
     """Median milliseconds of the neural update on the Cornell box: encode, onnxruntime, unpack."""
     scene = scenes.load("cornell")
     voxels = voxelize(scene, field.card.voxels)
@@ -83,7 +83,7 @@ def time_inference(field: NeuralField, repeats: int = 20) -> dict:
     parts: dict[str, list[float]] = {"encode": [], "network": [], "unpack": []}
     for i in range(repeats + 3):
         timings: dict[str, float] = {}
-        field.predict(voxels, scene.sun, lo, hi, include_emitted=False, timings=timings)
+        field.predict(voxels, scene.sun, lo, hi, include_emitted=False, timings=timings, resolution=resolution)
         if i >= 3:
             for k in parts:
                 parts[k].append(1000 * timings[k])
@@ -94,7 +94,7 @@ def time_inference(field: NeuralField, repeats: int = 20) -> dict:
 def run_candidate(candidate: Candidate, data: Path, epochs: int, runs: Path, evaluation, force: bool = False) -> dict:
     from viewer.training import export as exporter
     from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
-    from viewer.training.samples import ENCODING_VOXELS, load_split
+    from viewer.training.samples import ENCODING_VOXELS, load_split, training_split
     from viewer.training.train import TrainSettings, train
 
     run = runs / f"{candidate.name}-e{epochs}"
@@ -102,7 +102,7 @@ def run_candidate(candidate: Candidate, data: Path, epochs: int, runs: Path, eva
     if result_path.exists() and not force:
         return json.loads(result_path.read_text())
     m = candidate.probes
-    train_set, val_set = load_split(data, "train", m), load_split(data, "val", m)
+    train_set, val_set = training_split(data, m), load_split(data, "val", m)
     config = ProbeNetConfig(width=candidate.width, hidden=candidate.hidden, levels=candidate.levels)
     model = ProbeNet(config)
     start = time.perf_counter()
@@ -167,7 +167,13 @@ def main(argv=None) -> int:
     parser.add_argument("--runs", type=Path, default=Path("runs/sweep"))
     parser.add_argument("--only", help="comma-separated candidate names")
     parser.add_argument("--no-ship", action="store_true", help="do not retrain and export the chosen model")
+    parser.add_argument("--speed-only", action="store_true", help="only time the shipped model (docs/PERFORMANCE.md)")
     args = parser.parse_args(argv)
+    if args.speed_only:
+        shipped = json.loads((ROOT / "models" / "probenet.json").read_text())
+        write_shipped_tables({"errors": shipped["metrics"]["relative_rmse_vs_mitsuba"],
+                              "parameters": shipped["parameters"]})
+        return 0
     evaluation = evaluation_set()
     results = []
     for candidate in CANDIDATES:
@@ -183,12 +189,55 @@ def main(argv=None) -> int:
     out.write_text(json.dumps({"results": results, "chosen": chosen["name"], "within": WITHIN}, indent=1))
     plot(results, chosen, ROOT / "docs" / "images" / "neural_sweep.png")
     print(f"chosen: {chosen['name']}", file=sys.stderr)
+    write_sweep_table(results, chosen, args)
     if not args.no_ship:
-        ship(Candidate(**chosen["candidate"]), args, evaluation)
+        final = ship(Candidate(**chosen["candidate"]), args, evaluation)
+        write_shipped_tables(final)
     return 0
 
 
-def ship(candidate: Candidate, args, evaluation) -> None:
+def _load_line() -> str:
+    import os
+
+    return f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+
+
+def write_sweep_table(results: list[dict], chosen: dict, args) -> None:
+    from viewer.bench.report import replace_block
+
+    rows = ["| model | probes | parameters | epochs | mean rel. RMSE | worst scene | neural update (ms) |",
+            "|---|---|---|---|---|---|---|"]
+    for r in sorted(results, key=lambda r: (r["candidate"]["probes"], r["parameters"])):
+        mark = " **(chosen)**" if r["name"] == chosen["name"] else ""
+        rows.append(f"| {r['name']}{mark} | {r['candidate']['probes']}^3 | {r['parameters']} | {r['epochs']} | "
+                    f"{100 * r['mean_error']:.1f}% | {100 * r['worst_error']:.1f}% | {r['ms_total']:.1f} |")
+    block = ("\n".join(rows) + f"\n\n![error against size and time](images/neural_sweep.png)\n\n"
+             f"Command: `python -m viewer.training.sweep --data {args.data} --epochs {args.epochs}`; "
+             f"timings measured at {_load_line()} (one onnxruntime thread).\n")
+    replace_block(ROOT / "docs" / "ACCURACY.md", "<!-- neural-sweep -->", block, "# Accuracy")
+
+
+def write_shipped_tables(final: dict) -> None:
+    from viewer.bench.report import replace_block
+
+    rows = ["| scene | rel. RMSE vs Mitsuba |", "|---|---|"]
+    rows += [f"| {name} | {100 * error:.1f}% |" for name, error in final["errors"].items()]
+    replace_block(ROOT / "docs" / "ACCURACY.md", "<!-- neural-accuracy -->",
+                  "\n".join(rows) + f"\n\nModel: models/probenet.onnx ({final['parameters']} parameters). Command: "
+                  "`python -m viewer sample SCENE --points P.npy --method neural --out SH.npy` against "
+                  "Mitsuba at 500 free-space points per scene (`python -m viewer.training.sweep`).\n", "# Accuracy")
+    field = NeuralField(ROOT / "models" / "probenet.onnx")
+    rows = ["| probes | encode (ms) | onnxruntime (ms) | unpack (ms) | total (ms) |", "|---|---|---|---|---|"]
+    for m in (16, 32):
+        t = time_inference(field, resolution=m)
+        rows.append(f"| {m}^3 | {t['ms']['encode']:.2f} | {t['ms']['network']:.2f} | {t['ms']['unpack']:.2f} | "
+                    f"{t['ms_total']:.2f} |")
+    replace_block(ROOT / "docs" / "PERFORMANCE.md", "<!-- neural-speed -->",
+                  "\n".join(rows) + f"\n\nThe Cornell box, median of 20 updates after 3 warm-up runs, one onnxruntime "
+                  f"thread, {_load_line()}. Command: `python -m viewer.training.sweep --speed-only`.\n", "# Performance")
+
+
+def ship(candidate: Candidate, args, evaluation) -> dict:
     """Train the chosen configuration longer and export it as models/probenet.onnx with its card."""
     import shutil
 
@@ -206,6 +255,7 @@ def ship(candidate: Candidate, args, evaluation) -> None:
     target.with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n")
     print(f"shipped {target} ({final['parameters']} parameters, worst scene {100 * final['worst_error']:.1f}%)",
           file=sys.stderr)
+    return final
 
 
 if __name__ == "__main__":
