@@ -67,3 +67,34 @@ def test_a_folder_without_scene_files_is_bad_input(tmp_path):
     result = bench(tmp_path, "--out", tmp_path)
     assert result.returncode == 2
     assert "no scene files" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_every_sweep_model_is_a_neural_entry_with_its_file_in_its_memory(tmp_path):
+    """A model exported as the sweep writes it (runs/sweep/<run>/<name>.onnx + card) becomes an entry
+    whose memory is its 8^3 textures plus the .onnx file, and whose producer gives the probe grid."""
+    import json
+
+    import pytest
+
+    pytest.importorskip("torch", reason="the train extra (torch) builds the model")
+    from viewer.bench.methods import model_files, neural_method, texture_bytes
+    from viewer.scene import load
+    from viewer.training import export
+    from viewer.training.models import ProbeNet, ProbeNetConfig
+
+    assert model_files(tmp_path) == []  # nothing shipped, no sweep: no entries, no error
+    path = tmp_path / "runs" / "sweep" / "tiny-e1" / "tiny.onnx"
+    path.parent.mkdir(parents=True)
+    model = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2)).eval()
+    export.export_onnx(model, path, 8)
+    export.write_card(path, model, 8, training={"note": "untrained, for tests"}, metrics={})
+    card = json.loads(path.with_suffix(".json").read_text())
+    card["inputs"]["voxels"] = 16
+    path.with_suffix(".json").write_text(json.dumps(card))
+
+    assert model_files(tmp_path) == [path]
+    method = neural_method(path, root=tmp_path)
+    assert method.name == "neural:runs/sweep/tiny-e1/tiny.onnx"
+    assert method.memory_bytes == texture_bytes(8) + path.stat().st_size
+    grid = method.prepare()(load("cornell"), None)
+    assert grid.resolution == 8

@@ -19,6 +19,7 @@ theirs with one call, and the neural entries are one such provider, scanning for
 from __future__ import annotations
 
 import atexit
+import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterable
@@ -246,7 +247,7 @@ def neural_methods(quick: bool = False) -> Iterable[Method]:
         try:
             yield neural_method(path)
         except ModelError as exc:
-            print(f"bench: skipping {path}: {exc}", flush=True)
+            print(f"bench: skipping {path}: {exc}", file=sys.stderr, flush=True)
 
 
 # ---- the registry -----------------------------------------------------------------------------------
