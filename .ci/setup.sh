@@ -30,8 +30,12 @@ if [ ! -x .venv/bin/python ]; then
   "$python" -m venv .venv
 fi
 extras="reference"
-if [ "${1:-}" = "test" ]; then
-  extras="reference,test"
-fi
 .venv/bin/python -m pip install -q --upgrade pip >/dev/null
+if [ "${1:-}" = "test" ]; then
+  # The tests train and export tiny networks (torch, the `train` extra). Pin the CPU build first: on
+  # these machines `pip install torch==2.13.0` takes a local CPU wheel, while an unpinned torch would
+  # pull the registry's newest build with several GB of CUDA packages.
+  .venv/bin/python -m pip install -q "torch==2.13.0"
+  extras="reference,test,train"
+fi
 .venv/bin/python -m pip install -q -e ".[${extras}]"
