@@ -161,22 +161,25 @@ def emitter_sh(lights, points: np.ndarray) -> np.ndarray:
     n = normal.astype(np.float32)
     cos_e = np.maximum(-(x * n[:, 0] + y * n[:, 1] + z * n[:, 2]), 0.0)
     solid_angle = cos_e * (area / (r2 + area * NEAR_FIELD)).astype(np.float32)
-    basis = _basis32(np.stack([x, y, z], axis=-1)) * solid_angle  # (9, P, E)
-    # Three weighted sums, not a (9P x E) by (E x 3) matrix product: multi-threaded BLAS on that shape
-    # stalls for ~20 ms when the renderer keeps both cores busy.
-    rgb = radiance.astype(np.float32)
-    return np.stack([(basis * rgb[:, c]).sum(axis=2).T for c in range(3)], axis=-1)
+    basis = _basis32(x, y, z)
+    basis *= solid_angle  # (9, P, E)
+    p, e = solid_angle.shape
+    return (basis.reshape(9 * p, e) @ radiance.astype(np.float32)).reshape(9, p, 3).transpose(1, 0, 2)
 
 
-def _basis32(w: np.ndarray) -> np.ndarray:
-    """`sh.basis` in float32, coefficient first: (9, ...) for directions (..., 3)."""
-    x, y, z = w[..., 0], w[..., 1], w[..., 2]
+def _basis32(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """`sh.basis` in float32, coefficient first: (9, ...) for the components of unit directions."""
     out = np.empty((sh.SH_COUNT,) + x.shape, np.float32)
     out[0] = 0.282095
-    out[1], out[2], out[3] = 0.488603 * y, 0.488603 * z, 0.488603 * x
-    out[4], out[5] = 1.092548 * x * y, 1.092548 * y * z
-    out[6] = 0.315392 * (3 * z * z - 1)
-    out[7], out[8] = 1.092548 * x * z, 0.546274 * (x * x - y * y)
+    np.multiply(y, 0.488603, out=out[1])
+    np.multiply(z, 0.488603, out=out[2])
+    np.multiply(x, 0.488603, out=out[3])
+    np.multiply(x * y, 1.092548, out=out[4])
+    np.multiply(y * z, 1.092548, out=out[5])
+    np.multiply(z * z, 3 * 0.315392, out=out[6])
+    out[6] -= 0.315392
+    np.multiply(x * z, 1.092548, out=out[7])
+    np.multiply(x * x - y * y, 0.546274, out=out[8])
     return out
 
 
