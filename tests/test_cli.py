@@ -139,7 +139,8 @@ def test_capture_writes_a_png(tmp_path):
 
 
 def test_neural_without_a_model_is_refused_in_one_line(tmp_path, points):
-    result = run("sample", "cornell", "--points", points, "--method", "neural", "--out", tmp_path / "sh.npy")
+    result = run("sample", "cornell", "--points", points, "--method", "neural", "--model",
+                 tmp_path / "missing.onnx", "--out", tmp_path / "sh.npy")
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
     assert "model" in result.stderr
 

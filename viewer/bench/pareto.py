@@ -47,16 +47,41 @@ class Entry:
     memory: int
     errors: dict
     """scene -> relative RMSE."""
+    cpu_ms: float = float("nan")
+    """Mean CPU milliseconds (all threads), NaN where a row predates that column."""
+
+    @property
+    def short_setting(self) -> str:
+        """A model's file name without its folders; other settings as they are."""
+        return Path(self.setting).stem if self.family == "neural" else self.setting
 
     @property
     def label(self) -> str:
-        setting = Path(self.setting).stem if self.family == "neural" else self.setting
-        return f"{self.family} {setting}"
+        return f"{self.family} {self.short_setting}"
+
+
+COMPLETE = 0.9
+"""A scene joins the mean when the entries measured on it and on every scene before it are at least this
+share of the most complete scene's: a scene still being measured waits, rather than thinning the chart."""
+
+
+def complete_scenes(rows: list[dict], scenes: list[str]) -> list[str]:
+    """The scenes (in the given order) that the aggregate is taken over, see COMPLETE."""
+    measured = {s: {(r["method"], r["setting"]) for r in rows if r["scene"] == s} for s in scenes}
+    ranked = sorted((s for s in scenes if measured[s]), key=lambda s: -len(measured[s]))
+    if not ranked:
+        return []
+    chosen, common = [ranked[0]], measured[ranked[0]]
+    for s in ranked[1:]:
+        if len(common & measured[s]) >= COMPLETE * len(measured[ranked[0]]):
+            chosen.append(s)
+            common = common & measured[s]
+    return [s for s in scenes if s in chosen]
 
 
 def aggregate(rows: list[dict], scenes: list[str]) -> tuple[list[Entry], list[str]]:
-    """Entries measured on every scene that has rows (means over those scenes), and those scenes."""
-    present = [s for s in scenes if any(r["scene"] == s for r in rows)]
+    """Entries measured on every complete scene (means over those scenes), and those scenes."""
+    present = complete_scenes(rows, scenes)
     groups: dict[tuple[str, str], dict[str, dict]] = {}
     for r in rows:
         groups.setdefault((r["method"], r["setting"]), {})[r["scene"]] = r
@@ -69,7 +94,8 @@ def aggregate(rows: list[dict], scenes: list[str]) -> tuple[list[Entry], list[st
                              float(np.mean([float(r["ms"]) for r in chosen])),
                              float(np.mean([float(r["relative_rmse"]) for r in chosen])),
                              int(chosen[0]["memory_bytes"]),
-                             {s: float(by_scene[s]["relative_rmse"]) for s in present}))
+                             {s: float(by_scene[s]["relative_rmse"]) for s in present},
+                             float(np.mean([float(r.get("cpu_ms") or "nan") for r in chosen]))))
     return entries, present
 
 
@@ -233,7 +259,8 @@ def defaults_sentences(entries: list[Entry]) -> list[str]:
 
 def _front_table(on_front: list[Entry]) -> str:
     lines = ["| method | setting | ms (mean) | rel. RMSE (mean) | memory KiB |", "|---|---|---|---|---|"]
-    lines += [f"| {e.family} | {e.setting} | {e.ms:.0f} | {e.error:.3f} | {e.memory / 1024:.1f} |" for e in on_front]
+    lines += [f"| {e.family} | {e.short_setting} | {e.ms:.0f} | {e.error:.3f} | {e.memory / 1024:.1f} |"
+              for e in on_front]
     return "\n".join(lines)
 
 
@@ -247,12 +274,16 @@ def tables(rows: list[dict], scenes: list[str]) -> tuple[str, str]:
         "Every method that produces a field (a Mitsuba bake of the probes included):", "", _front_table(on_front), "",
         *(f"- {line}" for line in budget_sentences(entries)), "",
         *(f"- {line}" for line in defaults_sentences(entries))])
-    head = "| method | setting | ms (mean) | rel. RMSE (mean) | " + " | ".join(present) + " | memory KiB | front |"
-    every = [head, "|" + "---|" * (len(present) + 6)]
+    left_out = [s for s in scenes if s not in present and any(r["scene"] == s for r in rows)]
+    every = [f"Means over {', '.join(present)}" + (f"; not complete yet, left out: {', '.join(left_out)}"
+                                                    if left_out else "") + ".", "",
+             "| method | setting | ms (mean) | CPU ms | rel. RMSE (mean) | " + " | ".join(present)
+             + " | memory KiB | front |", "|" + "---|" * (len(present) + 7)]
     for e in sorted(entries, key=lambda e: (e.family, e.ms)):
         errors = " | ".join(f"{e.errors[s]:.3f}" for s in present)
         mark = "all" if e in on_front else ("viewer" if e in own_front else "")
-        every.append(f"| {e.family} | {e.setting} | {e.ms:.0f} | {e.error:.3f} | {errors} | "
+        cpu = "" if np.isnan(e.cpu_ms) else f"{e.cpu_ms:.0f}"
+        every.append(f"| {e.family} | {e.short_setting} | {e.ms:.0f} | {cpu} | {e.error:.3f} | {errors} | "
                      f"{e.memory / 1024:.1f} | {mark} |")
     return fronts, "\n".join(every)
 

@@ -34,9 +34,12 @@ SLOW_SECONDS = 20.0
 REPEATS = 3
 POINTS, POINTS_SEED, MARGIN, REFERENCE_DIRECTIONS = 500, 1, 0.06, 4096
 """The evaluation points and reference of docs/ACCURACY.md (so the cached Mitsuba results are shared)."""
-COLUMNS = ("scene", "method", "setting", "field", "ms", "repeats", "relative_rmse", "texture_bytes",
+COLUMNS = ("scene", "method", "setting", "field", "ms", "cpu_ms", "repeats", "relative_rmse", "texture_bytes",
            "model_bytes", "memory_bytes", "load_average", "measured")
-"""CSV columns. load_average: the 1-minute load when the row was measured (the machine is shared)."""
+"""CSV columns. ms: wall clock, what a user waits. cpu_ms: CPU time of every thread of the process over
+the same runs (median): it does not grow when other jobs share the cores or stop this one, so where the
+two disagree by more than the method's threads (llvmpipe and Mitsuba use every core, numpy mostly one)
+the machine was busy. load_average: the 1-minute load when the row was measured."""
 QUICK_SCENES = ("cornell",)
 
 
@@ -99,6 +102,21 @@ def read_rows(path: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
+def upgrade(path: Path) -> None:
+    """Rewrite a CSV written with fewer columns under today's header (missing values empty)."""
+    if not path.exists():
+        return
+    with open(path, newline="") as fh:
+        header = next(csv.reader(fh), [])
+    if tuple(header) == COLUMNS:
+        return
+    rows = read_rows(path)
+    with open(path, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows({c: r.get(c, "") for c in COLUMNS} for r in rows)
+
+
 def append_row(path: Path, row: dict) -> None:
     """One row, written and flushed at once (an interrupted run keeps everything it measured)."""
     new = not path.exists()
@@ -116,19 +134,22 @@ def key(row: dict) -> tuple[str, str, str]:
 
 # ---- measuring ----------------------------------------------------------------------------------------
 
-def measure(produce, scene, points, truth) -> tuple[float, int, float]:
-    """Median milliseconds, repeats, and mean relative RMSE (Mitsuba's estimates differ run to run)."""
+def measure(produce, scene, points, truth) -> tuple[float, float, int, float]:
+    """Median wall and CPU milliseconds, repeats, and mean relative RMSE (Mitsuba's estimates differ from
+    run to run)."""
     from viewer.bench.accuracy import relative_rmse
     from viewer.probes import ProbeGrid
 
-    seconds, errors = [], []
+    seconds, cpu, errors = [], [], []
     while len(seconds) < (1 if seconds and seconds[0] > SLOW_SECONDS else REPEATS):
-        clock = time.perf_counter()
+        clock, cpu_clock = time.perf_counter(), time.process_time()
         result = produce(scene, points)
         seconds.append(time.perf_counter() - clock)
+        cpu.append(time.process_time() - cpu_clock)
         estimate = result.interpolate(points) if isinstance(result, ProbeGrid) else result
         errors.append(relative_rmse(np.asarray(estimate, np.float64), truth))
-    return 1000.0 * statistics.median(seconds), len(seconds), float(np.mean(errors))
+    return (1000.0 * statistics.median(seconds), 1000.0 * statistics.median(cpu), len(seconds),
+            float(np.mean(errors)))
 
 
 class Progress:
@@ -152,6 +173,7 @@ def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
     from viewer.bench.methods import MethodUnavailable
     from viewer.bench.points import free_space_points
 
+    upgrade(paths.csv)
     done = {key(r) for r in read_rows(paths.csv)}
     loaded = [scenes.load(s) for s in sources]
     todo = [(scene, m) for scene in loaded for m in methods.values() if (scene.name, m.family, m.setting) not in done]
@@ -175,14 +197,15 @@ def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
             if producers[method.name] is None:
                 progress.step(f"{scene.name} {method.name}: skipped")
                 continue
-            ms, repeats, error = measure(producers[method.name], scene, points, truth)
+            ms, cpu_ms, repeats, error = measure(producers[method.name], scene, points, truth)
             append_row(paths.csv, {
                 "scene": scene.name, "method": method.family, "setting": method.setting, "field": int(method.field),
-                "ms": f"{ms:.1f}", "repeats": repeats, "relative_rmse": f"{error:.5f}",
+                "ms": f"{ms:.1f}", "cpu_ms": f"{cpu_ms:.1f}", "repeats": repeats, "relative_rmse": f"{error:.5f}",
                 "texture_bytes": method.texture_bytes, "model_bytes": method.model_bytes,
                 "memory_bytes": method.memory_bytes, "load_average": f"{os.getloadavg()[0]:.2f}",
                 "measured": time.strftime("%Y-%m-%d %H:%M:%S")})
-            progress.step(f"{scene.name} {method.name}: {ms:.0f} ms (x{repeats}), rel. RMSE {error:.3f}")
+            progress.step(f"{scene.name} {method.name}: {ms:.0f} ms (CPU {cpu_ms:.0f}, x{repeats}), "
+                          f"rel. RMSE {error:.3f}")
     return notes
 
 
