@@ -165,10 +165,17 @@ def main(argv=None) -> int:
     parser.add_argument("--epochs", type=int, default=24)
     parser.add_argument("--final-epochs", type=int, default=60)
     parser.add_argument("--runs", type=Path, default=Path("runs/sweep"))
+    parser.add_argument("--probes", type=int, default=16, help="probe lattice of --ship-run")
     parser.add_argument("--only", help="comma-separated candidate names")
     parser.add_argument("--no-ship", action="store_true", help="do not retrain and export the chosen model")
     parser.add_argument("--speed-only", action="store_true", help="only time the shipped model (docs/PERFORMANCE.md)")
+    parser.add_argument("--ship-run", type=Path, help="ship this finished training run (a `viewer.training.train` "
+                                                       "folder) instead of sweeping")
     args = parser.parse_args(argv)
+    if args.ship_run:
+        final = ship_run(args.ship_run, args, evaluation_set())
+        write_shipped_tables(final)
+        return 0
     if args.speed_only:
         shipped = json.loads((ROOT / "models" / "probenet.json").read_text())
         write_shipped_tables({"errors": shipped["metrics"]["relative_rmse_vs_mitsuba"],
@@ -237,11 +244,48 @@ def write_shipped_tables(final: dict) -> None:
                   f"thread, {_load_line()}. Command: `python -m viewer.training.sweep --speed-only`.\n", "# Performance")
 
 
+def ship_run(run: Path, args, evaluation) -> dict:
+    """Export a finished `viewer.training.train` run, measure it like a sweep candidate, and ship it."""
+    import torch
+
+    from viewer.training import export as exporter
+    from viewer.training.samples import ENCODING_VOXELS, training_split
+
+    state = torch.load(run / "checkpoint.pt", weights_only=False)
+    history = state["history"]
+    config = state["config"]
+    m = args.probes
+    scene = scenes.load("paper-test")
+    lo, hi = scene.bounds
+    inputs = encoding.encode(voxelize(scene, ENCODING_VOXELS), scene.sun, lo, hi, m).inputs
+    train_scenes = len(training_split(args.data, m, quiet=True))
+    training = {"data": str(args.data), "scenes": train_scenes, "epochs": len(history["epochs"]),
+                "seconds": float(sum(history["seconds"])),
+                "command": f"python -m viewer.training.train --data {args.data} --out {run} --width {config['width']} "
+                           f"--hidden {config['hidden']} --epochs {len(history['epochs'])} --batch 2"}
+    manifest = json.loads((args.data / "manifest.json").read_text()) if (args.data / "manifest.json").exists() else {}
+    files = {split: len(list((args.data / split).glob("*.npz"))) for split in ("train", "val", "paper")}
+    training["dataset"] = {"command": manifest.get("command"), "truth": manifest.get("truth", "mitsuba"),
+                           "files_used": files}
+    path = run / "probenet.onnx"
+    card = exporter.export(run, path, m, inputs, training,
+                           {"val_relative_rmse_probes": history["val_relative_rmse"][-1]})
+    final = {"candidate": {"width": config["width"], "hidden": config["hidden"], "levels": config["levels"], "probes": m},
+             "name": path.stem, "parameters": card["parameters"], "onnx": str(path), **measure(path, evaluation)}
+    final["worst_error"] = max(final["errors"].values())
+    final["mean_error"] = float(np.mean(list(final["errors"].values())))
+    return install(final)
+
+
 def ship(candidate: Candidate, args, evaluation) -> dict:
     """Train the chosen configuration longer and export it as models/probenet.onnx with its card."""
+    return install(run_candidate(candidate, args.data, args.final_epochs, args.runs, evaluation))
+
+
+def install(final: dict) -> dict:
+    """Copy a measured model to models/probenet.onnx and complete its card."""
     import shutil
 
-    final = run_candidate(candidate, args.data, args.final_epochs, args.runs, evaluation)
     target = ROOT / "models" / "probenet.onnx"
     target.parent.mkdir(exist_ok=True)
     shutil.copy(final["onnx"], target)

@@ -183,7 +183,7 @@ def main(argv=None) -> int:
     std = Standardized(data["train"])
     results = json.loads(args.results.read_text()) if args.results.exists() else {}
     for family in args.families.split(","):
-        for weight_decay in (0.0, LAMBDA):
+        for weight_decay in ((0.0,) if family == "probenet" else (0.0, LAMBDA)):
             key = f"{family}|{weight_decay:g}"
             if key in results and results[key].get("epochs") == args.epochs:
                 continue
