@@ -17,8 +17,9 @@ light is view-independent, so it is baked into a lightmap once per scene and lig
 (viewer/gpu/direct_bake.py) and read with one fetch; indirect light is smooth, so the probe grid is
 sampled per fragment at a quarter of the width and height (shaders/indirect_half.glsl) and upsampled
 among the texels of the same plane. On llvmpipe, 1280x720 Cornell box, 16 light samples: the final view
-from ~160-180 ms to ~35-40 ms; against the exact path, the median pixel differs by 0.06%, 99% of lit
-pixels by less than 4.5% (penumbra texels and face edges).
+from ~160-180 ms to ~35-40 ms, and to ~23 ms with the tone mapping in the surface pass (drawing into a
+DisplayTarget; docs/PERFORMANCE.md); against the exact path, the median pixel differs by 0.06%, 99% of
+lit pixels by less than 4.5% (penumbra texels and face edges).
 
 The renderer does not know where its pixels go: it draws into any HdrTarget or DisplayTarget and
 presents into any framebuffer (the window's screen, or an offscreen image, see viewer/gpu/offscreen.py).
