@@ -246,7 +246,8 @@ def plot_curves(results: dict, path: Path) -> None:
             if r["lambda"] != lam or not r["curve"]:
                 continue
             curve = np.array(r["curve"])
-            line, = ax.semilogy(curve[:, 0], curve[:, 1], label=f"{LABELS[r['family']]} train")
+            units = " (its own loss: scaled SH)" if r["family"] == "probenet" else ""
+            line, = ax.semilogy(curve[:, 0], curve[:, 1], label=f"{LABELS[r['family']]} train{units}")
             ax.semilogy(curve[:, 0], curve[:, 2], ls="--", color=line.get_color())
         ax.set_title(f"lambda = {lam:g} (solid: train, dashed: validation)")
         ax.set_xlabel("epoch")
