@@ -2,9 +2,11 @@
 
 Two scenes: the Cornell box (large smooth walls, boxes a few voxels wide) and `thin_shelf` (a shelf 0.02
 thick across the lit room: thinner than a voxel at every N here, with a shadow under it). The numpy
-solver (`physical`; the compute-shader solver gives the same probes to 0.1%) is solved once per N and
-projected at every M. `mitsuba-probes` (path-traced probes, interpolated) is the floor that the probe
-grid alone sets at each M: the difference to it is what the voxels cost.
+solver (`physical`) is solved once per N and projected at every M; at 64^3 voxels its sparse transition
+matrix would need ~10 GB, so the compute-shader solver (the same transport, probes within 0.1% of the
+numpy ones, docs/PERFORMANCE.md) takes that row, keeping its visibility table across the M.
+`mitsuba-probes` (path-traced probes, interpolated) is the floor that the probe grid alone sets at each
+M: the difference to it is what the voxels cost.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from viewer.bench.accuracy import relative_rmse
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, try_method
-from viewer.bench.stability.methods import MethodSettings
+from viewer.bench.stability.methods import MethodSettings, MethodUnavailable, gl_context
 from viewer.gi import GISettings
 from viewer.raymarch import Tracer
 from viewer.voxels import voxelize
@@ -41,6 +43,30 @@ def numpy_grids(scene, voxels: int, resolutions) -> dict[int, probe_grid.ProbeGr
             for m in resolutions}
 
 
+def compute_grids(scene, voxels: int, resolutions) -> dict[int, probe_grid.ProbeGrid]:
+    """The same with the compute-shader solver (MethodUnavailable without GL)."""
+    from viewer.gpu.compute_solver import ComputeSolver
+
+    grid = voxelize(scene, voxels)
+    solver, grids = None, {}
+    try:
+        for m in resolutions:
+            settings = GISettings(voxels=voxels, probes=m, directions=DIRECTIONS)
+            if solver is None:
+                solver = ComputeSolver(gl_context(), grid, scene.sun, settings, bounds=scene.bounds)
+            else:
+                solver.restart(settings=settings)
+            grids[m] = solver.run().probe_grid(include_emitted=True)
+    finally:
+        if solver is not None:
+            solver.release()
+    return grids
+
+
+NUMPY_LIMIT = 32
+"""Largest N the numpy solver is run at here (memory)."""
+
+
 def run(config: RunConfig) -> StudyResult:
     import time
 
@@ -53,10 +79,15 @@ def run(config: RunConfig) -> StudyResult:
         if "physical" in config.methods:
             for n in voxel_sizes:
                 start = time.perf_counter()
-                grids = numpy_grids(scene, n, probe_sizes)
+                method = "physical" if n <= NUMPY_LIMIT else "compute"
+                try:
+                    grids = (numpy_grids if method == "physical" else compute_grids)(scene, n, probe_sizes)
+                except MethodUnavailable as exc:
+                    result.notes.append(f"{n}^3 voxels skipped: {exc}")
+                    continue
                 seconds = (time.perf_counter() - start) / len(probe_sizes)
                 for m, grid in grids.items():
-                    result.rows.append(dict(scene=scene.name, method="physical", voxels=n, probes=m,
+                    result.rows.append(dict(scene=scene.name, method=method, voxels=n, probes=m,
                                             rmse=relative_rmse(grid.interpolate(points), truth), seconds=seconds))
                     print(f"resolution {scene.name} N={n} M={m}: {result.rows[-1]['rmse']:.3f}", flush=True)
         if "mitsuba-probes" in config.methods:
@@ -65,16 +96,17 @@ def run(config: RunConfig) -> StudyResult:
                 if grid is not None:
                     result.rows.append(dict(scene=scene.name, method="mitsuba-probes", voxels="-", probes=m,
                                             rmse=relative_rmse(grid.interpolate(points), truth), seconds=np.nan))
-    result.notes.append(f"{POINTS} free-space points per scene; Mitsuba 4096 directions per point; the solver "
+    result.notes.append(f"{POINTS} free-space points per scene; Mitsuba 4096 directions per point; the solvers "
                         f"with {DIRECTIONS} gather directions per probe. Seconds: the solve divided by the probe "
-                        "grids projected from it (a shared machine: compare within the table only).")
+                        "grids projected from it (a shared machine, and the GPU solver on llvmpipe: compare "
+                        "within a method only).")
     summarize(result)
     return result
 
 
 def summarize(result: StudyResult) -> None:
     for scene in dict.fromkeys(r["scene"] for r in result.rows):
-        rows = [r for r in result.rows if r["scene"] == scene and r["method"] == "physical"]
+        rows = [r for r in result.rows if r["scene"] == scene and r["method"] in ("physical", "compute")]
         for goal in GOALS:
             good = sorted((r for r in rows if r["rmse"] <= goal), key=lambda r: (r["voxels"] ** 3 + r["probes"] ** 3))
             result.summary.append(f"{scene}: " + (f"the smallest grids within {100 * goal:.0f}% are {good[0]['voxels']}^3 "
@@ -91,7 +123,8 @@ def chart(result: StudyResult, path) -> None:
         rows = [r for r in result.rows if r["scene"] == scene]
         for voxels in dict.fromkeys(r["voxels"] for r in rows):
             mine = [r for r in rows if r["voxels"] == voxels]
-            label = "Mitsuba probes (floor)" if voxels == "-" else f"{voxels}^3 voxels"
+            label = ("Mitsuba probes (floor)" if voxels == "-" else f"{voxels}^3 voxels"
+                     + (" (compute)" if mine[0]["method"] == "compute" else ""))
             ax.plot([r["probes"] for r in mine], [r["rmse"] for r in mine], "k--" if voxels == "-" else "-",
                     marker="o", label=label)
         for goal in GOALS:

@@ -27,9 +27,10 @@ COLUMNS = [("emitter", "emitter", "{}"), ("light", "light", "{}"), ("method", "m
            ("normals_negative", "(probe, normal) pairs with E < 0", "{:.4f}"),
            ("worst", "min E / mean E (probes)", "{:+.4f}"), ("points_negative", "points with E < 0", "{:.3f}"),
            ("blur", "band-1 kept", "{:.2f}")]
-EMITTERS = {"small bright (0.1 x 0.1, L = 500)": dict(half_size=0.05, radiance=500.0),
-            "large (0.6 x 0.6, L = 5)": dict(half_size=0.3, radiance=5.0)}
+SMALL = "small bright (0.1 x 0.1, L = 500)"
+EMITTERS = {SMALL: dict(half_size=0.05, radiance=500.0), "large (0.6 x 0.6, L = 5)": dict(half_size=0.3, radiance=5.0)}
 STRENGTHS = (0.0, 0.5, 1.0)
+CURVE_STRENGTHS = np.linspace(0.0, 1.0, 11)
 NORMALS = 4096
 EPSILON = 1e-6
 """Irradiance below -EPSILON x the probe's mean irradiance counts as negative (float32 round-off)."""
@@ -68,6 +69,10 @@ def run(config: RunConfig) -> StudyResult:
                     continue
                 probes = grid.coefficients.reshape(-1, 9, 3)
                 at_points = grid.interpolate(points)
+                if emitter is EMITTERS[SMALL]:   # the chart's curves, on a finer set of strengths
+                    curves = [negative_irradiance(sh.dering(probes, x), 1024) for x in CURVE_STRENGTHS]
+                    result.series[f"{name}, {light}"] = {
+                        "negative": [c["probes_negative"] for c in curves], "worst": [c["worst"] for c in curves]}
                 for strength in STRENGTHS:
                     factors = sh.window_factors(strength)
                     stats = negative_irradiance(sh.dering(probes, strength))
@@ -94,18 +99,24 @@ def summarize(result: StudyResult) -> None:
 def chart(result: StudyResult, path) -> None:
     import matplotlib.pyplot as plt
 
-    rows = [r for r in result.rows if r["emitter"].startswith("small")]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
-    for ax, light in zip(axes, ("incident (sample)", "indirect (renderer)")):
-        mine = [r for r in rows if r["light"] == light]
-        for method in dict.fromkeys(r["method"] for r in mine):
-            m = [r for r in mine if r["method"] == method]
-            ax.plot([r["dering"] for r in m], [100 * r["probes_negative"] for r in m], label=method, **style(method))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    x = CURVE_STRENGTHS
+    for label, curve in result.series.items():
+        method, light = label.split(", ", 1)
+        keywords = dict(style(method), label=label, ms=4)
+        if light.startswith("indirect"):
+            keywords.update(alpha=0.5, ls="-.")
+        else:
+            axes[0].plot(x, [100 * v for v in curve["negative"]], **keywords)
+        axes[1].plot(x, curve["worst"], **keywords)
+    axes[0].set_ylabel("% of probes with negative irradiance\nfor some normal (incident light)")
+    axes[1].set_ylabel("lowest irradiance over probes and normals\n/ that probe's mean irradiance")
+    axes[1].axhline(0.0, color="k", lw=0.8)
+    for ax in axes:
         ax.set_xlabel("deringing strength (poussin window)")
-        ax.set_title(f"small bright lamp: {light}", fontsize=10)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    axes[0].set_ylabel("% of probes with negative irradiance\nfor some normal")
+        ax.legend(fontsize=7)
+    fig.suptitle("A 0.1 x 0.1 lamp of radiance 500 in the closed room", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -94,18 +94,20 @@ def chart(result: StudyResult, path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    truth = np.asarray(result.series["Mitsuba (truth)"]["mean"])
     for label, values in result.series.items():
         t = np.linspace(0, 1, len(values["mean"]))
         keywords = dict(style(label), ms=4, label=label)
         if label.endswith("32 / 24"):
             keywords.update(alpha=0.6, ls="-.")
-        axes[0].plot(t, values["mean"], **keywords)
+        axes[0].plot(t, np.asarray(values["mean"]) / truth, **keywords)
         axes[1].plot(t[1:-1], values["jerk"], **keywords)
-    axes[0].set_ylabel("mean indirect irradiance (six normals, all points)")
-    axes[0].set_title("Indirect light per frame", fontsize=10)
+    axes[0].set_ylabel("mean indirect irradiance / Mitsuba's")
+    axes[0].set_yscale("log")
+    axes[0].set_title("Indirect light per frame, against the truth", fontsize=10)
     axes[1].set_ylabel("||E(t+1) - 2 E(t) + E(t-1)|| / ||E(t)||")
     axes[1].set_yscale("log")
-    axes[1].set_title("Jerk per frame (flicker; Mitsuba's is its noise)", fontsize=10)
+    axes[1].set_title("Jerk per frame (flicker; Mitsuba's includes its noise)", fontsize=10)
     for ax in axes:
         ax.set_xlabel("lamp position along its path")
         ax.grid(alpha=0.3)
