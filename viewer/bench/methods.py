@@ -12,8 +12,8 @@ Memory is what the renderer keeps for the result: the probe textures (M^3 probes
 `ProbeGrid.texture_data`) plus, for a network, its .onnx file. A method that cannot run here (no GL
 context, a broken model) raises `MethodUnavailable` from `prepare`; the benchmark notes it and goes on.
 
-More entries come from providers (`register_provider`): the paper's model families (Table 1) can add
-theirs with one call, and the neural entries are one such provider, scanning for model files.
+More entries come from providers (`register_provider`), each scanning for model files: the neural
+entries (models/, runs/sweep/) and the paper's model families (runs/table1/, `paper_families`).
 """
 
 from __future__ import annotations
@@ -252,9 +252,15 @@ def neural_methods(quick: bool = False) -> Iterable[Method]:
 
 # ---- the registry -----------------------------------------------------------------------------------
 
-PROVIDERS: list[Callable[[bool], Iterable[Method]]] = [neural_methods]
-"""Functions quick -> methods, asked each time the registry is built. The paper's families (Table 1,
-viewer.training) join with `register_provider(paper_family_methods)`, family `paper-family`."""
+def _paper_families(quick: bool) -> Iterable[Method]:
+    from viewer.bench.paper_families import paper_family_methods
+
+    return paper_family_methods(quick)
+
+
+PROVIDERS: list[Callable[[bool], Iterable[Method]]] = [neural_methods, _paper_families]
+"""Functions quick -> methods, asked each time the registry is built: the shipped and swept ProbeNets,
+and the paper's families (Table 1) where `python -m viewer.training.table1` has exported them."""
 
 
 def register_provider(provider: Callable[[bool], Iterable[Method]]) -> None:

@@ -22,17 +22,12 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-import numpy as np
 import torch
 from torch import nn
 
-from viewer.voxels import VoxelGrid
+from viewer.training.paper_inputs import PAPER_PROBES, VOXEL_FEATURES
 
 FAMILIES = ("mlp", "resnet10", "rnn", "cnn", "cnn-mlp")
-VOXEL_FEATURES = 10
-"""centre (3), albedo (3), emission (3), hash id (1)."""
-PAPER_VOXELS = 16
-PAPER_PROBES = 8
 
 
 @dataclass(frozen=True)
@@ -46,34 +41,6 @@ class PaperConfig:
 
     def to_dict(self) -> dict:
         return asdict(self)
-
-
-def voxel_list(voxels: VoxelGrid) -> np.ndarray:
-    """(K, 10) the paper's attributes per occupied cell, hash-id order, in raw units (see `standardize`)."""
-    cells = voxels.cells()
-    n = voxels.resolution
-    centre = (cells["center"] - voxels.lo) / (voxels.voxel_size * n)  # [0, 1]
-    return np.concatenate([centre, cells["albedo"], cells["emission"],
-                           (cells["hash_id"] / float(n ** 3))[:, None]], axis=1).astype(np.float32)
-
-
-class Standardizer:
-    """Min-max to [-1, 1] per input attribute; z-score per output coefficient; both from training data."""
-
-    def __init__(self, lists: list[np.ndarray], targets: np.ndarray):
-        rows = np.concatenate(lists)
-        self.lo, self.hi = rows.min(axis=0), rows.max(axis=0)
-        self.mean, self.std = targets.mean(axis=0), targets.std(axis=0) + 1e-6
-
-    def inputs(self, voxel_rows: np.ndarray) -> np.ndarray:
-        span = np.where(self.hi > self.lo, self.hi - self.lo, 1.0)
-        return np.clip((voxel_rows - self.lo) / span * 2 - 1, -1, 1).astype(np.float32)
-
-    def targets(self, values: np.ndarray) -> np.ndarray:
-        return ((values - self.mean) / self.std).astype(np.float32)
-
-    def physical(self, standardized: np.ndarray) -> np.ndarray:
-        return standardized * self.std + self.mean
 
 
 class PaperNet(nn.Module):

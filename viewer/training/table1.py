@@ -1,18 +1,24 @@
 """The paper's Table 1, reproduced: the five families with and without L2 regularization on the same
 splits, train / validation / test MSE on standardized coefficients, and relative RMSE in radiance units.
 
-    python -m viewer.training.table1 --data data/gi-v1 [--epochs 200] [--out docs/TABLE1.md]
+    python -m viewer.training.table1 --data data/gi-v1 [--epochs 200] [--out docs/TABLE1.md] [--models runs/table1]
 
 Splits: train = the procedural `train` split plus the paper's five training layouts; validation = the
 procedural `val` split (new layouts from the same distribution); test = `paper-test` (the held-out scene
 of the paper: a new sphere and a pink back wall). Targets: the dataset's 8^3 ground-truth probes.
 The production network (ProbeNet, 8^3 lattice) is trained on the same data and scored the same way,
 as a last row.
+
+Each trained family is exported to `--models` as `{family}-l{lambda}.onnx` (the network after the
+pooling layer, one scene a call) with `{...}.npz` beside it (the standardization: input range, output
+mean and std, pooled length), so that the benchmark can run it through onnxruntime
+(`viewer.bench.paper_families`).
 """
 
 from __future__ import annotations
 
 import argparse
+import warnings
 import json
 import sys
 import time
@@ -24,6 +30,7 @@ from torch.nn import functional as F
 
 from viewer.bench.report import replace_block
 from viewer.training import paper_models as pm
+from viewer.training.paper_inputs import PAPER_VOXELS, adaptive_pool, voxel_list
 from viewer.training.samples import Samples, encoded_split, load_split, training_split
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -37,8 +44,8 @@ def paper_encode(path: str, resolution: int) -> dict[str, np.ndarray]:
     from viewer.voxels import voxelize
 
     example = load_example(path)
-    rows = pm.voxel_list(voxelize(example.scene, pm.PAPER_VOXELS))
-    pooled = torch.nn.AdaptiveAvgPool1d(pm.PaperConfig.pooled)(torch.from_numpy(rows.T)[None])[0].numpy()
+    rows = voxel_list(voxelize(example.scene, PAPER_VOXELS))
+    pooled = adaptive_pool(rows, pm.PaperConfig.pooled)
     return {"pooled": pooled, "rows_min": rows.min(0), "rows_max": rows.max(0),
             "targets": example.targets[resolution].reshape(-1), "names": np.array(Path(path).stem)}
 
@@ -81,7 +88,7 @@ def relative_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
 
 
 def train_family(config: pm.PaperConfig, data: dict, std: Standardized, weight_decay: float, epochs: int,
-                 seed: int = 0) -> tuple[dict, list]:
+                 seed: int = 0) -> tuple[dict, list, pm.PaperNet]:
     torch.manual_seed(seed)
     model = pm.PaperNet(config)
     x, y = std.inputs(data["train"]), std.targets(data["train"])
@@ -107,7 +114,36 @@ def train_family(config: pm.PaperConfig, data: dict, std: Standardized, weight_d
         if epoch % 10 == 9 or epoch == epochs - 1:
             curve.append((epoch + 1, total / len(x), score(model, data["val"], std)[0]))
     scores = {name: score(model, split, std) for name, split in data.items()}
-    return scores, curve
+    return scores, curve, model
+
+
+def model_path(folder: Path, family: str, weight_decay: float) -> Path:
+    return folder / f"{family}-l{weight_decay:g}.onnx"
+
+
+def export_family(model: pm.PaperNet, std: Standardized, path: Path) -> None:
+    """The network after its pooling layer as ONNX (input `pooled` (1, 10, L) standardized, output
+    `probes` (1, 8^3 x 27) standardized), and the standardization beside it as .npz."""
+    model.eval()
+    example = torch.zeros(1, pm.VOXEL_FEATURES, model.config.pooled)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(_Head(model), (example,), str(path), input_names=["pooled"], output_names=["probes"],
+                          dynamo=False)
+    np.savez(path.with_suffix(".npz"), lo=std.lo, hi=std.hi, mean=std.mean, std=std.std,
+             pooled=model.config.pooled, family=model.config.family)
+
+
+class _Head(torch.nn.Module):
+    """`PaperNet.head` as a module's forward, for the exporter."""
+
+    def __init__(self, model: pm.PaperNet):
+        super().__init__()
+        self.model = model
+
+    def forward(self, pooled: torch.Tensor) -> torch.Tensor:
+        return self.model.head(pooled)
 
 
 def score(model, split: Split, std: Standardized) -> tuple[float, float]:
@@ -177,6 +213,8 @@ def main(argv=None) -> int:
     parser.add_argument("--families", default=",".join(pm.FAMILIES))
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "TABLE1.md")
     parser.add_argument("--results", type=Path, default=ROOT / "docs" / "data" / "table1.json")
+    parser.add_argument("--models", type=Path, default=ROOT / "runs" / "table1",
+                        help="where the trained families are exported for the benchmark")
     args = parser.parse_args(argv)
     torch.set_num_threads(2)
     data = load_data(args.data)
@@ -185,13 +223,15 @@ def main(argv=None) -> int:
     for family in args.families.split(","):
         for weight_decay in ((0.0,) if family == "probenet" else (0.0, LAMBDA)):
             key = f"{family}|{weight_decay:g}"
-            if key in results and results[key].get("epochs") == args.epochs:
+            exported = family == "probenet" or model_path(args.models, family, weight_decay).is_file()
+            if key in results and results[key].get("epochs") == args.epochs and exported:
                 continue
             start = time.perf_counter()
             if family == "probenet":
                 scores, curve = probenet_row(args.data, data, std, max(args.epochs // 4, 1))
             else:
-                scores, curve = train_family(paper_config(family), data, std, weight_decay, args.epochs)
+                scores, curve, model = train_family(paper_config(family), data, std, weight_decay, args.epochs)
+                export_family(model, std, model_path(args.models, family, weight_decay))
             results[key] = {"family": family, "lambda": weight_decay, "epochs": args.epochs, "scores": scores,
                             "trained_epochs": max(args.epochs // 4, 1) if family == "probenet" else args.epochs,
                             "curve": [list(map(float, c)) for c in curve], "seconds": time.perf_counter() - start,
