@@ -165,7 +165,7 @@ def _plot(ax, entries: list[Entry], cost, xlabel: str, unit=None) -> None:
             ax.annotate("/".join(names), (cost(e), e.error), textcoords="offset points", fontsize=8,
                         xytext=(4, 3) if k % 2 == 0 else (-4, -11), ha="left" if k % 2 == 0 else "right",
                         fontweight="bold", color="#1f77b4" if names[0].islower() else "black")
-        lines = [f"{'/'.join(names):>4s} {e.label:26s} {unit(cost(e)):>8s} {e.error:6.1%}" for e, *names in listed]
+        lines = [f"{'/'.join(names):>4s} {e.label[:30]:30s} {unit(cost(e)):>8s} {e.error:6.1%}" for e, *names in listed]
         ax.text(1.02, 0.0, "front points\n" + "\n".join(lines), transform=ax.transAxes, fontsize=7,
                 family="monospace", va="bottom")
     ax.axhline(GOAL, color="grey", linestyle=":", linewidth=0.8)
@@ -200,7 +200,7 @@ def charts(rows: list[dict], scenes: list[str], folder: Path) -> list[Path]:
     for name, cost, xlabel, unit in (
             ("benchmark_time.png", lambda e: e.ms, "milliseconds to produce the GI (median)", _ms),
             ("benchmark_memory.png", _memory, "memory kept for rendering, KiB (textures + model)", _kib)):
-        fig, ax = plt.subplots(figsize=(13, 7))
+        fig, ax = plt.subplots(figsize=(14, 7))
         _plot(ax, entries, cost, xlabel, unit)
         ax.margins(x=0.12)
         ax.set_title(title, fontsize=9)
@@ -217,8 +217,9 @@ def charts(rows: list[dict], scenes: list[str], folder: Path) -> list[Path]:
         ax.set_title(scene, fontsize=9)
     for ax in list(axes.flat)[len(present):]:
         ax.axis("off")
-    axes.flat[0].legend(fontsize=6, loc="lower left")
-    fig.tight_layout()
+    handles, names = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="lower center", ncol=6, fontsize=8)
+    fig.tight_layout(rect=(0, 0.12 / rows_of_panels, 1, 1))
     fig.savefig(folder / "benchmark_scenes.png", dpi=100)
     plt.close(fig)
     return written + [folder / "benchmark_scenes.png"]
