@@ -43,7 +43,8 @@ class StudyResult:
 
 STYLES = {"physical": dict(color="C0", marker="o"), "paper": dict(color="C1", marker="s"),
           "compute": dict(color="C2", marker="x", ls="--"), "ambient": dict(color="C3", marker="^"),
-          "mitsuba-probes": dict(color="C4", marker="d", ls=":"), "Mitsuba (truth)": dict(color="k", marker=".")}
+          "mitsuba-probes": dict(color="C4", marker="d", ls=":"), "neural": dict(color="C5", marker="*"),
+          "Mitsuba (truth)": dict(color="k", marker=".")}
 
 
 def style(method: str) -> dict:

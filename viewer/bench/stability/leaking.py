@@ -82,8 +82,8 @@ def run(config: RunConfig) -> StudyResult:
             spacing = (scene.bounds[1] - scene.bounds[0])[0] / probes
             near = dark & (points[:, 0] < spacing)
             for name in config.methods:
-                if name in ("paper", "ambient") and (voxels, probes) != sizes[0]:
-                    continue   # without visibility (or without probes) the leak does not depend on the size
+                if (name == "paper" or not METHODS[name].resolution) and (voxels, probes) != sizes[0]:
+                    continue   # without visibility (or at a fixed resolution) the leak does not depend on the size
                 for reduction in ((True, False) if METHODS[name].leak_reduction else (None,)):
                     run_settings = settings if reduction in (True, None) else without_leak_reduction(settings)
                     grid = try_method(name, scene, run_settings, result)

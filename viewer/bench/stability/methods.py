@@ -2,9 +2,9 @@
 
 Every method answers the same question as `python -m viewer sample`: the incident-radiance SH field over
 the scene (`include_emitted=True`, as compared with Mitsuba) or its indirect part only (False, what the
-renderer shades from probes). A new method is one entry, e.g. for the neural field:
+renderer shades from probes). A new method is one entry, as the neural field's:
 
-    METHODS["neural"] = Method(neural_probes, "the ONNX network, one shot")
+    METHODS["neural"] = Method(_neural, "the shipped network ...", leak_reduction=False, resolution=False)
 
 A method that cannot run here (no GL context, no model file) raises `MethodUnavailable`; the studies
 record it as skipped, with its reason, and go on.
@@ -43,6 +43,8 @@ class Method:
     """One line for the report."""
     leak_reduction: bool = True
     """Whether `gi.invalid_backface_fraction` (probe validity and fill) means anything to it."""
+    resolution: bool = True
+    """Whether `GISettings.voxels` and `probes` reach it: a study that varies them runs it once."""
 
 
 def _numpy(kernel: str):
@@ -117,6 +119,21 @@ def _path_traced_probes(scene: Scene, settings: MethodSettings) -> ProbeGrid:
 
 
 PROBE_DIRECTIONS = 1024
+_field = None
+
+
+def _neural(scene: Scene, settings: MethodSettings) -> ProbeGrid:
+    """The shipped network (models/probenet.onnx) at the voxel and probe resolution it was trained at
+    (its card's), whatever the settings say: one loaded model for the whole run."""
+    global _field
+    from viewer.neural import ModelError, NeuralField
+
+    if _field is None:
+        try:
+            _field = NeuralField()
+        except ModelError as exc:
+            raise MethodUnavailable(str(exc)) from None
+    return _field.solve(scene, include_emitted=settings.include_emitted)
 
 
 METHODS: dict[str, Method] = {
@@ -124,11 +141,13 @@ METHODS: dict[str, Method] = {
     "paper": Method(_numpy("paper"), "numpy solver, the paper's eq. 25 kernel (receiver cosine, no visibility)"),
     "compute": Method(_compute, "compute-shader solver (GLSL, physical kernel), as the viewer runs it"),
     "ambient": Method(_ambient, "constant ambient: Mitsuba's mean incident radiance as one SH DC term",
-                      leak_reduction=False),
+                      leak_reduction=False, resolution=False),
     "mitsuba-probes": Method(_path_traced_probes, "oracle: Mitsuba at the probe centres, interpolated like any "
                              "grid (the floor that the probe resolution sets)", leak_reduction=False),
+    "neural": Method(_neural, "the shipped network (models/probenet.onnx, ONNX on the CPU), one shot at its "
+                     "trained 16^3 voxels and 16^3 probes", leak_reduction=False, resolution=False),
 }
-"""Every method the studies run, in report order. The neural field joins with one entry."""
+"""Every method the studies run, in report order."""
 
 
 def run(name: str, scene: Scene, settings: MethodSettings = MethodSettings()) -> ProbeGrid:

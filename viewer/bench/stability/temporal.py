@@ -21,7 +21,7 @@ from viewer import gi
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, axis_irradiance, style, try_method
-from viewer.bench.stability.methods import MethodSettings, truth_sh
+from viewer.bench.stability.methods import METHODS, MethodSettings, truth_sh
 
 COLUMNS = [("method", "method", "{}"), ("size", "voxels / probes", "{}"), ("change", "frame-to-frame change", "{:.3f}"),
            ("ratio", "change / true change", "{:.2f}"), ("jerk", "jerk (flicker)", "{:.4f}"),
@@ -48,8 +48,8 @@ def run(config: RunConfig) -> StudyResult:
     for voxels, probes in sizes:
         settings = MethodSettings(gi.GISettings(voxels=voxels, probes=probes, directions=256), include_emitted=False)
         for name in config.methods:
-            if name in ("mitsuba-probes", "ambient", "paper") and (voxels, probes) != sizes[0]:
-                continue   # the oracle is slow at 24^3 probes, ambient has no resolution, paper is slow and wrong
+            if (name in ("mitsuba-probes", "paper") or not METHODS[name].resolution) and (voxels, probes) != sizes[0]:
+                continue   # the oracle is slow at 24^3 probes, paper is slow and wrong, the others ignore the size
             grids = []
             for frame in frames:
                 grid = try_method(name, frame, settings, result)
