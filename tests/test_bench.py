@@ -48,6 +48,13 @@ def test_quick_mode_writes_sane_numbers_charts_and_report_and_resumes(tmp_path):
     with open(tmp_path / "data" / "benchmark.csv", newline="") as fh:
         assert len(list(csv.DictReader(fh))) == len(rows)
 
+    redo = bench("--quick", "--out", tmp_path, "--only", "ambient:*", "--again")
+    assert redo.returncode == 0, redo.stderr
+    assert "1 rows to measure again" in redo.stderr and "1 to measure" in redo.stderr
+    with open(tmp_path / "data" / "benchmark.csv", newline="") as fh:
+        after = list(csv.DictReader(fh))
+    assert len(after) == len(rows) and [r["method"] for r in after].count("ambient") == 1
+
 
 def entry(family, ms, error, field=True):
     return Entry(family, "s", field, ms, error, 1024, {})
@@ -67,6 +74,12 @@ def test_a_folder_without_scene_files_is_bad_input(tmp_path):
     result = bench(tmp_path, "--out", tmp_path)
     assert result.returncode == 2
     assert "no scene files" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_the_stability_suite_is_not_run_into_a_quick_or_elsewhere_report(tmp_path):
+    result = bench("--quick", "--stability", "--out", tmp_path)
+    assert result.returncode == 2 and "--stability" in result.stderr and "Traceback" not in result.stderr
+    assert not (tmp_path / "data").exists()
 
 
 def test_every_sweep_model_is_a_neural_entry_with_its_file_in_its_memory(tmp_path):

@@ -311,18 +311,23 @@ def machine(rows: list[dict]) -> str:
 
     loads = [float(r["load_average"]) for r in rows]
     when = sorted(r["measured"] for r in rows)
-    return (f"{cpu}, {os.cpu_count()} cores; GL: {gl_renderer()}; {variant}. Measured {when[0]} to {when[-1]} "
-            f"while other jobs shared the machine: 1-minute load average {min(loads):.1f} to {max(loads):.1f} "
-            f"(median {np.median(loads):.1f}) on {os.cpu_count()} cores, so times are slower than on an idle "
-            "machine by up to the load over the core count.")
+    cores = os.cpu_count() or 1
+    busy = np.median(loads) > cores
+    return (f"{cpu}, {cores} cores; GL: {gl_renderer()}; {variant}. Measured {when[0]} to {when[-1]}"
+            + (" while other jobs shared the machine" if busy else "")
+            + f": 1-minute load average {min(loads):.1f} to {max(loads):.1f} (median {np.median(loads):.1f}) on "
+            f"{cores} cores" + (", so times are slower than on an idle machine by up to the load over the core "
+                                "count (each row's load is in the CSV)." if busy else "."))
+
+
+TITLE = "# Benchmark: every GI method, time and memory against error"
 
 
 def publish(rows: list[dict], scenes: list[str], paths, notes: list[str], quick: bool) -> str:
     """Charts and the generated blocks of the report; returns the front as text for the terminal."""
     charts(rows, scenes, paths.images)
     fronts, every = tables(rows, scenes)
-    title = "# Benchmark: every GI method, time and memory against error"
-    replace_block(paths.report, "<!-- bench-machine -->", machine(rows) + ("\n\nQuick mode." if quick else ""), title)
-    replace_block(paths.report, "<!-- bench-front -->", fronts, title)
-    replace_block(paths.report, "<!-- bench-table -->", every + "".join(f"\n\n- {n}" for n in notes), title)
+    replace_block(paths.report, "<!-- bench-machine -->", machine(rows) + ("\n\nQuick mode." if quick else ""), TITLE)
+    replace_block(paths.report, "<!-- bench-front -->", fronts, TITLE)
+    replace_block(paths.report, "<!-- bench-table -->", every + "".join(f"\n\n- {n}" for n in notes), TITLE)
     return fronts

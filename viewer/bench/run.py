@@ -56,6 +56,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--list", action="store_true", help="list the methods and exit")
     parser.add_argument("--charts-only", dest="charts_only", action="store_true",
                         help="measure nothing: charts and report from the CSV")
+    parser.add_argument("--again", action="store_true",
+                        help="measure the selected methods on these scenes again (their rows are replaced)")
+    parser.add_argument("--stability", action="store_true",
+                        help="run the stability suite first (python -m viewer.bench.stability: an hour or "
+                             "more), so that one command regenerates docs/BENCHMARK.md and docs/STABILITY.md")
 
 
 @dataclass(frozen=True)
@@ -130,6 +135,18 @@ def append_row(path: Path, row: dict) -> None:
 
 def key(row: dict) -> tuple[str, str, str]:
     return row["scene"], row["method"], row["setting"]
+
+
+def forget(path: Path, scenes: list[str], methods: dict) -> int:
+    """Drop the rows of these methods on these scenes (for --again); returns how many went."""
+    names = {(m.family, m.setting) for m in methods.values()}
+    rows = read_rows(path)
+    kept = [r for r in rows if not (r["scene"] in scenes and (r["method"], r["setting"]) in names)]
+    with open(path, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows({c: r.get(c, "") for c in COLUMNS} for r in kept)
+    return len(rows) - len(kept)
 
 
 # ---- measuring ----------------------------------------------------------------------------------------
@@ -225,17 +242,32 @@ def run(args) -> int:
         for name, m in methods.items():
             print(f"{name:40s} {m.memory_bytes / 1024:10.1f} KiB  {m.about}")
         return 0
+    if args.stability and (args.quick or args.out):
+        from viewer.cli import InputError
+
+        raise InputError("--stability writes docs/STABILITY.md: not with --quick or --out")
     out = args.out or (ROOT / "out" / "bench-quick" if args.quick else ROOT / "docs")
     paths = Paths.under(Path(out))
     sources = scene_sources(args.scenes, args.quick)
-    start = time.perf_counter()
-    notes = [] if args.charts_only else run_benchmark(sources, methods, paths)
     names = [scenes.load(s).name for s in sources]
+    start = time.perf_counter()
+    if args.stability:
+        from viewer.bench.stability.__main__ import main as stability
+
+        stability([])
+    if args.again and paths.csv.exists() and not args.charts_only:
+        upgrade(paths.csv)
+        print(f"bench: {forget(paths.csv, names, methods)} rows to measure again", file=sys.stderr)
+    notes = [] if args.charts_only else run_benchmark(sources, methods, paths)
     rows = [r for r in read_rows(paths.csv) if r["scene"] in names]
     if not rows:
         print(f"bench: no rows for these scenes in {paths.csv}", file=sys.stderr)
         return 0
     summary = pareto.publish(rows, names, paths, notes, args.quick)
+    if paths.report.resolve() == (ROOT / "docs" / "BENCHMARK.md").resolve():
+        from viewer.bench.stability.report import digest
+
+        pareto.replace_block(paths.report, "<!-- bench-stability -->", digest(), pareto.TITLE)
     print(summary, file=sys.stderr)
     print(f"bench: {time.perf_counter() - start:.0f} s; wrote {paths.csv}, {paths.images}, {paths.report}",
           file=sys.stderr)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -105,6 +106,18 @@ def write(result: StudyResult, chart) -> None:
         DOCUMENT.parent.mkdir(parents=True, exist_ok=True)
         DOCUMENT.write_text(skeleton())
     replace_block(DOCUMENT, marker(result.name), block(result, chart_file), TITLE)
+
+
+def digest() -> str:
+    """Every study's findings (its summary sentences, from the saved results) under its title, linked to
+    its section of STABILITY.md: the stability part of docs/BENCHMARK.md."""
+    parts = []
+    for name, title in TITLES.items():
+        result = load(name)
+        anchor = re.sub(r"[^a-z0-9 -]", "", title.lower()).replace(" ", "-")  # GitHub's heading anchors
+        lines = result.summary if result is not None and result.summary else ["not measured yet"]
+        parts.append(f"**[{title}](STABILITY.md#{anchor})**\n\n" + "\n".join(f"- {line}" for line in lines))
+    return "\n\n".join(parts) + "\n\nRegenerate: `python -m viewer.bench.stability` (or `python -m viewer bench --stability`)."
 
 
 def write_methods(methods: dict) -> None:
