@@ -91,3 +91,28 @@ def test_light_leaking_through_a_wall_thinner_than_a_voxel_stays_small():
     on_wall = np.maximum(grid.surface_irradiance(wall, normal), 0).mean()
     assert on_wall < 0.004 * np.maximum(grid.surface_irradiance(lit_wall, lit_normal), 0).mean()
 
+
+
+def test_distance_from_the_training_set_is_zero_inside_the_ranges_and_grows_outside():
+    """The out-of-distribution study's x axis (docs/STABILITY.md, out of distribution). Per axis: a room
+    drawn with the trained ranges lies inside them (0), a room 2.0 x 0.8 x 0.8 lies (2.0 - 1.3) / 0.55
+    = 1.3 range widths outside on the room axis and nowhere else. Through the network input: a reference
+    room's own encoding is at distance 0, and the elongated room lies farther from six reference rooms
+    than a seventh room drawn like them."""
+    from viewer.bench.stability.distance import VIEWS, EncodingDistance, scene_encoding
+    from viewer.bench.stability.ood import range_distance
+    from viewer.training.procedural import Ranges, random_scene
+
+    rooms = [random_scene(np.random.default_rng([7, k]), f"room-{k}") for k in range(7)]
+    long_room, long_params = random_scene(np.random.default_rng(8), "long",
+                                          Ranges(room_scale=((2.0, 0.8, 0.8), (2.0, 0.8, 0.8))))
+    assert all(range_distance(axis, params) == 0.0 for _, params in rooms
+               for axis in ("room", "colour", "light", "shape"))
+    assert range_distance("room", long_params) == pytest.approx(0.7 / 0.55)
+    assert range_distance("colour", long_params) == 0.0 and range_distance("light", long_params) == 0.0
+    inputs = [scene_encoding(scene, 8, 8) for scene, _ in rooms]
+    long_inputs = scene_encoding(long_room, 8, 8)
+    for view in VIEWS.values():
+        measure = EncodingDistance(inputs[:6], view)
+        assert measure(inputs[0]) == pytest.approx(0.0, abs=1e-9)
+        assert measure(long_inputs) > measure(inputs[6])

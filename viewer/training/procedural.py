@@ -58,7 +58,8 @@ class Ranges:
     objects: tuple[int, int] = (0, 4)
     """Fewest and most objects in a room (inclusive; fewer when they do not fit)."""
     object_kinds: tuple[str, ...] = OBJECT_KINDS
-    """Shapes to draw from: box, sphere, cylinder, cone, wedge, tilted-box."""
+    """Shapes to draw from: box, sphere, cylinder, cone, wedge, tilted-box; and "slab", never trained on
+    (an upright panel 0.02-0.04 thick)."""
     object_half_width: tuple[float, float] = (0.1, 0.4)
     """Horizontal half extent (or radius) of an object."""
     object_half_height: tuple[float, float] = (0.1, 0.6)
@@ -67,6 +68,9 @@ class Ranges:
     """Tilt of a tilted box about a horizontal axis (it rests on an edge)."""
     stack_probability: float = 0.3
     """Chance that an object is put on top of an upright box or cylinder already in the room."""
+    hang_probability: float = 0.0
+    """Chance that an object floats just under the ceiling lights instead of standing on the floor
+    (never in training: the out-of-distribution study's)."""
     placement_tries: int = 50
     """Rejection-sampling tries per object before it is left out (no object overlaps another)."""
     lights: tuple[int, int] = (1, 2)
@@ -78,6 +82,9 @@ class Ranges:
     wall_light_probability: float = 0.2
     """Chance that a light hangs on the back or a side wall (facing into the room) instead of under
     the ceiling (facing down)."""
+    floor_light_probability: float = 0.0
+    """Chance that a light lies on the floor facing up (never in training: the out-of-distribution
+    study's; objects may stand on it)."""
     colour_temperature: tuple[float, float] = (2700.0, 9000.0)
     """Colour temperature (K) of a light: the Planck spectrum at 610, 550 and 465 nm."""
     light_tint_probability: float = 0.15
@@ -183,8 +190,8 @@ def object_mesh(rng: np.random.Generator, kind: str, ranges: Ranges, max_half_wi
     height = rng.uniform(*ranges.object_half_height)
     yaw = rng.uniform(0.0, 360.0)
     params: dict = {"kind": kind, "yaw": yaw}
-    if kind in ("box", "wedge", "tilted-box"):
-        half = (width(), height, width())
+    if kind in ("box", "wedge", "tilted-box", "slab"):
+        half = (width(), height, width() if kind != "slab" else rng.uniform(0.01, 0.02))
         shape = meshes.cube() if kind != "wedge" else meshes.wedge()
         local = scale(*half)
         params["half"] = list(half)
@@ -206,7 +213,7 @@ def object_mesh(rng: np.random.Generator, kind: str, ranges: Ranges, max_half_wi
         if kind == "cylinder":
             params["top"] = radius
     else:
-        raise ValueError(f"unknown object kind {kind!r} (have {', '.join(OBJECT_KINDS)})")
+        raise ValueError(f"unknown object kind {kind!r} (have {', '.join(OBJECT_KINDS)}, slab)")
     vertices, faces = transformed(shape, rotate(Y_AXIS, yaw) @ local)
     vertices = vertices - (0.0, vertices[:, 1].min(), 0.0)  # rest on y = 0 (a tilted box on its edge)
     return (vertices, faces), params
@@ -241,6 +248,8 @@ def place_objects(rng: np.random.Generator, half: np.ndarray, ranges: Ranges,
                 if x_range[0] > x_range[1] or z_range[0] > z_range[1]:
                     continue
                 x, z, base = rng.uniform(*x_range), rng.uniform(*z_range), -float(half[1])
+                if ranges.hang_probability > 0 and rng.random() < ranges.hang_probability:
+                    base, params["hanging"] = top_limit - float(vertices[:, 1].max()), True
             moved = vertices + (x, base, z)
             if not inside_room(moved, half, top_limit):
                 continue
@@ -312,12 +321,14 @@ def draw_lights(rng: np.random.Generator, frames: dict[str, Frame], ranges: Rang
         for _ in range(100):
             on_wall = rng.random() < ranges.wall_light_probability
             wall = str(rng.choice(["back", "left-wall", "right-wall"])) if on_wall else "ceiling"
+            if ranges.floor_light_probability > 0 and rng.random() < ranges.floor_light_probability:
+                wall = "floor"
             f = frames[wall]
             ha = min(rng.uniform(*ranges.light_half_extent), 0.95 * f.half_u - 0.05)
             hb = min(rng.uniform(*ranges.light_half_extent), 0.95 * f.half_v - 0.05)
             a = rng.uniform(-f.half_u + 0.05 + ha, f.half_u - 0.05 - ha)
             # wall lights stay in the upper half, above most objects
-            b_lo = -f.half_v + 0.05 + hb if wall == "ceiling" else min(0.0, f.half_v - 0.05 - hb)
+            b_lo = -f.half_v + 0.05 + hb if wall in ("ceiling", "floor") else min(0.0, f.half_v - 0.05 - hb)
             b = rng.uniform(b_lo, f.half_v - 0.05 - hb)
             box = (wall, a - ha, a + ha, b - hb, b + hb)
             if not any(u[0] == wall and box[1] < u[2] and u[1] < box[2] and box[3] < u[4] and u[3] < box[4]

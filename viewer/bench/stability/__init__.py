@@ -10,7 +10,7 @@ One module per study, each with `run(config) -> StudyResult` and `chart(result, 
 - precision   very bright emitters through the renderer's RGBA16F probe textures
 - temporal    a light moving along a path: frame-to-frame flicker of the indirect light
 - resolution  error against voxel and probe resolution, per scene
-- ood         the neural model out of its training distribution (pending the model)
+- ood         the neural model out of its training distribution: error against distance from it
 
 The methods compared live in one registry (`methods.METHODS`); `scenes` builds the study scenes.
 docs/STABILITY.md holds the results; tests/test_stability.py the properties that must always hold.
