@@ -161,6 +161,17 @@ def _subdivide(tri: np.ndarray, max_edge: float) -> tuple[np.ndarray, np.ndarray
     return np.concatenate(centroids), np.concatenate(areas), np.concatenate(sources)
 
 
+def _sorted_unique(codes: np.ndarray, bound: int) -> tuple[np.ndarray, np.ndarray]:
+    """np.unique(codes, return_inverse=True) for integer codes in [0, bound): by counting instead of
+    sorting when the table is small (10x faster for the pieces of a 16^3 or 32^3 voxelization)."""
+    if bound > 1 << 23:
+        return np.unique(codes, return_inverse=True)
+    keys = np.flatnonzero(np.bincount(codes, minlength=bound))
+    index = np.zeros(bound, np.int64)
+    index[keys] = np.arange(len(keys))
+    return keys, index[codes]
+
+
 def voxelize(scene: Scene, resolution: int = 32, normal_mode: str = "area") -> VoxelGrid:
     """Voxelize a scene into an N^3 grid.
 
@@ -178,26 +189,28 @@ def voxelize(scene: Scene, resolution: int = 32, normal_mode: str = "area") -> V
     centroid, piece_area, source = _subdivide(scene.triangles[keep], 0.25 * h)
     piece_face = face_ids[source]
     face_normal = scene.face_normals
-    normal = face_normal[piece_face]
 
     coords = np.clip(np.floor((centroid - lo) / h).astype(np.int64), 0, resolution - 1)
     # per face, then per piece: a (pieces x 3) @ (3 x 6) product goes to multi-threaded BLAS, which is
     # 2-3x slower than the whole voxelization when the other core is busy
     facing = np.argmax(face_normal @ FACINGS.T, axis=1)[piece_face]
     cell = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2
-    keys, inverse = np.unique(cell * 6 + facing, return_inverse=True)
+    keys, inverse = _sorted_unique(cell * 6 + facing, resolution ** 3 * 6)
 
-    def total(values):
-        w = values * piece_area[:, None]
-        return np.stack([np.bincount(inverse, w[:, c], minlength=len(keys)) for c in range(w.shape[1])], 1)
+    def total(values, per_face=True):
+        """Area-weighted sums per voxel-facing, one contiguous column at a time (4x faster than
+        weighting the (pieces, 3) array; values per face are gathered per column)."""
+        columns = np.asarray(values, np.float64).T
+        return np.stack([np.bincount(inverse, (column[piece_face] if per_face else column) * piece_area,
+                                     minlength=len(keys)) for column in columns], 1)
 
     area = np.bincount(inverse, piece_area, minlength=len(keys))
     safe = np.maximum(area, 1e-30)[:, None]
-    position = total(centroid) / safe
-    albedo = total(scene.albedo[piece_face]) / safe
-    emission = total(scene.emission[piece_face]) / safe
+    position = total(centroid, per_face=False) / safe
+    albedo = total(scene.albedo) / safe
+    emission = total(scene.emission) / safe
     if normal_mode == "area":
-        n = total(normal)
+        n = total(face_normal)
     else:  # eq. 3: unweighted mean over the distinct triangles touching the voxel
         pairs = np.unique(np.stack([inverse, piece_face], 1), axis=0)
         n = np.stack([np.bincount(pairs[:, 0], face_normal[pairs[:, 1], c], minlength=len(keys))
@@ -225,7 +238,7 @@ def _light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSamp
     normal = scene.face_normals[face]
     coords = np.clip(np.floor((centroid - lo) / h).astype(np.int64), 0, resolution - 1)
     cell = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2
-    key = cell * 6 + np.argmax(normal @ FACINGS.T, axis=1)
+    key = cell * 6 + np.argmax(scene.face_normals[emitting] @ FACINGS.T, axis=1)[source]
     voxel = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
     stray = keys[voxel] != key
     if stray.any():
