@@ -165,7 +165,7 @@ def _plot(ax, entries: list[Entry], cost, xlabel: str, unit=None) -> None:
             ax.annotate("/".join(names), (cost(e), e.error), textcoords="offset points", fontsize=8,
                         xytext=(4, 3) if k % 2 == 0 else (-4, -11), ha="left" if k % 2 == 0 else "right",
                         fontweight="bold", color="#1f77b4" if names[0].islower() else "black")
-        lines = [f"{'/'.join(names):>4s} {e.label[:30]:30s} {unit(cost(e)):>8s} {e.error:6.1%}" for e, *names in listed]
+        lines = [f"{'/'.join(names):>4s} {e.label[:36]:36s} {unit(cost(e)):>8s} {e.error:6.1%}" for e, *names in listed]
         ax.text(1.02, 0.0, "front points\n" + "\n".join(lines), transform=ax.transAxes, fontsize=7,
                 family="monospace", va="bottom")
     ax.axhline(GOAL, color="grey", linestyle=":", linewidth=0.8)
