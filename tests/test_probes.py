@@ -139,3 +139,14 @@ def test_small_emitter_solid_angle_matches_the_analytic_disc():
     exact = 4 * radiance * (a / np.sqrt(1 + a * a)) * np.arctan(a / np.sqrt(1 + a * a))
     # the L2 SH of a lamp seen under a wide cone blurs it slightly; compare the DC-free irradiance sum
     assert e_sh == pytest.approx(exact, rel=0.05)
+
+
+def test_one_solve_gives_both_the_sampled_and_the_renderers_probes():
+    scene = lit_room(box(half_size=0.3, albedo=0.6, name="block"))
+    settings = gi.GISettings(voxels=8, probes=6, directions=64)
+    everything, indirect = gi.solve_parts(scene, settings, (True, False))
+    np.testing.assert_array_equal(everything.coefficients, gi.solve(scene, settings).coefficients)
+    np.testing.assert_array_equal(indirect.coefficients, gi.solve(scene, settings, include_emitted=False).coefficients)
+    # the lamp's own light is in the first only: more light at every probe that sees it
+    assert (everything.coefficients[..., 0, :] >= indirect.coefficients[..., 0, :] - 1e-6).all()
+    assert everything.coefficients[..., 0, :].sum() > 1.5 * indirect.coefficients[..., 0, :].sum()

@@ -53,6 +53,13 @@ class Timings:
 
 def solve(scene: Scene, settings: GISettings = GISettings(), include_emitted: bool = True,
           timings: Timings | None = None) -> probes.ProbeGrid:
+    return solve_parts(scene, settings, (include_emitted,), timings)[0]
+
+
+def solve_parts(scene: Scene, settings: GISettings = GISettings(), parts: tuple[bool, ...] = (True, False),
+                timings: Timings | None = None) -> list[probes.ProbeGrid]:
+    """One transport solve projected once per entry of `parts`: with the emitted light (True, what
+    `sample` returns) or without it (False, the indirect light the renderer shades from the probes)."""
     timings = timings if timings is not None else Timings()
     clock = time.perf_counter()
 
@@ -70,9 +77,11 @@ def solve(scene: Scene, settings: GISettings = GISettings(), include_emitted: bo
     light = transport.solve(grid, scene.sun, transport.TransportSettings(settings.kernel, settings.bounces),
                             transition=g, tracer=tracer)
     lap("bounces")
-    probe_settings = probes.ProbeSettings(resolution=settings.probes, directions=settings.directions,
-                                          include_emitted=include_emitted, dering=settings.dering,
-                                          invalid_backface_fraction=settings.invalid_backface_fraction)
-    result = probes.project(grid, light, scene.sun, scene.bounds, probe_settings, tracer)
+    results = []
+    for include_emitted in parts:
+        probe_settings = probes.ProbeSettings(resolution=settings.probes, directions=settings.directions,
+                                              include_emitted=include_emitted, dering=settings.dering,
+                                              invalid_backface_fraction=settings.invalid_backface_fraction)
+        results.append(probes.project(grid, light, scene.sun, scene.bounds, probe_settings, tracer))
     lap("probes")
-    return result
+    return results

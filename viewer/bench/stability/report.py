@@ -26,6 +26,7 @@ TITLES = {
     "temporal": "Temporal stability: a moving light",
     "resolution": "Resolution: which scenes need which grid",
     "ood": "Out of distribution (neural model)",
+    "sun": "Sunlight through a window",
 }
 TITLE = "# Stability"
 
