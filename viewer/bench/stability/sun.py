@@ -172,13 +172,14 @@ def chart(result: StudyResult, path) -> None:
         right.plot([r["voxels"] for r in measured], [r["indirect_without_sun"] for r in measured], marker="o",
                    ls=":", color=line.get_color(), mfc="none", label=f"{scene}, sun taken away")
     left.axhline(1.0, color="k", lw=0.8, ls="--")
-    left.set(xscale="log", xlabel="voxels per axis", ylabel="sunlight on the voxels / through the window",
-             title="How much sunlight the first bounce lets in")
-    right.set(xscale="log", xlabel="voxels per axis (probes 16^3 at 16, 24^3 at 32)",
-              ylabel="relative RMSE vs Mitsuba (indirect light)",
-              title="physical solver's indirect light, with and without the sun")
+    left.set(xlabel="voxels per axis", ylabel="sunlight on the voxels / through the window",
+             title="Sunlight the first bounce lets in (1 is right)")
+    right.set(xlabel="voxels per axis (probes 16^3 at 16, 24^3 at 32)",
+              ylabel="relative RMSE vs Mitsuba (indirect light)", title="physical, indirect light, sun on / off")
     for ax in (left, right):
+        ax.set_xscale("log", base=2)
         ax.set_xticks([16, 32, 64], ["16", "32", "64"])
+        ax.minorticks_off()
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
