@@ -32,6 +32,23 @@ class ModelError(ValueError):
     """The model file or its card is missing, corrupt or made for other inputs."""
 
 
+def open_session(path: Path, threads: int = 1):
+    """An onnxruntime session on the CPU, or ModelError in one line. One thread by default: the networks
+    are small, and a second one fights the renderer's threads for the two cores (measured slower under
+    load, docs/PERFORMANCE.md)."""
+    try:
+        import onnxruntime as ort
+    except ImportError as exc:
+        raise ModelError(f"the neural GI source needs onnxruntime ({exc}): pip install onnxruntime") from None
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = threads
+    options.inter_op_num_threads = 1
+    try:
+        return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    except Exception as exc:  # noqa: BLE001 - onnxruntime raises its own types for bad files
+        raise ModelError(f"{Path(path).name}: onnxruntime cannot load it ({str(exc).splitlines()[0]})") from None
+
+
 @dataclass(frozen=True)
 class ModelCard:
     path: Path
@@ -97,19 +114,7 @@ class NeuralField:
         if version != encoding.VERSION:
             raise ModelError(f"{self.card.path.name} was trained on encoding version {version}, "
                              f"this viewer encodes version {encoding.VERSION}")
-        try:
-            import onnxruntime as ort
-        except ImportError as exc:
-            raise ModelError(f"the neural GI source needs onnxruntime ({exc}): pip install onnxruntime") from None
-        options = ort.SessionOptions()
-        # One thread: the network is small, and a second one fights the renderer's threads for the
-        # two cores (measured slower under load, docs/PERFORMANCE.md).
-        options.intra_op_num_threads = threads
-        options.inter_op_num_threads = 1
-        try:
-            self.session = ort.InferenceSession(str(self.card.path), options, providers=["CPUExecutionProvider"])
-        except Exception as exc:  # noqa: BLE001 - onnxruntime raises its own types for bad files
-            raise ModelError(f"{self.card.path.name}: onnxruntime cannot load it ({str(exc).splitlines()[0]})") from None
+        self.session = open_session(self.card.path, threads)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
         if len(inputs) != 1 or inputs[0].shape[1] != encoding.CHANNELS:
             raise ModelError(f"{self.card.path.name}: expects inputs {inputs[0].shape}, "

@@ -27,7 +27,7 @@ class PaperFamily:
     """One exported family: `solve(scene)` -> the 8^3 probe grid of all the light (emitted included)."""
 
     def __init__(self, path: Path):
-        import onnxruntime as ort
+        from viewer.neural import ModelError, open_session
 
         stats = path.with_suffix(".npz")
         if not stats.is_file():
@@ -35,12 +35,10 @@ class PaperFamily:
         with np.load(stats) as z:
             self.lo, self.hi, self.mean, self.std = z["lo"], z["hi"], z["mean"], z["std"]
             self.pooled, self.family = int(z["pooled"]), str(z["family"])
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = 1
         try:
-            self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-        except Exception as exc:  # onnxruntime raises its own classes for unreadable files
-            raise MethodUnavailable(f"{path}: not a model onnxruntime can load ({exc})") from None
+            self.session = open_session(path)
+        except ModelError as exc:
+            raise MethodUnavailable(str(exc)) from None
 
     def inputs(self, scene: Scene) -> np.ndarray:
         from viewer.voxels import voxelize

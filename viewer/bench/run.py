@@ -118,7 +118,11 @@ def upgrade(path: Path) -> None:
         header = next(csv.reader(fh), [])
     if tuple(header) == COLUMNS:
         return
-    rows = read_rows(path)
+    write_rows(path, read_rows(path))
+
+
+def write_rows(path: Path, rows: list[dict]) -> None:
+    """The whole CSV anew under today's header (values a row lacks stay empty)."""
     with open(path, "w", newline="") as fh:
         writer = csv.DictWriter(fh, COLUMNS, extrasaction="ignore")
         writer.writeheader()
@@ -145,10 +149,7 @@ def forget(path: Path, scenes: list[str], methods: dict) -> int:
     names = {(m.family, m.setting) for m in methods.values()}
     rows = read_rows(path)
     kept = [r for r in rows if not (r["scene"] in scenes and (r["method"], r["setting"]) in names)]
-    with open(path, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, COLUMNS, extrasaction="ignore")
-        writer.writeheader()
-        writer.writerows({c: r.get(c, "") for c in COLUMNS} for r in kept)
+    write_rows(path, kept)
     return len(rows) - len(kept)
 
 

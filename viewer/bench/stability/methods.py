@@ -53,21 +53,29 @@ def _numpy(kernel: str):
     return solve
 
 
-_context = None
+_shared: dict[str, object] = {}
+
+
+def _once(name: str, make, unavailable: type[Exception]):
+    """What `make()` builds, built once for the whole run; MethodUnavailable (its message) when `make`
+    raises `unavailable`."""
+    if name not in _shared:
+        try:
+            _shared[name] = make()
+        except unavailable as exc:
+            raise MethodUnavailable(str(exc)) from None
+    return _shared[name]
 
 
 def gl_context():
     """One headless GL context for the whole run (MethodUnavailable without EGL/GL 4.3)."""
-    global _context
-    if _context is None:
-        from viewer.gpu.context import GLUnavailable, create_context
+    from viewer.gpu.context import GLUnavailable, create_context
 
-        try:
-            _context = create_context()
-        except GLUnavailable as exc:
-            raise MethodUnavailable(str(exc)) from None
-        atexit.register(_context.release)
-    return _context
+    def make():
+        context = create_context()
+        atexit.register(context.release)
+        return context
+    return _once("gl", make, GLUnavailable)
 
 
 def _compute(scene: Scene, settings: MethodSettings) -> ProbeGrid:
@@ -119,21 +127,12 @@ def _path_traced_probes(scene: Scene, settings: MethodSettings) -> ProbeGrid:
 
 
 PROBE_DIRECTIONS = 1024
-_field = None
-
-
 def _neural(scene: Scene, settings: MethodSettings) -> ProbeGrid:
     """The shipped network (models/probenet.onnx) at the voxel and probe resolution it was trained at
     (its card's), whatever the settings say: one loaded model for the whole run."""
-    global _field
     from viewer.neural import ModelError, NeuralField
 
-    if _field is None:
-        try:
-            _field = NeuralField()
-        except ModelError as exc:
-            raise MethodUnavailable(str(exc)) from None
-    return _field.solve(scene, include_emitted=settings.include_emitted)
+    return _once("neural", NeuralField, ModelError).solve(scene, include_emitted=settings.include_emitted)
 
 
 METHODS: dict[str, Method] = {
