@@ -115,6 +115,8 @@ class LightSamples:
     """(S, 3) emitted radiance."""
     voxel: np.ndarray
     """(S,) index of the voxel that holds the piece."""
+    face: np.ndarray | None = None
+    """(S,) the scene face each piece was cut from (its radiance follows that face's emission)."""
 
     @property
     def count(self) -> int:
@@ -178,6 +180,37 @@ def voxelize(scene: Scene, resolution: int = 32, normal_mode: str = "area") -> V
     normal_mode: "area" (area-weighted mean of the surface normals in the voxel) or "paper" (eq. 3:
     the plain mean of the normals of the triangles that touch the voxel, normalized).
     """
+    return _voxelize(scene, resolution, normal_mode)[0]
+
+
+@dataclass(frozen=True)
+class Voxelization:
+    """A VoxelGrid with what it was made from: for colour edits without voxelizing again
+    (viewer.relight) and for tracing rays against the scene's own triangles (viewer.dda)."""
+
+    grid: VoxelGrid
+    faces: "sparse.csr_matrix"
+    """(K, F) share of each voxel's area that each scene face covers: voxel albedo = faces @ face albedo."""
+    keys: np.ndarray
+    """(K,) sorted voxel keys: flat cell index * 6 + facing (the index of FACINGS)."""
+
+
+def voxelize_with_faces(scene: Scene, resolution: int = 32, normal_mode: str = "area") -> Voxelization:
+    """`voxelize`, keeping the pieces and the face shares (see Voxelization)."""
+    from scipy import sparse
+
+    grid, inverse, piece_face, piece_area, keys = _voxelize(scene, resolution, normal_mode)
+    share = piece_area / np.maximum(grid.area[inverse], 1e-300)
+    faces = sparse.csr_matrix((share, (inverse, piece_face)), shape=(grid.count, len(scene.faces)))
+    return Voxelization(grid, faces, keys)
+
+
+def face_facing(normals: np.ndarray) -> np.ndarray:
+    """(F,) index into FACINGS of the signed axis closest to each normal (the voxel a face's pieces join)."""
+    return np.argmax(normals @ FACINGS.T, axis=1)
+
+
+def _voxelize(scene: Scene, resolution: int, normal_mode: str):
     if resolution < 2:
         raise ValueError("voxel resolution must be at least 2")
     if normal_mode not in ("area", "paper"):
@@ -193,7 +226,7 @@ def voxelize(scene: Scene, resolution: int = 32, normal_mode: str = "area") -> V
     coords = np.clip(np.floor((centroid - lo) / h).astype(np.int64), 0, resolution - 1)
     # per face, then per piece: a (pieces x 3) @ (3 x 6) product goes to multi-threaded BLAS, which is
     # 2-3x slower than the whole voxelization when the other core is busy
-    facing = np.argmax(face_normal @ FACINGS.T, axis=1)[piece_face]
+    facing = face_facing(face_normal)[piece_face]
     cell = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2
     keys, inverse = _sorted_unique(cell * 6 + facing, resolution ** 3 * 6)
 
@@ -220,16 +253,17 @@ def voxelize(scene: Scene, resolution: int = 32, normal_mode: str = "area") -> V
     cell_id = keys // 6
     vox_coords = np.stack([cell_id % resolution, (cell_id // resolution) % resolution,
                            cell_id // resolution ** 2], axis=1)
-    return VoxelGrid(lo=lo, voxel_size=h, resolution=resolution, coords=vox_coords, position=position,
+    grid = VoxelGrid(lo=lo, voxel_size=h, resolution=resolution, coords=vox_coords, position=position,
                      normal=n, area=area, albedo=albedo, emission=emission,
                      lights=_light_samples(scene, face_ids, lo, h, resolution, keys))
+    return grid, inverse, piece_face, piece_area, keys
 
 
 def _light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSamples:
     emitting = face_ids[np.any(scene.emission[face_ids] > 0, axis=1)]
     if not len(emitting):
         empty = np.zeros((0, 3))
-        return LightSamples(empty, empty, np.zeros(0), empty, np.zeros(0, np.int64))
+        return LightSamples(empty, empty, np.zeros(0), empty, np.zeros(0, np.int64), np.zeros(0, np.int64))
     # Half a voxel, unless the emitters are large (a glowing wall): then about MAX_LIGHT_SAMPLES pieces,
     # since a large emitter is no longer small next to the voxels anyway.
     total = float(scene.face_areas[emitting].sum())
@@ -249,4 +283,4 @@ def _light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSamp
         for s in np.nonzero(stray)[0]:
             same = np.nonzero(keys % 6 == key[s] % 6)[0]
             voxel[s] = same[np.argmin(np.linalg.norm(centres[same] - coords[s], axis=1))]
-    return LightSamples(centroid, normal, area, scene.emission[face], voxel)
+    return LightSamples(centroid, normal, area, scene.emission[face], voxel, face)

@@ -1,0 +1,143 @@
+"""The relight stage of the physical GI: given what the geometry stage traced (viewer.geometry), the light
+of the scene from its colours, lamps and sun, in milliseconds. It never traces a ray.
+
+With T the transport matrix (the share of voxel i's cosine-weighted gather rays that reach voxel j),
+rho the voxel albedo, E_d the irradiance straight from the lamps and the sun, and Le the emission of the
+surfaces the gather rays find (large emitters; lamps come through E_d), the reflected radiance R of the
+Lambertian voxels solves
+
+    R = rho / pi * E_d + rho * T (Le + R)                               (B = Le + R, eq. 23-30)
+
+whose Neumann series is the paper's Markov chain of bounces (eq. 30): R_0 = rho / pi * E_d + rho T Le
+is the first bounce, and each sweep R <- R_0 + rho T R adds one more. The sweeps start from the previous
+solution when there is one (an edit moves the answer a little) and stop once the largest change is below
+`tolerance` of the largest radiance; when the bounces decay geometrically (albedo near 1) the remaining
+tail of the series is added in closed form (Aitken), so a white furnace converges in tens of sweeps, not
+thousands. The probes are then one product: the SH basis of each probe direction times the radiance of
+the voxel it sees, plus the lamps' and the sun's direct light.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from viewer import sh
+from viewer.geometry import Geometry, SunPaths
+from viewer.lightpaths import LightPaths
+from viewer.probes import ProbeGrid, fill_invalid
+from viewer.scene import Scene
+
+
+@dataclass(frozen=True)
+class Materials:
+    """The relight's inputs: what colour and light edits change."""
+
+    albedo: np.ndarray
+    """(K, 3) voxel albedo."""
+    emission: np.ndarray
+    """(K, 3) emitted radiance of the voxels the gather rays find (0 for lamps)."""
+    lamp: np.ndarray
+    """(U, 3) emitted radiance of each lamp patch (viewer.geometry.LightPaths)."""
+    sun: np.ndarray
+    """(3,) the sun's irradiance (0 without a sun)."""
+
+
+def materials(scene: Scene, geometry: Geometry, lights: LightPaths) -> Materials:
+    """Per-face colours and emission -> per voxel and per lamp patch (sparse products, no voxelizing)."""
+    gathered = np.where(geometry.lamp[:, None], 0.0, scene.emission)
+    lamp = (lights.patch_of_sample @ scene.emission[lights.sample_face] if lights.count
+            else np.zeros((0, 3)))
+    sun = scene.sun.irradiance if scene.sun is not None else np.zeros(3)
+    return Materials(np.asarray(geometry.faces @ scene.albedo, np.float32),
+                     np.asarray(geometry.faces @ gathered, np.float32), np.asarray(lamp, np.float32),
+                     np.asarray(sun, np.float64))
+
+
+@dataclass(frozen=True)
+class RelightSettings:
+    tolerance: float = 1e-4
+    """Stop once a sweep changes no voxel by more than this share of the largest radiance."""
+    max_sweeps: int = 400
+    """Most sweeps (bounces) of one relight."""
+    bounces: int | None = None
+    """Sum exactly this many bounces from a cold start (1 = direct light reflected once) and do not
+    extrapolate: the paper's truncated chain. None: converge."""
+
+
+@dataclass(frozen=True)
+class Lighting:
+    reflected: np.ndarray
+    """(K, 3) float32 reflected outgoing radiance R of every voxel."""
+    direct: np.ndarray
+    """(K, 3) float32 irradiance straight from the lamps and the sun."""
+    sweeps: int
+    """Sweeps this relight took."""
+
+
+def direct_irradiance(lights: LightPaths, sun: SunPaths, mat: Materials) -> np.ndarray:
+    direct = lights.voxel_irradiance @ mat.lamp if lights.count else np.zeros((len(sun.voxel_cosine), 3), np.float32)
+    return np.asarray(direct + sun.voxel_cosine[:, None] * mat.sun[None].astype(np.float32), np.float32)
+
+
+def solve(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials,
+          settings: RelightSettings = RelightSettings(), previous: Lighting | None = None) -> Lighting:
+    """The reflected light of every voxel (see the module docstring)."""
+    t = geometry.transport
+    rho = mat.albedo
+    direct = direct_irradiance(lights, sun, mat)
+    first = rho * (direct / np.float32(np.pi) + t @ mat.emission)
+    if settings.bounces is not None:
+        reflected, bounce = first.copy(), first
+        for _ in range(1, settings.bounces):
+            bounce = rho * (t @ bounce)
+            reflected += bounce
+        return Lighting(reflected, direct, max(settings.bounces, 1))
+    warm = previous is not None and previous.reflected.shape == first.shape
+    reflected = previous.reflected.copy() if warm else first.copy()
+    change_before = ratio_before = None
+    for sweep in range(1, settings.max_sweeps + 1):
+        update = first + rho * (t @ reflected)
+        change = update - reflected
+        reflected = update
+        if np.abs(change).max(initial=0.0) <= settings.tolerance * max(np.abs(reflected).max(initial=0.0), 1e-30):
+            break
+        if change_before is not None:
+            # Aitken: once the change shrinks by the same ratio r every sweep (the dominant mode of
+            # rho T), the sweeps still to come add change * r / (1 - r)
+            ratio = np.abs(change).sum(axis=0) / np.maximum(np.abs(change_before).sum(axis=0), 1e-30)
+            if (ratio_before is not None and np.all(np.abs(ratio - ratio_before) < 1e-3 * ratio)
+                    and np.all(ratio < 0.999)):
+                reflected = reflected + change * (ratio / (1.0 - ratio)).astype(np.float32)
+                change_before = ratio_before = None
+                continue
+            ratio_before = ratio
+        change_before = change
+    return Lighting(reflected.astype(np.float32), direct, sweep)
+
+
+def probe_coefficients(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials,
+                       lighting: Lighting, include_emitted: bool = True) -> np.ndarray:
+    """(P, 9, 3) incident-radiance SH at every probe: what the probe directions see (the reflected light,
+    and with `include_emitted` the gathered emitters), plus the lamps' and the sun's direct light."""
+    radiance = lighting.reflected + mat.emission if include_emitted else lighting.reflected
+    radiance = np.vstack([radiance, np.zeros((1, 3), np.float32)])     # row K: nothing seen
+    seen = radiance[geometry.probe_hits]                                 # (P, D, 3)
+    p, d = geometry.probe_hits.shape
+    coefficients = (seen.transpose(0, 2, 1).reshape(p * 3, d) @ geometry.probe_basis).reshape(p, 3, 9)
+    coefficients = coefficients.transpose(0, 2, 1)
+    if include_emitted:
+        if lights.count:
+            coefficients = coefficients + (lights.probe_sh @ mat.lamp).reshape(p, 9, 3)
+        if sun.direction is not None and np.any(mat.sun > 0):
+            coefficients = coefficients + sun.probe_visible[:, None, None] * sh.project_delta(sun.direction, mat.sun)[None]
+    return np.asarray(coefficients, np.float32)
+
+
+def probe_grid(geometry: Geometry, coefficients: np.ndarray, dering: float = 0.0) -> ProbeGrid:
+    m = geometry.probe_resolution
+    grid = fill_invalid(coefficients.reshape(m, m, m, 9, 3), geometry.valid)
+    if dering > 0:
+        grid = sh.dering(grid, dering)
+    return ProbeGrid(lo=geometry.probe_lo, hi=geometry.probe_hi, coefficients=grid, valid=geometry.valid)
