@@ -1,4 +1,10 @@
-"""One call from a Scene to its probe grid with the numpy solver: voxelize, light, bounce, project.
+"""One call from a Scene to its probe grid with the physical solver, and the cached pipeline behind it.
+
+The `physical` kernel runs in two stages (viewer.geometry traces the scene once; viewer.relight lights
+it in milliseconds), kept by `PhysicalGI` across edits: a colour or intensity edit re-runs the relight
+only, a lamp move the lamp paths and the relight, a geometry change everything. The paper's kernel
+(eq. 25, no visibility) stays on the all-pairs transition matrix of viewer.transport, as the comparison
+it is.
 
 The settings here are the product defaults; `python -m viewer sample` and the viewer's "CPU solver" GI
 source both come through `solve`.
@@ -9,7 +15,9 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-from viewer import probes, transport, voxels
+import numpy as np
+
+from viewer import geometry, lightpaths, probes, relight, transport, voxels
 from viewer.raymarch import Tracer
 from viewer.scene import Scene
 
@@ -25,11 +33,13 @@ class GISettings:
     """Light transition kernel: `physical` or `paper` (see viewer.transport)."""
     bounces: int = 100
     """Most bounces summed (the solver stops earlier once converged)."""
-    directions: int = 512
-    """Directions gathered per probe for the reflected light. Against Mitsuba in free space 128, 256
-    and 512 give 4.2%, 4.1% and 4.1% (Cornell box, 32^3 voxels, 24^3 probes), but on surfaces the
-    renderer shows fewer directions as a cloudy texture (every probe samples the same lattice, so its
-    error is structured, not noise): 512 keeps walls and ceiling smooth."""
+    directions: int = 256
+    """Directions gathered per probe for the reflected light. Physical kernel, against Mitsuba at
+    free-space points on the eight benchmark scenes: 128, 256 and 512 give 4.2%, 4.1% and 4.1% (mean),
+    and the relight's probe projection costs in proportion."""
+    gather_rays: int = 64
+    """Physical kernel: cosine-weighted rays gathered per voxel (the transport matrix's row length).
+    32, 64 and 128 give the same error at free-space points (4.1%, the benchmark scenes)."""
     dering: float = 0.0
     """SH deringing strength (0 = off)."""
     invalid_backface_fraction: float = 0.25
@@ -61,6 +71,10 @@ def solve_parts(scene: Scene, settings: GISettings = GISettings(), parts: tuple[
     """One transport solve projected once per entry of `parts`: with the emitted light (True, what
     `sample` returns) or without it (False, the indirect light the renderer shades from the probes)."""
     timings = timings if timings is not None else Timings()
+    if settings.kernel == "physical":
+        gi = PhysicalGI(settings)
+        gi.update(scene, timings)
+        return [gi.probe_grid(include_emitted) for include_emitted in parts]
     clock = time.perf_counter()
 
     def lap(name):
@@ -85,3 +99,83 @@ def solve_parts(scene: Scene, settings: GISettings = GISettings(), parts: tuple[
         results.append(probes.project(grid, light, scene.sun, scene.bounds, probe_settings, tracer))
     lap("probes")
     return results
+
+
+def geometry_settings(settings: GISettings) -> geometry.GeometrySettings:
+    return geometry.GeometrySettings(voxels=settings.voxels, probes=settings.probes,
+                                     gather_rays=settings.gather_rays, directions=settings.directions,
+                                     normal_mode=settings.normal_mode,
+                                     invalid_backface_fraction=settings.invalid_backface_fraction)
+
+
+class PhysicalGI:
+    """The physical GI of a scene and its edits: each stage's result is kept while what it depends on
+    stays the same, and the last solution warm-starts the next relight.
+
+    `update(scene)` brings everything up to date and returns the stages it ran; `probe_grid` then
+    projects. `relighter` does the sweeps and the projection (viewer.relight on the CPU by default;
+    viewer.gpu.compute_relight runs them in compute shaders)."""
+
+    def __init__(self, settings: GISettings = GISettings(), relighter=relight):
+        self.settings = settings
+        self.relighter = relighter
+        self.geometry: geometry.Geometry | None = None
+        self.lights: lightpaths.LightPaths | None = None
+        self.sun: geometry.SunPaths | None = None
+        self.materials: relight.Materials | None = None
+        self.lighting: relight.Lighting | None = None
+
+    def update(self, scene: Scene, timings: Timings | None = None, stale_geometry: bool = False) -> list[str]:
+        """Bring the solution up to date with `scene`; returns the stages that ran ("geometry" includes
+        the voxelization, "lights" the lamp paths, "sun" the sun's, "relight" always). With
+        `stale_geometry` a changed geometry is not traced again when only the lamps moved: the
+        viewer's quick answer to a lamp drag, with the lamp's own occlusion where it was before."""
+        timings = timings if timings is not None else Timings()
+        ran = []
+        clock = time.perf_counter()
+
+        def lap(name):
+            nonlocal clock
+            now = time.perf_counter()
+            timings.stages[name] = timings.stages.get(name, 0.0) + now - clock
+            clock = now
+
+        wanted = geometry_settings(self.settings)
+        key = geometry.scene_key(scene, wanted)
+        lamp_moved_only = (stale_geometry and self.geometry is not None
+                           and self.geometry.faces.shape[1] == len(scene.faces))
+        if self.geometry is None or (self.geometry.key != key and not lamp_moved_only):
+            voxelization = voxels.voxelize_with_faces(scene, wanted.voxels, wanted.normal_mode)
+            lap("voxelize")
+            self.geometry = geometry.trace(scene, voxelization, wanted)
+            self.lights = self.sun = self.lighting = None
+            ran.append("geometry")
+        if self.lights is None or self.lights.key != lightpaths.lights_key(scene, self.geometry):
+            self.lights = lightpaths.build(scene, self.geometry)
+            ran.append("lights")
+        sun_direction = None if scene.sun is None else scene.sun.direction
+        if self.sun is None or not _same_direction(self.sun.direction, sun_direction):
+            self.sun = geometry.sun_paths(self.geometry, scene.sun)
+            ran.append("sun")
+        if ran:
+            lap("geometry")
+        self.materials = relight.materials(scene, self.geometry, self.lights)
+        self.lighting = self.relighter.solve(self.geometry, self.lights, self.sun, self.materials,
+                                             relight.RelightSettings(bounces=self._bounces()), self.lighting)
+        lap("relight")
+        return ran + ["relight"]
+
+    def _bounces(self) -> int | None:
+        """The paper's truncated chain when fewer bounces are asked for than convergence needs."""
+        return self.settings.bounces if self.settings.bounces < GISettings().bounces else None
+
+    def probe_grid(self, include_emitted: bool = True) -> probes.ProbeGrid:
+        c = self.relighter.probe_coefficients(self.geometry, self.lights, self.sun, self.materials,
+                                              self.lighting, include_emitted)
+        return relight.probe_grid(self.geometry, c, self.settings.dering)
+
+
+def _same_direction(a, b) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.allclose(a, b, rtol=0, atol=1e-12))

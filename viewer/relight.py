@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from viewer import sh
@@ -57,8 +58,10 @@ def materials(scene: Scene, geometry: Geometry, lights: LightPaths) -> Materials
 
 @dataclass(frozen=True)
 class RelightSettings:
-    tolerance: float = 1e-4
-    """Stop once a sweep changes no voxel by more than this share of the largest radiance."""
+    tolerance: float = 1e-5
+    """Stop once a sweep changes no voxel by more than this share of the largest radiance. The answer
+    is then within about tolerance / (1 - albedo) of the converged one, wherever the sweeps started:
+    an edit's warm-started relight and a cold solve of the edited scene agree to 1e-5."""
     max_sweeps: int = 400
     """Most sweeps (bounces) of one relight."""
     bounces: int | None = None
@@ -77,8 +80,9 @@ class Lighting:
 
 
 def direct_irradiance(lights: LightPaths, sun: SunPaths, mat: Materials) -> np.ndarray:
-    direct = lights.voxel_irradiance @ mat.lamp if lights.count else np.zeros((len(sun.voxel_cosine), 3), np.float32)
-    return np.asarray(direct + sun.voxel_cosine[:, None] * mat.sun[None].astype(np.float32), np.float32)
+    """(K, 3) irradiance straight from the lamps and the sun."""
+    direct = dense_times(lights.voxel_irradiance, mat.lamp)
+    return direct + sun.voxel_cosine[:, None] * mat.sun[None].astype(np.float32)
 
 
 def solve(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials,
@@ -87,18 +91,18 @@ def solve(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials,
     t = geometry.transport
     rho = mat.albedo
     direct = direct_irradiance(lights, sun, mat)
-    first = rho * (direct / np.float32(np.pi) + t @ mat.emission)
+    first = rho * (direct / np.float32(np.pi) + gather(t, mat.emission))
     if settings.bounces is not None:
         reflected, bounce = first.copy(), first
         for _ in range(1, settings.bounces):
-            bounce = rho * (t @ bounce)
+            bounce = rho * gather(t, bounce)
             reflected += bounce
         return Lighting(reflected, direct, max(settings.bounces, 1))
     warm = previous is not None and previous.reflected.shape == first.shape
     reflected = previous.reflected.copy() if warm else first.copy()
     change_before = ratio_before = None
     for sweep in range(1, settings.max_sweeps + 1):
-        update = first + rho * (t @ reflected)
+        update = first + rho * gather(t, reflected)
         change = update - reflected
         reflected = update
         if np.abs(change).max(initial=0.0) <= settings.tolerance * max(np.abs(reflected).max(initial=0.0), 1e-30):
@@ -123,13 +127,11 @@ def probe_coefficients(geometry: Geometry, lights: LightPaths, sun: SunPaths, ma
     and with `include_emitted` the gathered emitters), plus the lamps' and the sun's direct light."""
     radiance = lighting.reflected + mat.emission if include_emitted else lighting.reflected
     radiance = np.vstack([radiance, np.zeros((1, 3), np.float32)])     # row K: nothing seen
-    seen = radiance[geometry.probe_hits]                                 # (P, D, 3)
-    p, d = geometry.probe_hits.shape
-    coefficients = (seen.transpose(0, 2, 1).reshape(p * 3, d) @ geometry.probe_basis).reshape(p, 3, 9)
-    coefficients = coefficients.transpose(0, 2, 1)
+    coefficients = _project(geometry.probe_hits, geometry.probe_basis, np.asarray(radiance, np.float32))
+    p = len(coefficients)
     if include_emitted:
         if lights.count:
-            coefficients = coefficients + (lights.probe_sh @ mat.lamp).reshape(p, 9, 3)
+            coefficients = coefficients + dense_times(lights.probe_sh, mat.lamp).reshape(p, 9, 3)
         if sun.direction is not None and np.any(mat.sun > 0):
             coefficients = coefficients + sun.probe_visible[:, None, None] * sh.project_delta(sun.direction, mat.sun)[None]
     return np.asarray(coefficients, np.float32)
@@ -141,3 +143,70 @@ def probe_grid(geometry: Geometry, coefficients: np.ndarray, dering: float = 0.0
     if dering > 0:
         grid = sh.dering(grid, dering)
     return ProbeGrid(lo=geometry.probe_lo, hi=geometry.probe_hi, coefficients=grid, valid=geometry.valid)
+
+
+# ---- the two products, compiled: each row is independent, so they run on every core ----------------------
+
+def gather(matrix, values: np.ndarray) -> np.ndarray:
+    """matrix @ values for a CSR matrix and (K, 3) values: what each receiver's gather rays find."""
+    return _csr_times(matrix.indptr, matrix.indices, matrix.data, np.ascontiguousarray(values, np.float32))
+
+
+def dense_times(matrix: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(R, U) @ (U, 3) -> (R, 3) float32, without BLAS: these products are small, and OpenBLAS's
+    threads spin-wait for each other, so one takes tens of milliseconds instead of one whenever the
+    renderer keeps the other core busy (measured: viewer.neural)."""
+    return _dense_times(matrix, np.ascontiguousarray(values, np.float32))
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _dense_times(matrix, values):
+    rows, columns = matrix.shape
+    out = np.zeros((rows, 3), np.float32)
+    for i in numba.prange(rows):
+        a = b = c = 0.0
+        for j in range(columns):
+            w = matrix[i, j]
+            if w != 0.0:
+                a += w * values[j, 0]
+                b += w * values[j, 1]
+                c += w * values[j, 2]
+        out[i, 0], out[i, 1], out[i, 2] = a, b, c
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _csr_times(indptr, indices, data, values):
+    out = np.empty((len(indptr) - 1, 3), np.float32)
+    for i in numba.prange(len(indptr) - 1):
+        a = b = c = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            j, w = indices[e], data[e]
+            a += w * values[j, 0]
+            b += w * values[j, 1]
+            c += w * values[j, 2]
+        out[i, 0], out[i, 1], out[i, 2] = a, b, c
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _project(hits, basis, radiance):
+    """(P, 9, 3): sum over each probe's directions of basis x the radiance of the voxel it sees."""
+    count, directions = hits.shape
+    out = np.empty((count, 9, 3), np.float32)
+    for p in numba.prange(count):
+        acc = np.zeros((9, 3))
+        for r in range(directions):
+            j = hits[p, r]
+            l0, l1, l2 = radiance[j, 0], radiance[j, 1], radiance[j, 2]
+            if l0 == 0.0 and l1 == 0.0 and l2 == 0.0:
+                continue
+            for k in range(9):
+                b = basis[r, k]
+                acc[k, 0] += b * l0
+                acc[k, 1] += b * l1
+                acc[k, 2] += b * l2
+        for k in range(9):
+            for c in range(3):
+                out[p, k, c] = acc[k, c]
+    return out
