@@ -104,3 +104,27 @@ def test_lamp_light_is_linear_in_its_radiance():
     three = relight.direct_irradiance(lights, sun, relight.materials(scene.with_emission("lamp", 15.0), g, lights))
     assert np.allclose(three, 3 * one, rtol=1e-5)
     assert one.max() > 0
+
+
+def test_invalid_probes_are_filled_as_fill_invalid_does():
+    from viewer.probes import fill_invalid
+
+    scene = scenes.load("cornell")
+    g = geometry.build(scene, geometry.GeometrySettings(voxels=16, probes=12))
+    assert not g.valid.all()
+    rng = np.random.default_rng(0)
+    raw = rng.normal(size=(12 ** 3, 9, 3)).astype(np.float32)
+    ours = relight.probe_grid(g, raw).coefficients
+    assert np.allclose(ours, fill_invalid(raw.reshape(12, 12, 12, 9, 3), g.valid), atol=1e-5)
+
+
+def test_lamp_columns_give_the_patch_by_patch_light():
+    """Summing each lamp's patches (one column per lamp) gives the same light as patch by patch."""
+    scene = scenes.load("cornell")
+    g = geometry.build(scene, geometry.GeometrySettings(voxels=16, probes=8))
+    lights = lightpaths.build(scene, g)
+    mat = relight.materials(scene, g, lights)
+    voxel_matrix, probe_matrix, radiance = lights.columns(mat.lamp)
+    assert probe_matrix.shape[1] < lights.count
+    assert np.allclose(probe_matrix @ radiance, lights.probe_sh @ mat.lamp, rtol=1e-4, atol=1e-6)
+    assert np.allclose(voxel_matrix @ radiance, lights.voxel_irradiance @ mat.lamp, rtol=1e-4, atol=1e-6)

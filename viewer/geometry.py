@@ -24,7 +24,7 @@ import numpy as np
 from scipy import sparse
 
 from viewer import dda, sh
-from viewer.probes import ProbeGrid
+from viewer.probes import ProbeGrid, fill_waves
 from viewer.scene import DirectionalLight, Scene
 from viewer.voxels import VoxelGrid, Voxelization, voxelize_with_faces
 
@@ -123,6 +123,9 @@ class Geometry:
     """(D, 9) float32: quadrature weight x SH basis of each probe direction (SH = basis^T L[hits])."""
     valid: np.ndarray
     """(M, M, M) bool: probes not inside solids."""
+    fill_waves: np.ndarray
+    """(M^3,) int32 the wave of viewer.probes.fill_invalid in which each invalid probe gets its value
+    (0: valid; -1 everywhere: no valid probe)."""
 
     @property
     def probe_resolution(self) -> int:
@@ -159,7 +162,8 @@ def trace(scene: Scene, voxelization: Voxelization, settings: GeometrySettings) 
     basis = (weights[:, None] * sh.basis(directions)).astype(np.float32)
     valid = (backface <= settings.invalid_backface_fraction).reshape(m, m, m)
     return Geometry(scene_key(scene, settings), settings, grid, cells, faces, lamp_faces(scene), transport,
-                    np.asarray(lo, np.float64), np.asarray(hi, np.float64), points, probe_hits, basis, valid)
+                    np.asarray(lo, np.float64), np.asarray(hi, np.float64), points, probe_hits, basis, valid,
+                    fill_waves(valid).reshape(-1))
 
 
 # ---- the sun ------------------------------------------------------------------------------------------------

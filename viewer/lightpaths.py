@@ -40,10 +40,29 @@ class LightPaths:
     """(K, U) float32 irradiance at each voxel per unit radiance of each patch, visibility included."""
     probe_sh: np.ndarray
     """(P * 9, U) float32 incident-radiance SH at each probe per unit radiance of each patch."""
+    lamp_of_patch: np.ndarray
+    """(U,) the lamp (scene group) of each patch, or a number of its own for a patch that mixes lamps."""
+    lamp_voxel_irradiance: np.ndarray
+    """(K, G) voxel_irradiance summed over each lamp's patches: while every patch of a lamp has the
+    same radiance (a colour or intensity edit changes a whole group), the relight's products need one
+    column per lamp instead of one per patch."""
+    lamp_probe_sh: np.ndarray
+    """(P * 9, G) probe_sh summed likewise."""
 
     @property
     def count(self) -> int:
         return self.patch_of_sample.shape[0]
+
+    def columns(self, patch_radiance: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(voxel matrix, probe matrix, radiance per column): per lamp when every patch of each lamp
+        has the same radiance, else per patch."""
+        lamps = self.lamp_probe_sh.shape[1]
+        first = np.zeros(lamps, np.int64)
+        first[self.lamp_of_patch[::-1]] = np.arange(self.count)[::-1]
+        radiance = patch_radiance[first]
+        if np.array_equal(patch_radiance, radiance[self.lamp_of_patch]):
+            return self.lamp_voxel_irradiance, self.lamp_probe_sh, radiance
+        return self.voxel_irradiance, self.probe_sh, patch_radiance
 
 
 def lights_key(scene: Scene, geometry: Geometry) -> str:
@@ -62,6 +81,7 @@ def build(scene: Scene, geometry: Geometry) -> LightPaths:
     k, p = grid.count, len(geometry.probe_points)
     if not len(lamp):
         return LightPaths(lights_key(scene, geometry), np.zeros(0, np.int64), sparse.csr_matrix((0, 0)),
+                          np.zeros((k, 0), np.float32), np.zeros((p * 9, 0), np.float32), np.zeros(0, np.int64),
                           np.zeros((k, 0), np.float32), np.zeros((p * 9, 0), np.float32))
     position, area, source = _subdivide(scene.triangles[lamp], 0.5 * h)
     face = lamp[source]
@@ -87,8 +107,18 @@ def build(scene: Scene, geometry: Geometry) -> LightPaths:
                                            SURFACE_OFFSET * h, *patches, geometry.cells.args())
     probe_sh = _probe_sh(np.ascontiguousarray(geometry.probe_points), *patches, geometry.cells.args())
     share = sparse.diags(1.0 / patch_area) @ select
-    return LightPaths(lights_key(scene, geometry), face, share.tocsr(), voxel_irradiance,
-                      probe_sh.reshape(p * 9, u))
+    group = scene.face_group[face]
+    lowest = np.full(u, np.iinfo(np.int64).max)
+    highest = np.full(u, -1)
+    np.minimum.at(lowest, patch, group)
+    np.maximum.at(highest, patch, group)
+    _, lamp_of_patch = np.unique(np.where(lowest == highest, lowest, -1 - np.arange(u)), return_inverse=True)
+    lamp_of_patch = lamp_of_patch.ravel()
+    summed = np.zeros((u, lamp_of_patch.max() + 1), np.float32)
+    summed[np.arange(u), lamp_of_patch] = 1.0
+    probe_sh = probe_sh.reshape(p * 9, u)
+    return LightPaths(lights_key(scene, geometry), face, share.tocsr(), voxel_irradiance, probe_sh,
+                      lamp_of_patch, voxel_irradiance @ summed, probe_sh @ summed)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -168,6 +168,31 @@ def fill_invalid(coefficients: np.ndarray, valid: np.ndarray, iterations: int | 
     return c.astype(np.float32)
 
 
+def fill_waves(valid: np.ndarray) -> np.ndarray:
+    """(M, M, M) int32: the iteration of probes.fill_invalid in which each probe gets its value (0 for
+    valid probes), -1 for every probe when none is valid (fill_invalid then returns zeros)."""
+    known = np.array(valid, bool)
+    waves = np.where(known, 0, -1).astype(np.int32)
+    if not known.any():
+        return waves
+    m = known.shape[0]
+    for wave in range(1, 3 * m + 1):
+        if known.all():
+            break
+        count = np.zeros(known.shape, np.int32)
+        for axis in range(3):
+            for shift in (1, -1):
+                neighbour = np.roll(known, shift, axis=axis)
+                edge = [slice(None)] * 3
+                edge[axis] = 0 if shift == 1 else m - 1
+                neighbour[tuple(edge)] = False  # no wrap-around
+                count += neighbour
+        grow = ~known & (count > 0)
+        waves[grow] = wave
+        known |= grow
+    return waves
+
+
 # ---- projection: what each probe sees -----------------------------------------------------------------
 
 FAR_FIELD = 6.0

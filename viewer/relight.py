@@ -27,7 +27,7 @@ import numpy as np
 from viewer import sh
 from viewer.geometry import Geometry, SunPaths
 from viewer.lightpaths import LightPaths
-from viewer.probes import ProbeGrid, fill_invalid
+from viewer.probes import ProbeGrid
 from viewer.scene import Scene
 
 
@@ -81,7 +81,8 @@ class Lighting:
 
 def direct_irradiance(lights: LightPaths, sun: SunPaths, mat: Materials) -> np.ndarray:
     """(K, 3) irradiance straight from the lamps and the sun."""
-    direct = dense_times(lights.voxel_irradiance, mat.lamp)
+    voxel_matrix, _, radiance = lights.columns(mat.lamp)
+    direct = dense_times(voxel_matrix, radiance)
     return direct + sun.voxel_cosine[:, None] * mat.sun[None].astype(np.float32)
 
 
@@ -131,15 +132,22 @@ def probe_coefficients(geometry: Geometry, lights: LightPaths, sun: SunPaths, ma
     p = len(coefficients)
     if include_emitted:
         if lights.count:
-            coefficients = coefficients + dense_times(lights.probe_sh, mat.lamp).reshape(p, 9, 3)
+            _, probe_matrix, radiance = lights.columns(mat.lamp)
+            coefficients = coefficients + dense_times(probe_matrix, radiance).reshape(p, 9, 3)
         if sun.direction is not None and np.any(mat.sun > 0):
             coefficients = coefficients + sun.probe_visible[:, None, None] * sh.project_delta(sun.direction, mat.sun)[None]
     return np.asarray(coefficients, np.float32)
 
 
 def probe_grid(geometry: Geometry, coefficients: np.ndarray, dering: float = 0.0) -> ProbeGrid:
+    """The probes as a ProbeGrid, invalid ones filled from valid neighbours (viewer.probes.fill_invalid,
+    wave by wave as the geometry planned them)."""
     m = geometry.probe_resolution
-    grid = fill_invalid(coefficients.reshape(m, m, m, 9, 3), geometry.valid)
+    if geometry.fill_waves.max(initial=0) < 0:
+        grid = np.zeros((m, m, m, 9, 3), np.float32)
+    else:
+        grid = _fill(np.ascontiguousarray(coefficients, np.float32).reshape(-1, 27).copy(), geometry.fill_waves, m)
+        grid = grid.reshape(m, m, m, 9, 3)
     if dering > 0:
         grid = sh.dering(grid, dering)
     return ProbeGrid(lo=geometry.probe_lo, hi=geometry.probe_hi, coefficients=grid, valid=geometry.valid)
@@ -210,3 +218,27 @@ def _project(hits, basis, radiance):
             for c in range(3):
                 out[p, k, c] = acc[k, c]
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _fill(values, waves, m):
+    """Each probe of wave w > 0 takes the mean of its 6-neighbours of waves 0..w-1, wave after wave
+    (the same as viewer.probes.fill_invalid; probe p = (x M + y) M + z)."""
+    last = waves.max()
+    for wave in range(1, last + 1):
+        for p in range(m * m * m):
+            if waves[p] != wave:
+                continue
+            x, y, z = p // (m * m), (p // m) % m, p % m
+            total = np.zeros(values.shape[1])
+            count = 0
+            for dx, dy, dz in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)):
+                qx, qy, qz = x + dx, y + dy, z + dz
+                if qx < 0 or qy < 0 or qz < 0 or qx >= m or qy >= m or qz >= m:
+                    continue
+                q = (qx * m + qy) * m + qz
+                if 0 <= waves[q] < wave:
+                    total += values[q]
+                    count += 1
+            values[p] = total / count
+    return values
