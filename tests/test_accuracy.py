@@ -43,7 +43,7 @@ def test_free_space_points_keep_their_distance_and_stay_out_of_objects():
 def test_compute_solver_is_within_15_percent_of_mitsuba():
     """`sample --method compute`: the GPU solver's field against the ground truth (it matches the numpy
     solver to about 1e-6, tests/test_gpu_compute.py, so this guards the whole GPU path end to end)."""
-    from viewer.gpu.compute_solver import solve_probes
+    from viewer.gpu.compute_relight import solve_probes
     from viewer.gpu.context import create_context
 
     scene = scenes.load("paper-test")

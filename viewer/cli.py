@@ -158,7 +158,7 @@ def run_sample(args) -> int:
     if args.method == "solver":
         grid = gi.solve(scene, settings, include_emitted=True, timings=timings)
     elif args.method == "compute":
-        from viewer.gpu.compute_solver import solve_probes
+        from viewer.gpu.compute_relight import solve_probes
         from viewer.gpu.context import create_context
 
         ctx = create_context()

@@ -74,7 +74,7 @@ def solve_parts(scene: Scene, settings: GISettings = GISettings(), parts: tuple[
     if settings.kernel == "physical":
         gi = PhysicalGI(settings)
         gi.update(scene, timings)
-        return [gi.probe_grid(include_emitted) for include_emitted in parts]
+        return [gi.probe_grid(include_emitted, timings) for include_emitted in parts]
     clock = time.perf_counter()
 
     def lap(name):
@@ -125,54 +125,96 @@ class PhysicalGI:
         self.materials: relight.Materials | None = None
         self.lighting: relight.Lighting | None = None
 
-    def update(self, scene: Scene, timings: Timings | None = None, stale_geometry: bool = False) -> list[str]:
-        """Bring the solution up to date with `scene`; returns the stages that ran ("geometry" includes
-        the voxelization, "lights" the lamp paths, "sun" the sun's, "relight" always). With
-        `stale_geometry` a changed geometry is not traced again when only the lamps moved: the
-        viewer's quick answer to a lamp drag, with the lamp's own occlusion where it was before."""
+    def update(self, scene: Scene, timings: Timings | None = None, stale_geometry: bool = False,
+               bounces: int | None = None) -> list[str]:
+        """Bring the solution up to date with `scene`; returns the stages that ran ("geometry",
+        "lights", "sun": what was traced; "relight" always). With `stale_geometry` a changed geometry is
+        not traced again when only the lamps moved: the viewer's quick answer to a lamp drag, with the
+        lamp's own occlusion where it was before. `bounces` truncates this relight (the viewer shows
+        a new scene's first bounce before the rest)."""
         timings = timings if timings is not None else Timings()
-        ran = []
+        prepared = self.prepare(scene, stale_geometry, timings)
+        self.install(prepared)
+        self.relight(scene, timings, bounces)
+        return prepared.ran + ["relight"]
+
+    def prepare(self, scene: Scene, stale_geometry: bool = False, timings: Timings | None = None) -> "Prepared":
+        """The tracing `scene` needs (geometry, lamp paths, sun paths), without changing this object:
+        it can run on a worker thread (the traces are compiled code that releases the GIL) while the
+        render thread keeps relighting with what is installed."""
+        timings = timings if timings is not None else Timings()
         clock = time.perf_counter()
-
-        def lap(name):
-            nonlocal clock
-            now = time.perf_counter()
-            timings.stages[name] = timings.stages.get(name, 0.0) + now - clock
-            clock = now
-
         wanted = geometry_settings(self.settings)
-        key = geometry.scene_key(scene, wanted)
-        lamp_moved_only = (stale_geometry and self.geometry is not None
-                           and self.geometry.faces.shape[1] == len(scene.faces))
-        if self.geometry is None or (self.geometry.key != key and not lamp_moved_only):
+        found, lights, sun, ran = self.geometry, self.lights, self.sun, []
+        lamp_moved_only = stale_geometry and found is not None and found.faces.shape[1] == len(scene.faces)
+        if found is None or (found.key != geometry.scene_key(scene, wanted) and not lamp_moved_only):
             voxelization = voxels.voxelize_with_faces(scene, wanted.voxels, wanted.normal_mode)
-            lap("voxelize")
-            self.geometry = geometry.trace(scene, voxelization, wanted)
-            self.lights = self.sun = self.lighting = None
+            now = time.perf_counter()
+            timings.stages["voxelize"] = timings.stages.get("voxelize", 0.0) + now - clock
+            clock = now
+            found, lights, sun = geometry.trace(scene, voxelization, wanted), None, None
             ran.append("geometry")
-        if self.lights is None or self.lights.key != lightpaths.lights_key(scene, self.geometry):
-            self.lights = lightpaths.build(scene, self.geometry)
+        if lights is None or lights.key != lightpaths.lights_key(scene, found):
+            lights = lightpaths.build(scene, found)
             ran.append("lights")
-        sun_direction = None if scene.sun is None else scene.sun.direction
-        if self.sun is None or not _same_direction(self.sun.direction, sun_direction):
-            self.sun = geometry.sun_paths(self.geometry, scene.sun)
+        if sun is None or not _same_direction(sun.direction, None if scene.sun is None else scene.sun.direction):
+            sun = geometry.sun_paths(found, scene.sun)
             ran.append("sun")
         if ran:
-            lap("geometry")
+            timings.stages["geometry"] = timings.stages.get("geometry", 0.0) + time.perf_counter() - clock
+        return Prepared(found, lights, sun, ran)
+
+    def needs_tracing(self, scene: Scene, stale_geometry: bool = False) -> bool:
+        """Whether `scene` needs more than a relight (cheap to ask: it hashes the triangles)."""
+        g = self.geometry
+        if g is None or self.lights is None or self.sun is None:
+            return True
+        if g.key != geometry.scene_key(scene, geometry_settings(self.settings)) and not (
+                stale_geometry and g.faces.shape[1] == len(scene.faces)):
+            return True
+        return (self.lights.key != lightpaths.lights_key(scene, g)
+                or not _same_direction(self.sun.direction, None if scene.sun is None else scene.sun.direction))
+
+    def install(self, prepared: "Prepared") -> None:
+        if prepared.geometry is not self.geometry:
+            self.lighting = None
+        self.geometry, self.lights, self.sun = prepared.geometry, prepared.lights, prepared.sun
+
+    def relight(self, scene: Scene, timings: Timings | None = None, bounces: int | None = None) -> relight.Lighting:
+        """The relight stage: the scene's colours and lights on the installed geometry."""
+        clock = time.perf_counter()
         self.materials = relight.materials(scene, self.geometry, self.lights)
-        self.lighting = self.relighter.solve(self.geometry, self.lights, self.sun, self.materials,
-                                             relight.RelightSettings(bounces=self._bounces()), self.lighting)
-        lap("relight")
-        return ran + ["relight"]
+        settings = relight.RelightSettings(bounces=bounces or self._bounces())
+        self.lighting = self.relighter.solve(self.geometry, self.lights, self.sun, self.materials, settings,
+                                             self.lighting)
+        if timings is not None:
+            timings.stages["relight"] = timings.stages.get("relight", 0.0) + time.perf_counter() - clock
+        return self.lighting
 
     def _bounces(self) -> int | None:
         """The paper's truncated chain when fewer bounces are asked for than convergence needs."""
         return self.settings.bounces if self.settings.bounces < GISettings().bounces else None
 
-    def probe_grid(self, include_emitted: bool = True) -> probes.ProbeGrid:
+    def probe_grid(self, include_emitted: bool = True, timings: Timings | None = None) -> probes.ProbeGrid:
+        """The probes of the current solution (the projection is part of the relight: its time goes to
+        `timings`' "relight")."""
+        clock = time.perf_counter()
         c = self.relighter.probe_coefficients(self.geometry, self.lights, self.sun, self.materials,
                                               self.lighting, include_emitted)
-        return relight.probe_grid(self.geometry, c, self.settings.dering)
+        grid = relight.probe_grid(self.geometry, c, self.settings.dering)
+        if timings is not None:
+            timings.stages["relight"] = timings.stages.get("relight", 0.0) + time.perf_counter() - clock
+        return grid
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """What PhysicalGI.prepare traced."""
+
+    geometry: geometry.Geometry
+    lights: lightpaths.LightPaths
+    sun: geometry.SunPaths
+    ran: list[str]
 
 
 def _same_direction(a, b) -> bool:

@@ -86,24 +86,40 @@ def direct_irradiance(lights: LightPaths, sun: SunPaths, mat: Materials) -> np.n
     return direct + sun.voxel_cosine[:, None] * mat.sun[None].astype(np.float32)
 
 
+def first_bounce(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials) -> tuple[np.ndarray, np.ndarray]:
+    """(R_0, E_d): the direct light reflected once plus the gathered emitters' light reflected once,
+    and the direct irradiance."""
+    direct = direct_irradiance(lights, sun, mat)
+    return mat.albedo * (direct / np.float32(np.pi) + gather(geometry.transport, mat.emission)), direct
+
+
 def solve(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials,
           settings: RelightSettings = RelightSettings(), previous: Lighting | None = None) -> Lighting:
-    """The reflected light of every voxel (see the module docstring)."""
-    t = geometry.transport
-    rho = mat.albedo
-    direct = direct_irradiance(lights, sun, mat)
-    first = rho * (direct / np.float32(np.pi) + gather(t, mat.emission))
-    if settings.bounces is not None:
-        reflected, bounce = first.copy(), first
-        for _ in range(1, settings.bounces):
-            bounce = rho * gather(t, bounce)
-            reflected += bounce
-        return Lighting(reflected, direct, max(settings.bounces, 1))
-    warm = previous is not None and previous.reflected.shape == first.shape
+    """The reflected light of every voxel (see the module docstring), with sweeps on the CPU."""
+    first, direct = first_bounce(geometry, lights, sun, mat)
+    t, rho = geometry.transport, mat.albedo
+    reflected, sweeps = iterate(first, lambda r: first + rho * gather(t, r), settings, previous)
+    return Lighting(reflected, direct, sweeps)
+
+
+def iterate(first: np.ndarray, sweep, settings: RelightSettings, previous: Lighting | None = None,
+            correct=None) -> tuple[np.ndarray, int]:
+    """Sweeps R <- sweep(R) = R_0 + rho T R until the change is below the tolerance, from the previous
+    solution when its shape fits, with the Aitken tail when the change decays geometrically; with
+    `settings.bounces` exactly that many bounces from R_0 (bounces - 1 sweeps). `correct(R)` is told
+    of the starting R and of every extrapolated one (the GPU keeps its own copy). Returns (R, sweeps)."""
+    warm = settings.bounces is None and previous is not None and previous.reflected.shape == first.shape
     reflected = previous.reflected.copy() if warm else first.copy()
+    if correct is not None:
+        correct(reflected)
+    if settings.bounces is not None:
+        for _ in range(1, settings.bounces):
+            reflected = sweep(reflected)
+        return reflected, max(settings.bounces, 1)
     change_before = ratio_before = None
-    for sweep in range(1, settings.max_sweeps + 1):
-        update = first + rho * gather(t, reflected)
+    sweeps = 0
+    for sweeps in range(1, settings.max_sweeps + 1):
+        update = sweep(reflected)
         change = update - reflected
         reflected = update
         if np.abs(change).max(initial=0.0) <= settings.tolerance * max(np.abs(reflected).max(initial=0.0), 1e-30):
@@ -115,11 +131,13 @@ def solve(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials,
             if (ratio_before is not None and np.all(np.abs(ratio - ratio_before) < 1e-3 * ratio)
                     and np.all(ratio < 0.999)):
                 reflected = reflected + change * (ratio / (1.0 - ratio)).astype(np.float32)
+                if correct is not None:
+                    correct(reflected)
                 change_before = ratio_before = None
                 continue
             ratio_before = ratio
         change_before = change
-    return Lighting(reflected.astype(np.float32), direct, sweep)
+    return np.asarray(reflected, np.float32), sweeps
 
 
 def probe_coefficients(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials,
@@ -129,14 +147,21 @@ def probe_coefficients(geometry: Geometry, lights: LightPaths, sun: SunPaths, ma
     radiance = lighting.reflected + mat.emission if include_emitted else lighting.reflected
     radiance = np.vstack([radiance, np.zeros((1, 3), np.float32)])     # row K: nothing seen
     coefficients = _project(geometry.probe_hits, geometry.probe_basis, np.asarray(radiance, np.float32))
-    p = len(coefficients)
     if include_emitted:
-        if lights.count:
-            _, probe_matrix, radiance = lights.columns(mat.lamp)
-            coefficients = coefficients + dense_times(probe_matrix, radiance).reshape(p, 9, 3)
-        if sun.direction is not None and np.any(mat.sun > 0):
-            coefficients = coefficients + sun.probe_visible[:, None, None] * sh.project_delta(sun.direction, mat.sun)[None]
-    return np.asarray(coefficients, np.float32)
+        coefficients += direct_sh(geometry, lights, sun, mat)
+    return coefficients
+
+
+def direct_sh(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials) -> np.ndarray:
+    """(P, 9, 3) float32 SH of the light straight from the lamps and the sun at every probe."""
+    p = len(geometry.probe_points)
+    out = np.zeros((p, 9, 3), np.float32)
+    if lights.count:
+        _, probe_matrix, radiance = lights.columns(mat.lamp)
+        out += dense_times(probe_matrix, radiance).reshape(p, 9, 3)
+    if sun.direction is not None and np.any(mat.sun > 0):
+        out += sun.probe_visible[:, None, None] * sh.project_delta(sun.direction, mat.sun)[None].astype(np.float32)
+    return out
 
 
 def probe_grid(geometry: Geometry, coefficients: np.ndarray, dering: float = 0.0) -> ProbeGrid:

@@ -92,7 +92,7 @@ def measure(ctx, name: str, size: int, spp: int, points: int, falloffs) -> list[
     from viewer import reference
     from viewer import scene as scenes
     from viewer.gi import GISettings
-    from viewer.gpu.compute_solver import solve_probes
+    from viewer.gpu.compute_relight import solve_probes
     from viewer.gpu.offscreen import OffscreenRenderer
     from viewer.gpu.renderer import RenderSettings
 

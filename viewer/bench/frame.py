@@ -31,7 +31,7 @@ import numpy as np
 from viewer import scene as scenes
 from viewer.bench.report import replace_block
 from viewer.gi import GISettings
-from viewer.gpu.compute_solver import solve_probes
+from viewer.gpu.compute_relight import solve_probes
 from viewer.gpu.context import create_context, describe
 from viewer.gpu.offscreen import OffscreenRenderer, parse_size
 from viewer.gpu.pass_timer import PassTimer

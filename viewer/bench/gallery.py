@@ -55,7 +55,7 @@ def side_by_side(left: np.ndarray, right: np.ndarray, gap: int = 4) -> np.ndarra
 def render_ours(ctx, scene, size: int) -> tuple[dict[str, np.ndarray], np.ndarray, float]:
     """The four views (uint8, default tone mapping), the linear HDR final image and the solve seconds."""
     from viewer.gi import GISettings
-    from viewer.gpu.compute_solver import solve_probes
+    from viewer.gpu.compute_relight import solve_probes
     from viewer.gpu.offscreen import OffscreenRenderer
 
     start = time.perf_counter()

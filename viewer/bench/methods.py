@@ -133,20 +133,10 @@ def gl_renderer() -> str:
 
 def compute_method(settings: GISettings) -> Method:
     def prepare() -> Produce:
-        from viewer.gpu.compute_solver import ComputeSolver
-        from viewer.voxels import voxelize
+        from viewer.gpu.compute_relight import solve_probes
 
         ctx, programs = _gl()
-
-        def produce(scene: Scene, points) -> ProbeGrid:
-            # compute_solver.solve_probes, with the run's compiled programs kept
-            voxels = voxelize(scene, settings.voxels, settings.normal_mode)
-            solver = ComputeSolver(ctx, voxels, scene.sun, settings, scene.bounds, programs=programs)
-            try:
-                return solver.run().probe_grid(include_emitted=True)
-            finally:
-                solver.release()
-        return produce
+        return lambda scene, points: solve_probes(ctx, scene, settings, programs=programs)
 
     family = "compute" if settings.kernel == "physical" else f"compute-{settings.kernel}"
     return Method(family, _grid_label(settings), prepare, texture_bytes(settings.probes),

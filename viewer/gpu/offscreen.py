@@ -176,7 +176,7 @@ def solver_probes(args) -> ProbeSource:
         if gi == "solver":
             return solver.solve(scene, settings, include_emitted=False)
         if gi == "compute":
-            from viewer.gpu.compute_solver import solve_probes
+            from viewer.gpu.compute_relight import solve_probes
 
             return solve_probes(ctx, scene, settings, include_emitted=False)
         if gi == "neural":

@@ -79,7 +79,7 @@ def gl_context():
 
 
 def _compute(scene: Scene, settings: MethodSettings) -> ProbeGrid:
-    from viewer.gpu.compute_solver import solve_probes
+    from viewer.gpu.compute_relight import solve_probes
 
     return solve_probes(gl_context(), scene, replace(settings.gi, kernel="physical"),
                         include_emitted=settings.include_emitted)
