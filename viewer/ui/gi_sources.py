@@ -16,13 +16,13 @@ from pathlib import Path
 
 from viewer.gi import GISettings
 from viewer.probes import ProbeGrid
+from viewer.resources import MODELS
 from viewer.scene import Scene
 from viewer.ui.background import SOLVER_STAGES, BackgroundTask, SolverProcess
 
 SOURCES = ("off", "compute", "solver", "neural")
 LABELS = {"off": "Off (direct only)", "compute": "Compute (GPU)", "solver": "CPU solver (numpy)",
           "neural": "Neural (ONNX)"}
-MODELS = Path(__file__).resolve().parent.parent.parent / "models"
 
 
 def unavailable_reasons() -> dict[str, str]:
