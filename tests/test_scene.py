@@ -541,3 +541,29 @@ def test_gltf_malformed_light(tmp_path):
     document["nodes"][2]["rotation"] = "sideways"
     path.write_text(json.dumps(document))
     assert_scene_error(path)
+
+
+# ---- module layers ---------------------------------------------------------------------------------------
+
+def viewer_imports(module: str) -> set[str]:
+    """The viewer modules one module imports anywhere in its file (inside functions too)."""
+    import ast
+
+    tree = ast.parse((Path(__file__).parents[1] / "viewer" / f"{module}.py").read_text())
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            found |= {node.module} | {f"{node.module}.{a.name}" for a in node.names}
+    return {name.split(".")[1] for name in found if name.startswith("viewer.")}
+
+
+def test_scene_modules_import_downwards_only():
+    """The data type at the bottom, the file formats above it, the dispatch on top: no import circle."""
+    formats = {"obj", "loaders"}
+    assert viewer_imports("scene_types").isdisjoint(formats | {"scene"})
+    for module in formats:
+        assert "scene_types" in viewer_imports(module)
+        assert viewer_imports(module).isdisjoint((formats - {module}) | {"scene"}), module
+    assert formats | {"scene_types"} <= viewer_imports("scene")

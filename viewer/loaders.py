@@ -1,6 +1,6 @@
-"""File formats -> Scene.
+"""The file formats trimesh parses -> Scene (OBJ/MTL has its own reader, viewer.obj; viewer.scene picks
+the reader by suffix).
 
-- OBJ/MTL (`viewer.obj`, our own reader): `Kd` is the albedo, `Ke` the emitted radiance (linear RGB).
 - glTF/GLB: trimesh reads the geometry and the node graph; materials and lights come from the glTF JSON
   itself, because trimesh 5.2 rounds baseColorFactor to 8 bits and reads neither
   KHR_materials_emissive_strength nor KHR_lights_punctual. Albedo = baseColorFactor x mean linear colour
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer.scene import DirectionalLight, Scene, SceneError
+from viewer.scene_types import DirectionalLight, Scene, SceneError
 
 DEFAULT_ALBEDO = (0.7, 0.7, 0.7)
 MATERIAL_TAG = "gi-viewer-material-"
@@ -30,13 +30,8 @@ MALFORMED = (TypeError, ValueError, KeyError, IndexError, AttributeError)
 
 
 def read(path: Path) -> Scene:
-    if path.stat().st_size == 0:
-        raise SceneError(f"{path}: empty file")
+    """A glTF, GLB or PLY file (chosen by its suffix) as one Scene."""
     suffix = path.suffix.lower()
-    if suffix == ".obj":
-        from viewer import obj
-
-        return obj.read(path)
     gltf, data = _tagged_gltf(path) if suffix in (".gltf", ".glb") else ({}, path.read_bytes())
     loaded = _trimesh_scene(path, data)
     parts = [_part(path, name, vertices, faces, visual, gltf)
