@@ -543,6 +543,25 @@ def test_gltf_malformed_light(tmp_path):
     assert_scene_error(path)
 
 
+# ---- the box a scene fills --------------------------------------------------------------------------------
+
+def write_obj(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def test_a_flat_scene_gets_a_box_with_depth_centred_on_its_plane(tmp_path):
+    floor = load(write_obj(tmp_path / "floor.obj", "v -2 0.5 -1\nv 2 0.5 -1\nv 2 0.5 1\nf 1 3 2\n"))
+    lo, hi = floor.bounds
+    np.testing.assert_allclose(lo, [-2, -1.5, -1])
+    np.testing.assert_allclose(hi, [2, 2.5, 1])
+
+
+def test_coordinates_beyond_float32_are_refused(tmp_path):
+    with pytest.raises(SceneError, match="float32"):
+        load(write_obj(tmp_path / "huge.obj", "v 0 0 0\nv 3e38 0 0\nv 0 3e38 0\nf 1 2 3\n"))
+
+
 # ---- module layers ---------------------------------------------------------------------------------------
 
 def viewer_imports(module: str) -> set[str]:

@@ -51,8 +51,11 @@ def _trimesh_scene(path: Path, data: bytes):
 
     suffix = path.suffix.lower()[1:]
     try:
-        return trimesh.load_scene(io.BytesIO(data), file_type=suffix, process=False,
-                                  resolver=trimesh.resolvers.FilePathResolver(str(path)))
+        # trimesh casts whatever numbers the file holds (a NaN colour to uint8, say) and numpy warns on
+        # the user's terminal; what comes back is checked here and by Scene instead.
+        with np.errstate(all="ignore"):
+            return trimesh.load_scene(io.BytesIO(data), file_type=suffix, process=False,
+                                      resolver=trimesh.resolvers.FilePathResolver(str(path)))
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error on bad files
         raise SceneError(f"{path}: cannot parse {suffix.upper()} file ({_one_line(exc)})") from None
 
@@ -69,7 +72,10 @@ def _meshes(path: Path, loaded):
         vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
         if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(vertices):
             raise SceneError(f"{path}: face indices out of range in {geometry_name!r}")
-        vertices = vertices @ transform[:3, :3].T + transform[:3, 3]
+        if not (np.all(np.isfinite(vertices)) and np.all(np.isfinite(transform))):
+            raise SceneError(f"{path}: NaN or infinite vertex positions or node transform in {geometry_name!r}")
+        with np.errstate(over="ignore", invalid="ignore"):  # too large for float64: Scene says so in one line
+            vertices = vertices @ transform[:3, :3].T + transform[:3, 3]
         if np.linalg.det(transform[:3, :3]) < 0:  # a mirroring node swaps the front (glTF 2.0, 3.7.4)
             faces = faces[:, ::-1]
         yield str(geometry_name), vertices, faces, mesh.visual

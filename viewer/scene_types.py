@@ -18,6 +18,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 
+MAX_COORDINATE = 1e15
+"""Largest vertex coordinate: the renderer and the compute solver work in float32 (up to 3.4e38), and
+triangle areas, squares of coordinates, summed over a voxel, must stay finite there."""
+FLAT = 1e-6
+"""A bounding box thinner than this fraction of its largest extent along an axis is flat along it."""
+
+
 class SceneError(ValueError):
     """A scene file (or scene description) that cannot be used; the message is one readable line."""
 
@@ -81,13 +88,13 @@ class Scene:
             raise SceneError(f"{self.name}: the scene has no triangles")
         if not np.all(np.isfinite(v)):
             raise SceneError(f"{self.name}: vertex positions contain NaN or infinity")
+        if np.abs(v).max() > MAX_COORDINATE:
+            raise SceneError(f"{self.name}: vertex coordinates beyond +-{MAX_COORDINATE:.0e} (the GPU computes "
+                             f"areas in float32)")
         if f.min() < 0 or f.max() >= len(v):
             raise SceneError(f"{self.name}: face indices out of range (0..{len(v) - 1})")
-        # Voxelizing weighs every triangle by its area: none may overflow, and some must be non-zero.
-        with np.errstate(over="ignore", invalid="ignore"):
-            doubled_area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
-        if not np.all(np.isfinite(doubled_area)):
-            raise SceneError(f"{self.name}: vertex coordinates too large (triangle areas overflow)")
+        # Voxelizing weighs every triangle by its area: some must be non-zero.
+        doubled_area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
         if not np.any(doubled_area > 0):
             raise SceneError(f"{self.name}: every triangle is degenerate (zero area)")
         albedo = np.broadcast_to(np.asarray(self.albedo, np.float64), f.shape).copy()
@@ -129,8 +136,19 @@ class Scene:
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi): the box around the vertices the faces use, and the box every stage fills (probes,
+        the camera's framing). A flat scene (a floor alone, one lamp) has no depth along one axis: that
+        axis is widened, centred on the plane, to the box's largest extent, so that the probe grid over
+        it has a spacing on every axis and probes on both sides of the plane."""
         used = self.vertices[np.unique(self.faces)]
-        return used.min(axis=0), used.max(axis=0)
+        lo, hi = used.min(axis=0), used.max(axis=0)
+        extent = hi - lo
+        flat = extent <= FLAT * extent.max()
+        if np.any(flat):
+            half = 0.5 * (extent.max() if extent.max() > 0 else 1.0)
+            centre = 0.5 * (lo + hi)
+            lo, hi = np.where(flat, centre - half, lo), np.where(flat, centre + half, hi)
+        return lo, hi
 
     @property
     def has_emitters(self) -> bool:
