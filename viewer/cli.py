@@ -232,13 +232,13 @@ def run_bake(args) -> int:
     scene = _load_scene(args)
     timings = Timings({"load": time.perf_counter() - start})
     grid = baked.bake(scene, args.scene, settings, timings)
+    texels = baked.texture_volumes(grid.indirect) if args.dds else None
+    if texels is not None and args.dds_precision == "16":
+        if np.abs(texels).max() > float(np.finfo(np.float16).max):
+            raise InputError("--dds-precision 16: probe values beyond half-float range; use 32")
+        texels = texels.astype(np.float16)
     baked.write_npz(grid, args.out)
-    if args.dds:
-        texels = baked.texture_volumes(grid.indirect)
-        if args.dds_precision == "16":
-            if np.abs(texels).max() > float(np.finfo(np.float16).max):
-                raise InputError("--dds-precision 16: probe values beyond half-float range; use 32")
-            texels = texels.astype(np.float16)
+    if texels is not None:
         dds.write_volume(args.dds, texels)
     print(f"bake: {args.out}{' and ' + args.dds if args.dds else ''} ({grid.radiance.resolution}^3 probes); "
           f"{timings}", file=sys.stderr)
