@@ -43,6 +43,21 @@ def test_a_scene_without_emitters_gives_a_black_finite_field(tmp_path, points):
     assert np.all(np.isfinite(sh)) and np.all(sh == 0)
 
 
+def test_a_flat_scene_samples_with_only_the_timing_line_on_stderr(tmp_path, points):
+    """A lamp alone has no depth: its probe box gets some (Scene.bounds), where a zero probe spacing used
+    to divide by zero and print numpy's warning with a stray source line, then crash."""
+    write(tmp_path / "lamp.mtl", "newmtl lamp\nKe 4 4 4\n")
+    scene = write(tmp_path / "lamp.obj", "mtllib lamp.mtl\nusemtl lamp\n"
+                  "v -1 1 -1\nv 1 1 -1\nv 1 1 1\nv -1 1 1\nf 1 2 3\nf 1 3 4\n")  # facing down
+    out = tmp_path / "sh.npy"
+    result = run("sample", scene, "--points", points, "--out", out, "--voxels", "8", "--probes", "4",
+                 "--directions", "64")
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.count("\n") == 1 and result.stderr.startswith("sample solver:"), result.stderr
+    sh = np.load(out)
+    assert np.all(np.isfinite(sh)) and np.all(sh[:, 0, :] > 0)  # every point is below the lamp
+
+
 def write(path: Path, content) -> Path:
     if isinstance(content, bytes):
         path.write_bytes(content)

@@ -541,3 +541,48 @@ def test_gltf_malformed_light(tmp_path):
     document["nodes"][2]["rotation"] = "sideways"
     path.write_text(json.dumps(document))
     assert_scene_error(path)
+
+
+# ---- the box a scene fills --------------------------------------------------------------------------------
+
+def write_obj(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def test_a_flat_scene_gets_a_box_with_depth_centred_on_its_plane(tmp_path):
+    floor = load(write_obj(tmp_path / "floor.obj", "v -2 0.5 -1\nv 2 0.5 -1\nv 2 0.5 1\nf 1 3 2\n"))
+    lo, hi = floor.bounds
+    np.testing.assert_allclose(lo, [-2, -1.5, -1])
+    np.testing.assert_allclose(hi, [2, 2.5, 1])
+
+
+def test_coordinates_beyond_float32_are_refused(tmp_path):
+    with pytest.raises(SceneError, match="float32"):
+        load(write_obj(tmp_path / "huge.obj", "v 0 0 0\nv 3e38 0 0\nv 0 3e38 0\nf 1 2 3\n"))
+
+
+# ---- module layers ---------------------------------------------------------------------------------------
+
+def viewer_imports(module: str) -> set[str]:
+    """The viewer modules one module imports anywhere in its file (inside functions too)."""
+    import ast
+
+    tree = ast.parse((Path(__file__).parents[1] / "viewer" / f"{module}.py").read_text())
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            found |= {node.module} | {f"{node.module}.{a.name}" for a in node.names}
+    return {name.split(".")[1] for name in found if name.startswith("viewer.")}
+
+
+def test_scene_modules_import_downwards_only():
+    """The data type at the bottom, the file formats above it, the dispatch on top: no import circle."""
+    formats = {"obj", "loaders"}
+    assert viewer_imports("scene_types").isdisjoint(formats | {"scene"})
+    for module in formats:
+        assert "scene_types" in viewer_imports(module)
+        assert viewer_imports(module).isdisjoint((formats - {module}) | {"scene"}), module
+    assert formats | {"scene_types"} <= viewer_imports("scene")

@@ -92,16 +92,23 @@ def run(args) -> int:
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         log(f"no display found (DISPLAY and WAYLAND_DISPLAY are unset); rendering {options.scene} headless")
         return render_headless(options)
+    from viewer import baked as baked_files
     from viewer.scene import load
 
-    scene = load(options.scene)   # a bad scene fails here: one line and exit status 2 (viewer.cli)
+    baked = None   # a baked grid (`gi-viewer FILE.npz`): its scene, lit by its probes
+    if baked_files.is_baked_file(options.scene):
+        baked = baked_files.read_npz(options.scene)
+        scene = baked_files.load_scene(baked, options.scene)
+        log(f"showing the probes baked in {options.scene} on {baked_files.scene_source(baked, options.scene)}")
+    else:
+        scene = load(options.scene)   # a bad scene fails here: one line and exit status 2 (viewer.cli)
     try:
         window = open_window(options)
     except Exception as exc:  # no X server behind DISPLAY, no GL 4.3, glfw missing ...
         log(f"cannot open a window ({type(exc).__name__}: {exc}); rendering {options.scene} headless")
         return render_headless(options)
     ViewerApp.argv = options
-    app = ViewerApp(ctx=window.ctx, wnd=window, timer=mglw.timers.clock.Timer(), scene=scene)
+    app = ViewerApp(ctx=window.ctx, wnd=window, timer=mglw.timers.clock.Timer(), scene=scene, baked=baked)
     window._config = weakref.ref(app)  # as moderngl-window's create_window_config_instance does
     try:
         mglw.run_window_config_instance(app)
@@ -177,7 +184,7 @@ class ViewerApp(mglw.WindowConfig):
     def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
         add_arguments(parser)
 
-    def __init__(self, scene=None, **kwargs):
+    def __init__(self, scene=None, baked=None, **kwargs):
         super().__init__(**kwargs)
         import glfw
         from imgui_bundle import imgui
@@ -214,13 +221,15 @@ class ViewerApp(mglw.WindowConfig):
         self.renderer = Renderer(self.ctx, settings, options.shader_dir or SHADERS)
         self.viewport = Viewport(self.ctx, self.renderer, self.render_scale, self.preview_scale, samples=self.msaa)
         self.times = FrameTimes(self.ctx)
-        gi = GIController(self.ctx, options.gi, GISettings(voxels=options.voxels, probes=options.probes,
-                                                           kernel=options.kernel, bounces=options.bounces,
-                                                           directions=options.directions))
+        gi = GIController(self.ctx, "baked" if baked else options.gi,
+                          GISettings(voxels=options.voxels, probes=options.probes, kernel=options.kernel,
+                                     bounces=options.bounces, directions=options.directions),
+                          baked=baked.indirect if baked else None)
         # Frame-time summaries cover the frames since the indirect light last settled.
-        self.session = Session(self.renderer, gi, scene or load(options.scene), options.scene, log=log,
+        self.session = Session(self.renderer, gi, scene or load(options.scene),
+                               baked.scene if baked else options.scene, log=log,
                                on_gi_ready=self.times.restart_summary)
-        if options.gi != gi.source:
+        if not baked and options.gi != gi.source:
             note = gi.fallback or gi.unavailable.get(options.gi, "")
             log(f"--gi {options.gi} is not available ({note}); GI source: {gi.source}")
             self.session.messages.append(Message(f"GI source {options.gi!r} not available: {note}", error=True))
@@ -500,6 +509,7 @@ class ViewerApp(mglw.WindowConfig):
 def main(argv: list[str] | None = None) -> int:
     """`python -m viewer.app [SCENE] [flags]`: the viewer with all of its flags (`python -m viewer view`
     passes only the scene until viewer/cli.py adds them). Exit status as in viewer.cli."""
+    from viewer.baked import BakedError
     from viewer.cli import InputError
     from viewer.scene import SceneError
 
@@ -509,7 +519,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     try:
         return run(args)
-    except (SceneError, InputError) as exc:
+    except (SceneError, InputError, BakedError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
 

@@ -1,4 +1,4 @@
-"""The command line: `python -m viewer [capture|sample|bench] ...` (see ../shared/DESIGN.md).
+"""The command line: `python -m viewer [capture|sample|bake|bench] ...` (see ../shared/DESIGN.md).
 
 Exit status 0 on success, 2 for bad input (one line on stderr, no traceback), 1 for an internal error.
 """
@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer.baked import BakedError
 from viewer.gi import GISettings, Timings
 from viewer.scene import SceneError
 
@@ -91,6 +92,14 @@ def build_parser() -> argparse.ArgumentParser:
     capture.add_argument("--exposure", type=float, default=0.0, help="exposure in EV")
     _gi_arguments(capture)
 
+    bake = sub.add_parser("bake", help="solve once and write the converged probe grid for other tools")
+    bake.add_argument("scene", help="a built-in scene name or a scene file (.obj .glb .gltf .ply)")
+    bake.add_argument("--out", required=True, help="the probe grid, .npz (keys: docs/BAKED.md)")
+    bake.add_argument("--dds", help="also write the indirect light as a DDS volume texture (docs/BAKED.md)")
+    bake.add_argument("--dds-precision", dest="dds_precision", choices=("32", "16"), default="32",
+                      help="bits per channel of the DDS texels (RGBA32F or RGBA16F)")
+    _gi_arguments(bake)
+
     bench = sub.add_parser("bench", help="every GI method's time, memory and error against Mitsuba: CSV, charts")
     from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
 
@@ -100,13 +109,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] not in ("view", "sample", "capture", "bench", "-h", "--help"):
+    if not argv or argv[0] not in ("view", "sample", "capture", "bake", "bench", "-h", "--help"):
         argv = ["view", *argv]
     try:
         args = build_parser().parse_args(argv)
         return {"view": run_view, "sample": run_sample, "capture": run_capture,
-                "bench": run_bench}[args.command](args)
-    except (InputError, SceneError) as exc:
+                "bench": run_bench, "bake": run_bake}[args.command](args)
+    except (InputError, SceneError, BakedError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
@@ -189,8 +198,9 @@ def neural_field(args):
 def run_capture(args) -> int:
     from viewer.gpu import offscreen
 
+    probe_source = baked_probe_source(args)
     try:
-        return offscreen.run_capture(args)
+        return offscreen.run_capture(args, probe_source)
     except offscreen.CaptureError as exc:
         raise InputError(str(exc)) from None
 
@@ -205,3 +215,50 @@ def run_view(args) -> int:
     from viewer import app
 
     return app.run(args)
+
+
+def run_bake(args) -> int:
+    """`bake SCENE --out FILE.npz [--dds FILE.dds]`: the numpy solver's converged grid, for other tools."""
+    from viewer import baked, dds
+
+    settings = gi_settings(args)
+    outputs = [(args.out, ".npz")] + ([(args.dds, ".dds")] if args.dds else [])
+    for name, suffix in outputs:
+        if Path(name).suffix.lower() != suffix:
+            raise InputError(f"{name}: expected a {suffix} file")
+        if not Path(name).resolve().parent.is_dir():
+            raise InputError(f"{name}: folder {Path(name).parent} does not exist")
+    start = time.perf_counter()
+    scene = _load_scene(args)
+    timings = Timings({"load": time.perf_counter() - start})
+    grid = baked.bake(scene, args.scene, settings, timings)
+    texels = baked.texture_volumes(grid.indirect) if args.dds else None
+    if texels is not None and args.dds_precision == "16":
+        if np.abs(texels).max() > float(np.finfo(np.float16).max):
+            raise InputError("--dds-precision 16: probe values beyond half-float range; use 32")
+        texels = texels.astype(np.float16)
+    baked.write_npz(grid, args.out)
+    if texels is not None:
+        dds.write_volume(args.dds, texels)
+    print(f"bake: {args.out}{' and ' + args.dds if args.dds else ''} ({grid.radiance.resolution}^3 probes); "
+          f"{timings}", file=sys.stderr)
+    return 0
+
+
+def baked_probe_source(args):
+    """For `capture FILE.npz` (and the headless `gi-viewer FILE.npz`): point args at the scene the grid was
+    baked from, with its sun, and return a probe source that hands over the baked indirect light whatever
+    `--gi` names (`--gi off` still shows direct light only). None when args.scene is not a baked file."""
+    from viewer import baked
+
+    if not baked.is_baked_file(args.scene):
+        return None
+    if getattr(args, "sun", None):
+        raise InputError("--sun: a baked grid keeps the sun it was baked with")
+    grid, path = baked.read_npz(args.scene), args.scene
+    args.scene, args.sun = baked.scene_source(grid, path), grid.sun
+
+    def probe_source(scene, gi, ctx):
+        print(f"capture: the probes baked in {path} stand in for --gi {gi}", file=sys.stderr)
+        return grid.indirect
+    return probe_source

@@ -1,6 +1,6 @@
-"""File formats -> Scene.
+"""The file formats trimesh parses -> Scene (OBJ/MTL has its own reader, viewer.obj; viewer.scene picks
+the reader by suffix).
 
-- OBJ/MTL (`viewer.obj`, our own reader): `Kd` is the albedo, `Ke` the emitted radiance (linear RGB).
 - glTF/GLB: trimesh reads the geometry and the node graph; materials and lights come from the glTF JSON
   itself, because trimesh 5.2 rounds baseColorFactor to 8 bits and reads neither
   KHR_materials_emissive_strength nor KHR_lights_punctual. Albedo = baseColorFactor x mean linear colour
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer.scene import DirectionalLight, Scene, SceneError
+from viewer.scene_types import DirectionalLight, Scene, SceneError
 
 DEFAULT_ALBEDO = (0.7, 0.7, 0.7)
 MATERIAL_TAG = "gi-viewer-material-"
@@ -30,13 +30,8 @@ MALFORMED = (TypeError, ValueError, KeyError, IndexError, AttributeError)
 
 
 def read(path: Path) -> Scene:
-    if path.stat().st_size == 0:
-        raise SceneError(f"{path}: empty file")
+    """A glTF, GLB or PLY file (chosen by its suffix) as one Scene."""
     suffix = path.suffix.lower()
-    if suffix == ".obj":
-        from viewer import obj
-
-        return obj.read(path)
     gltf, data = _tagged_gltf(path) if suffix in (".gltf", ".glb") else ({}, path.read_bytes())
     loaded = _trimesh_scene(path, data)
     parts = [_part(path, name, vertices, faces, visual, gltf)
@@ -56,8 +51,11 @@ def _trimesh_scene(path: Path, data: bytes):
 
     suffix = path.suffix.lower()[1:]
     try:
-        return trimesh.load_scene(io.BytesIO(data), file_type=suffix, process=False,
-                                  resolver=trimesh.resolvers.FilePathResolver(str(path)))
+        # trimesh casts whatever numbers the file holds (a NaN colour to uint8, say) and numpy warns on
+        # the user's terminal; what comes back is checked here and by Scene instead.
+        with np.errstate(all="ignore"):
+            return trimesh.load_scene(io.BytesIO(data), file_type=suffix, process=False,
+                                      resolver=trimesh.resolvers.FilePathResolver(str(path)))
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error on bad files
         raise SceneError(f"{path}: cannot parse {suffix.upper()} file ({_one_line(exc)})") from None
 
@@ -74,7 +72,10 @@ def _meshes(path: Path, loaded):
         vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
         if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(vertices):
             raise SceneError(f"{path}: face indices out of range in {geometry_name!r}")
-        vertices = vertices @ transform[:3, :3].T + transform[:3, 3]
+        if not (np.all(np.isfinite(vertices)) and np.all(np.isfinite(transform))):
+            raise SceneError(f"{path}: NaN or infinite vertex positions or node transform in {geometry_name!r}")
+        with np.errstate(over="ignore", invalid="ignore"):  # too large for float64: Scene says so in one line
+            vertices = vertices @ transform[:3, :3].T + transform[:3, 3]
         if np.linalg.det(transform[:3, :3]) < 0:  # a mirroring node swaps the front (glTF 2.0, 3.7.4)
             faces = faces[:, ::-1]
         yield str(geometry_name), vertices, faces, mesh.visual

@@ -19,11 +19,10 @@ import numpy as np
 
 from viewer import encoding
 from viewer.probes import ProbeGrid
+from viewer.resources import DEFAULT_MODEL
 from viewer.scene import Scene
 from viewer.voxels import VoxelGrid, voxelize
 
-ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_MODEL = ROOT / "models" / "probenet.onnx"
 OUTPUTS = 19
 """Per probe and colour pass: 9 SH of all the light, 9 of the reflected light, 1 validity logit."""
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer.scene import Scene, SceneError
+from viewer.scene_types import Scene, SceneError
 
 DEFAULT_ALBEDO = (0.7, 0.7, 0.7)
 

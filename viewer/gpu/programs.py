@@ -22,7 +22,8 @@ from pathlib import Path
 
 import moderngl
 
-SHADERS = Path(__file__).resolve().parent.parent.parent / "shaders"
+from viewer.resources import SHADERS
+
 GLSL_VERSION = "#version 430 core"
 STAGES = ("VERTEX_SHADER", "GEOMETRY_SHADER", "FRAGMENT_SHADER", "COMPUTE_SHADER")
 _KEYWORDS = {"VERTEX_SHADER": "vertex_shader", "GEOMETRY_SHADER": "geometry_shader",

@@ -16,13 +16,14 @@ from pathlib import Path
 
 from viewer.gi import GISettings
 from viewer.probes import ProbeGrid
+from viewer.resources import MODELS
 from viewer.scene import Scene
 from viewer.ui.background import SOLVER_STAGES, BackgroundTask, SolverProcess
 
-SOURCES = ("off", "compute", "solver", "neural")
+SOURCES = ("off", "compute", "solver", "neural", "baked")
 LABELS = {"off": "Off (direct only)", "compute": "Compute (GPU)", "solver": "CPU solver (numpy)",
-          "neural": "Neural (ONNX)"}
-MODELS = Path(__file__).resolve().parent.parent.parent / "models"
+          "neural": "Neural (ONNX)", "baked": "Baked (.npz file)"}
+NO_BAKED_GRID = "No baked grid: open one with `gi-viewer FILE.npz` (write it with `gi-viewer bake`)."
 
 
 def unavailable_reasons() -> dict[str, str]:
@@ -33,6 +34,7 @@ def unavailable_reasons() -> dict[str, str]:
                               "this build yet.")
     if not (MODELS / "probenet.onnx").is_file():
         reasons["neural"] = "No trained model: the neural field needs models/probenet.onnx (docs/TRAINING.md)."
+    reasons["baked"] = NO_BAKED_GRID
     return reasons
 
 
@@ -191,10 +193,15 @@ without a solver step (docs/PERFORMANCE.md, `python -m viewer.bench.frame --prog
 
 class GIController:
     def __init__(self, ctx, source: str = "solver", settings: GISettings | None = None,
-                 compute_budget_ms: float = COMPUTE_BUDGET_MS, neural_model: Path | None = None):
+                 compute_budget_ms: float = COMPUTE_BUDGET_MS, neural_model: Path | None = None,
+                 baked: ProbeGrid | None = None):
         self.ctx = ctx
         self.neural_model = neural_model
+        self.baked = baked
+        """Probes read from a baked file, for the scene opened with them (a new scene drops them)."""
         self.unavailable = unavailable_reasons()
+        if baked is not None:
+            del self.unavailable["baked"]
         self.source = source if source not in self.unavailable else "off"
         self.settings = settings or GISettings()
         self.compute_budget_ms = compute_budget_ms
@@ -214,6 +221,10 @@ class GIController:
     # ---- inputs -----------------------------------------------------------------------------------------
     def set_scene(self, scene: Scene, version: int, new_scene: bool = False) -> None:
         """The scene changed (an edit, or a new file: then the old probes no longer fit and go at once)."""
+        if new_scene and self.scene is not None and self.baked is not None:  # the baked probes fit no other
+            self.baked, self.unavailable["baked"] = None, NO_BAKED_GRID
+            if self.source == "baked":
+                self.source = "compute" if "compute" not in self.unavailable else "off"
         self.scene, self._scene_version = scene, version
         if new_scene:
             self._outgoing.append(None)
@@ -247,6 +258,8 @@ class GIController:
                 self._cpu = self._cpu or SolverProcess()
                 self._cpu.request(self.scene, self.settings)
                 self._cpu_requested = key
+        elif self.source == "baked":
+            self._outgoing.append(self.baked)
         elif self.source == "neural":
             if self._neural is None:
                 from viewer.neural import ModelError
@@ -321,6 +334,8 @@ class GIController:
             if self._compute.error:
                 return "Compute solver failed.", None, self._compute.error
             return self._compute.status(), None, self.fallback
+        if self.source == "baked":
+            return "Baked probes, as read from the file (edits do not relight them).", None, None
         if self.source == "neural" and self._neural is not None:
             if self._neural.error:
                 return "Neural source failed.", None, self._neural.error
