@@ -16,8 +16,9 @@ import time
 import traceback
 from typing import Any, Callable
 
-SOLVER_STAGES = ("voxelize", "transition", "bounces", "probes")
-"""The stages of viewer.gi.solve, in order (its Timings keys)."""
+SOLVER_STAGES = ("voxelize", "geometry", "relight")
+"""The stages of the physical kernel's solve (viewer.gi.PhysicalGI), in order (its Timings keys); an edit
+that needs no tracing runs only the last."""
 
 
 class BackgroundTask:
@@ -64,8 +65,11 @@ def _solver_worker(connection) -> None:
 
     class ReportingStages(dict):
         def __setitem__(self, name, seconds):
+            if name not in self:
+                connection.send(("stage", name))
             super().__setitem__(name, seconds)
-            connection.send(("stage", name))
+
+    solvers: dict = {}   # settings -> gi.PhysicalGI: an edit re-runs only what it changes
 
     connection.send(("ready",))
     while True:
@@ -75,7 +79,14 @@ def _solver_worker(connection) -> None:
         generation, scene, settings = job
         timings = gi.Timings(ReportingStages())
         try:
-            grid = gi.solve(scene, settings, include_emitted=False, timings=timings)
+            if settings.kernel == "physical":
+                solver = solvers.get(settings) or gi.PhysicalGI(settings)
+                solvers.clear()
+                solvers[settings] = solver
+                solver.update(scene, timings)
+                grid = solver.probe_grid(include_emitted=False, timings=timings)
+            else:
+                grid = gi.solve(scene, settings, include_emitted=False, timings=timings)
             connection.send(("done", generation, grid, dict(timings.stages)))
         except Exception as exc:
             connection.send(("error", generation, f"{type(exc).__name__}: {exc}"))

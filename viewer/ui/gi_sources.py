@@ -114,6 +114,11 @@ class ComputeSource:
             self.solver.restart(voxels, scene.sun, settings, bounds=scene.bounds)
         self._unpublished = False
 
+    def release(self) -> None:
+        if self.solver is not None:
+            self.solver.release()
+            self.solver = None
+
     def status(self) -> str:
         if self._waiting:
             return "Compute solver: starting..."
@@ -274,7 +279,15 @@ class GIController:
             self.fallback = None
             self._neural.restart(self.scene, self.settings)
         if self.source == "compute":
-            self._compute = self._compute or ComputeSource(self.ctx)
+            # the physical kernel relights (viewer.ui.relight_source); the paper's kernel keeps the
+            # all-pairs solver
+            from viewer.ui.relight_source import RelightSource
+
+            kind = RelightSource if self.settings.kernel == "physical" else ComputeSource
+            if not isinstance(self._compute, kind):
+                if self._compute is not None:
+                    self._compute.release()
+                self._compute = kind(self.ctx)
             self._compute.restart(self.scene, self.settings)
 
     # ---- per frame ----------------------------------------------------------------------------------------
@@ -345,3 +358,5 @@ class GIController:
     def close(self) -> None:
         if self._cpu is not None:
             self._cpu.close()
+        if self._compute is not None:
+            self._compute.release()
