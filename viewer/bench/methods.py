@@ -143,6 +143,61 @@ def compute_method(settings: GISettings) -> Method:
                   about=f"compute-shader solver, {settings.kernel} kernel, blocking run to convergence")
 
 
+class _Edit:
+    """An edit's time to converged probes: untimed (`before`), the scene is edited away and relit; timed,
+    the edit comes back to the scene itself (so the error is the scene's own) and the probes are
+    projected, as the viewer does after the edit. `kind`: `colour` (the largest group's albedo: the
+    relight only) or `lamp` (the brightest emitter moved by a tenth of the scene: new lamp paths on the
+    unchanged geometry, then the relight, as the viewer answers a lamp drag)."""
+
+    def __init__(self, settings: GISettings, kind: str, relighter_factory=None):
+        self.settings, self.kind, self.relighter_factory = settings, kind, relighter_factory
+        self.solvers: dict = {}
+
+    def _edited(self, scene: Scene) -> Scene:
+        if self.kind == "colour":
+            group = scene.groups[int(np.argmax(np.bincount(scene.face_group, scene.face_areas, len(scene.groups))))]
+            return scene.with_albedo(group, scene.group_albedo(group)[::-1] * 0.5)
+        from viewer.ui.scene_edits import emitter_group
+
+        group = emitter_group(scene)
+        if group is None:
+            return scene.with_sun(None)
+        lo, hi = scene.bounds
+        move = np.eye(4)
+        move[0, 3] = 0.1 * float(hi[0] - lo[0])
+        return scene.transformed_group(group, move)
+
+    def before(self, scene: Scene) -> None:
+        from viewer.gi import PhysicalGI
+
+        if scene.name not in self.solvers:
+            relighter = self.relighter_factory() if self.relighter_factory else None
+            solver = PhysicalGI(self.settings, relighter) if relighter else PhysicalGI(self.settings)
+            solver.update(scene)
+            self.solvers[scene.name] = solver
+        self.solvers[scene.name].update(self._edited(scene), stale_geometry=True)
+
+    def __call__(self, scene: Scene, points) -> ProbeGrid:
+        solver = self.solvers[scene.name]
+        solver.update(scene, stale_geometry=True)
+        return solver.probe_grid(include_emitted=True)
+
+
+def edit_method(settings: GISettings, kind: str, backend: str) -> Method:
+    def prepare() -> Produce:
+        if backend == "numpy":
+            return _Edit(settings, kind)
+        from viewer.gpu.compute_relight import ComputeRelight
+
+        ctx, programs = _gl()
+        return _Edit(settings, kind, lambda: ComputeRelight(ctx, programs))
+
+    what = {"colour": "a colour edit (the relight)", "lamp": "a lamp move (lamp paths + relight)"}[kind]
+    return Method(f"{backend}-edit", f"{_grid_label(settings)} {kind}", prepare, texture_bytes(settings.probes),
+                  about=f"{backend} solver, time from {what} to converged probes")
+
+
 # ---- baselines and Mitsuba -------------------------------------------------------------------------
 
 AMBIENT_POINTS = 64
@@ -263,7 +318,8 @@ def registry(quick: bool = False) -> dict[str, Method]:
     if quick:
         small = GISettings(voxels=16, probes=8)
         methods = [ambient_method(), *(mitsuba_points_method(d) for d in (16, 64, 256)),
-                   numpy_method(GISettings(voxels=8, probes=8)), compute_method(small)]
+                   numpy_method(GISettings(voxels=8, probes=8)), compute_method(small),
+                   edit_method(small, "colour", "compute"), mitsuba_probes_method(8, 64)]
     else:
         # The numpy solver at 64^3 voxels would hold a 27730^2 transition matrix (6 GB) and take hours:
         # 64^3 runs on the compute solver only. At 32^3 its bounces cost little beside the transition
@@ -273,6 +329,8 @@ def registry(quick: bool = False) -> dict[str, Method]:
         methods += [compute_method(replace(DEFAULT, kernel="paper"))]
         methods += [numpy_method(replace(DEFAULT, voxels=16)), numpy_method(DEFAULT),
                     numpy_method(replace(DEFAULT, voxels=16, kernel="paper"))]
+        methods += [edit_method(DEFAULT, kind, backend) for backend in ("compute", "numpy")
+                    for kind in ("colour", "lamp")]
         methods += [mitsuba_points_method(d) for d in (16, 64, 256, 1024)]
         methods += [mitsuba_probes_method(m, d) for m, d in ((8, 64), (16, 64), (16, 256), (24, 256), (32, 256))]
     for provider in PROVIDERS:

@@ -26,6 +26,7 @@ STYLES = {
     "ambient": ("o", "#7f7f7f"), "compute": ("s", "#1f77b4"), "compute-paper": ("s", "#9ecae1"),
     "numpy": ("D", "#2ca02c"), "numpy-paper": ("D", "#98df8a"), "neural": ("^", "#d62728"),
     "paper-family": ("v", "#ff9896"), "mitsuba-probes": ("P", "#9467bd"), "mitsuba": ("x", "#8c564b"),
+    "compute-edit": ("*", "#08306b"), "numpy-edit": ("*", "#00441b"),
 }
 """Marker and colour per method family; a family not listed here gets the next of EXTRA_STYLES."""
 EXTRA_STYLES = [("*", "#e377c2"), ("h", "#bcbd22"), ("p", "#17becf")]
@@ -33,6 +34,10 @@ SAME = 0.01
 """Errors within 1% of each other count as the same accuracy when saying what beats a default."""
 VIEWER_FAMILIES = ("compute", "compute-paper", "numpy", "numpy-paper", "neural")
 """The GI sources the viewer itself offers (its panel and `sample --method`)."""
+EDIT_FAMILIES = ("compute-edit", "numpy-edit")
+"""Time from an edit to converged probes on a scene whose geometry is already traced: drawn on the
+charts, kept off the fronts (they are not a way to light a scene from nothing), and set against the
+Mitsuba bake of the same error in their own table."""
 DEFAULTS = {"compute": "N32 M24 conv", "numpy": "N32 M24 conv", "neural": "models/probenet.onnx"}
 """The product's GI sources at their shipped defaults (viewer.gi.GISettings, the shipped model)."""
 
@@ -107,7 +112,8 @@ def front(entries: list[Entry], cost=lambda e: e.ms, families: tuple[str, ...] |
     """The field entries (of `families`, or all) that no other such entry beats in both cost and error,
     cheapest first."""
     best, out = np.inf, []
-    chosen = (e for e in entries if e.field and (families is None or e.family in families))
+    chosen = (e for e in entries if e.field and (e.family in families if families is not None
+                                                  else e.family not in EDIT_FAMILIES))
     for e in sorted(chosen, key=lambda e: (cost(e), e.error)):
         if e.error < best:
             out.append(e)
@@ -118,7 +124,7 @@ def front(entries: list[Entry], cost=lambda e: e.ms, families: tuple[str, ...] |
 def dominated_by(entry: Entry, entries: list[Entry], families: tuple[str, ...] | None = None) -> Entry | None:
     """The fastest field entry (of `families`, or any) faster and as accurate (within SAME); None: none is."""
     better = [e for e in entries if e.field and e is not entry and e.ms < entry.ms
-              and e.error <= entry.error * (1.0 + SAME)
+              and e.error <= entry.error * (1.0 + SAME) and e.family not in EDIT_FAMILIES
               and (families is None or e.family in families)]
     return min(better, key=lambda e: e.ms) if better else None
 
@@ -323,6 +329,38 @@ def machine(rows: list[dict]) -> str:
 TITLE = "# Benchmark: every GI method, time and memory against error"
 
 
+def against_mitsuba(rows: list[dict], scenes: list[str]) -> str:
+    """Markdown: per scene, the physical GI's time from a new scene and from an edit to converged probes,
+    next to the Mitsuba bake of the probes whose error is equal or larger (the slowest such bake: the
+    one closest to our accuracy), measured in the same run, and how many times faster ours is."""
+    ours = [("compute", DEFAULTS["compute"], "new scene")]
+    ours += [(f, f"{DEFAULTS['compute']} {kind}", kind + " edit") for f in EDIT_FAMILIES for kind in ("colour", "lamp")]
+    lines = ["| scene | GI source | what | ms | rel. RMSE | Mitsuba bake of equal or larger error | its ms | "
+             "ours faster by |", "|---|---|---|---|---|---|---|---|"]
+    ratios: dict[str, list[float]] = {}
+    for scene in scenes:
+        here = {(r["method"], r["setting"]): r for r in rows if r["scene"] == scene}
+        bakes = [r for (family, _), r in here.items() if family == "mitsuba-probes"]
+        for family, setting, what in ours:
+            row = here.get((family, setting))
+            if row is None:
+                continue
+            ms, error = float(row["ms"]), float(row["relative_rmse"])
+            worse = [b for b in bakes if float(b["relative_rmse"]) >= error]
+            if worse:
+                bake = max(worse, key=lambda b: float(b["ms"]))
+                ratio = float(bake["ms"]) / ms
+                ratios.setdefault(f"{family} {what}", []).append(ratio)
+                lines.append(f"| {scene} | {family} | {what} | {ms:.0f} | {error:.3f} | {bake['setting']} "
+                             f"({float(bake['relative_rmse']):.3f}) | {float(bake['ms']):.0f} | {ratio:.0f}x |")
+            else:
+                lines.append(f"| {scene} | {family} | {what} | {ms:.0f} | {error:.3f} | none as coarse: every "
+                             "bake measured is more accurate | | |")
+    summary = [f"- {name}: {min(v):.0f}x to {max(v):.0f}x faster (median {np.median(v):.0f}x) over "
+               f"{len(v)} scenes." for name, v in ratios.items()]
+    return "\n".join(lines + [""] + summary)
+
+
 def publish(rows: list[dict], scenes: list[str], paths, notes: list[str], quick: bool) -> str:
     """Charts and the generated blocks of the report; returns the front as text for the terminal."""
     charts(rows, scenes, paths.images)
@@ -330,4 +368,5 @@ def publish(rows: list[dict], scenes: list[str], paths, notes: list[str], quick:
     replace_block(paths.report, "<!-- bench-machine -->", machine(rows) + ("\n\nQuick mode." if quick else ""), TITLE)
     replace_block(paths.report, "<!-- bench-front -->", fronts, TITLE)
     replace_block(paths.report, "<!-- bench-table -->", every + "".join(f"\n\n- {n}" for n in notes), TITLE)
+    replace_block(paths.report, "<!-- bench-edits -->", against_mitsuba(rows, scenes), TITLE)
     return fronts

@@ -162,7 +162,10 @@ def measure(produce, scene, points, truth) -> tuple[float, float, int, float]:
     from viewer.probes import ProbeGrid
 
     seconds, cpu, errors = [], [], []
+    before = getattr(produce, "before", None)   # untimed set-up before each run (an edit's other side)
     while len(seconds) < (1 if seconds and seconds[0] > SLOW_SECONDS else REPEATS):
+        if before is not None:
+            before(scene)
         clock, cpu_clock = time.perf_counter(), time.process_time()
         result = produce(scene, points)
         seconds.append(time.perf_counter() - clock)
