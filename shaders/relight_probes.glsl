@@ -33,11 +33,16 @@ void main() {
     for (int r = 0; r < direction_count; ++r) {
         int j = hits[p * direction_count + r];
         vec3 light = reflected[j].rgb;
-        vec3 glow = with_emission ? emission[j].rgb : vec3(0.0);
         for (int c = 0; c < 9; ++c) {
-            float b = basis[9 * r + c];
-            reflected_sum[c] += b * light;
-            emitted_sum[c] += b * glow;
+            reflected_sum[c] += basis[9 * r + c] * light;
+        }
+    }
+    if (with_emission) {   // a second pass only where some surface found by the rays emits
+        for (int r = 0; r < direction_count; ++r) {
+            vec3 glow = emission[hits[p * direction_count + r]].rgb;
+            for (int c = 0; c < 9; ++c) {
+                emitted_sum[c] += basis[9 * r + c] * glow;
+            }
         }
     }
     for (int c = 0; c < 9; ++c) {

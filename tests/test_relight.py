@@ -126,5 +126,5 @@ def test_lamp_columns_give_the_patch_by_patch_light():
     mat = relight.materials(scene, g, lights)
     voxel_matrix, probe_matrix, radiance = lights.columns(mat.lamp)
     assert probe_matrix.shape[1] < lights.count
-    assert np.allclose(probe_matrix @ radiance, lights.probe_sh @ mat.lamp, rtol=1e-4, atol=1e-6)
+    assert np.allclose(probe_matrix @ radiance, lights.probe_matrix() @ mat.lamp, rtol=1e-4, atol=1e-6)
     assert np.allclose(voxel_matrix @ radiance, lights.voxel_irradiance @ mat.lamp, rtol=1e-4, atol=1e-6)

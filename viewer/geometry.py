@@ -121,6 +121,8 @@ class Geometry:
     """(P, D) int32 voxel seen by each probe direction; K where the ray sees nothing or a back face."""
     probe_basis: np.ndarray
     """(D, 9) float32: quadrature weight x SH basis of each probe direction (SH = basis^T L[hits])."""
+    probe_basis_t: np.ndarray
+    """(9, D) float32: the same, transposed (the CPU projection's layout)."""
     valid: np.ndarray
     """(M, M, M) bool: probes not inside solids."""
     fill_waves: np.ndarray
@@ -162,7 +164,8 @@ def trace(scene: Scene, voxelization: Voxelization, settings: GeometrySettings) 
     basis = (weights[:, None] * sh.basis(directions)).astype(np.float32)
     valid = (backface <= settings.invalid_backface_fraction).reshape(m, m, m)
     return Geometry(scene_key(scene, settings), settings, grid, cells, faces, lamp_faces(scene), transport,
-                    np.asarray(lo, np.float64), np.asarray(hi, np.float64), points, probe_hits, basis, valid,
+                    np.asarray(lo, np.float64), np.asarray(hi, np.float64), points, probe_hits, basis,
+                    np.ascontiguousarray(basis.T), valid,
                     fill_waves(valid).reshape(-1))
 
 

@@ -13,7 +13,7 @@ product (viewer.relight); a lamp move builds the LightPaths again, not the Geome
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba
 import numpy as np
@@ -42,16 +42,15 @@ class LightPaths:
     """(U, S) area share of each sample in its patch: patch radiance = this @ sample radiance."""
     voxel_irradiance: np.ndarray
     """(K, U) float32 irradiance at each voxel per unit radiance of each patch, visibility included."""
-    probe_sh: np.ndarray
-    """(P * 9, U) float32 incident-radiance SH at each probe per unit radiance of each patch."""
     lamp_of_patch: np.ndarray
     """(U,) the lamp (scene group) of each patch, or a number of its own for a patch that mixes lamps."""
     lamp_voxel_irradiance: np.ndarray
     """(K, G) voxel_irradiance summed over each lamp's patches: while every patch of a lamp has the
     same radiance (a colour or intensity edit changes a whole group), the relight's products need one
     column per lamp instead of one per patch."""
-    lamp_probe_sh: np.ndarray
-    """(P * 9, G) probe_sh summed likewise."""
+    _probes: dict = field(default_factory=dict, compare=False, repr=False)
+    """The probes' matrices, made on first use (the renderer's indirect light never needs them), and
+    what they are made from."""
 
     @property
     def count(self) -> int:
@@ -60,13 +59,22 @@ class LightPaths:
     def columns(self, patch_radiance: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(voxel matrix, probe matrix, radiance per column): per lamp when every patch of each lamp
         has the same radiance, else per patch."""
-        lamps = self.lamp_probe_sh.shape[1]
+        lamps = self.lamp_voxel_irradiance.shape[1]
         first = np.zeros(lamps, np.int64)
         first[self.lamp_of_patch[::-1]] = np.arange(self.count)[::-1]
         radiance = patch_radiance[first]
         if np.array_equal(patch_radiance, radiance[self.lamp_of_patch]):
-            return self.lamp_voxel_irradiance, self.lamp_probe_sh, radiance
-        return self.voxel_irradiance, self.probe_sh, patch_radiance
+            return self.lamp_voxel_irradiance, self.probe_matrix(per_lamp=True), radiance
+        return self.voxel_irradiance, self.probe_matrix(per_lamp=False), patch_radiance
+
+    def probe_matrix(self, per_lamp: bool = False) -> np.ndarray:
+        """(P * 9, U) float32 incident-radiance SH at each probe per unit radiance of each patch, or
+        (P * 9, G) summed per lamp."""
+        if "patch" not in self._probes:
+            points, patches, cells, summed = self._probes["inputs"]
+            probe_sh = _probe_sh(points, *patches, cells).reshape(len(points) * 9, self.count)
+            self._probes.update(patch=probe_sh, lamp=probe_sh @ summed)
+        return self._probes["lamp" if per_lamp else "patch"]
 
 
 def lights_key(scene: Scene, geometry: Geometry) -> str:
@@ -84,9 +92,10 @@ def build(scene: Scene, geometry: Geometry) -> LightPaths:
     lamp = np.nonzero(lamp_faces(scene))[0]
     k, p = grid.count, len(geometry.probe_points)
     if not len(lamp):
+        none = np.zeros((p * 9, 0), np.float32)
         return LightPaths(lights_key(scene, geometry), np.zeros(0, np.int64), sparse.csr_matrix((0, 0)),
-                          np.zeros((k, 0), np.float32), np.zeros((p * 9, 0), np.float32), np.zeros(0, np.int64),
-                          np.zeros((k, 0), np.float32), np.zeros((p * 9, 0), np.float32))
+                          np.zeros((k, 0), np.float32), np.zeros(0, np.int64), np.zeros((k, 0), np.float32),
+                          {"patch": none, "lamp": none})
     position, area, source = _subdivide(scene.triangles[lamp], 0.5 * h)
     face = lamp[source]
     normal = scene.face_normals[face]
@@ -110,7 +119,6 @@ def build(scene: Scene, geometry: Geometry) -> LightPaths:
                np.ascontiguousarray(area[order]), target, FAR_FIELD * size)
     voxel_irradiance = _surface_irradiance(np.ascontiguousarray(grid.position), np.ascontiguousarray(grid.normal),
                                            SURFACE_OFFSET * h, *patches, geometry.cells.args())
-    probe_sh = _probe_sh(np.ascontiguousarray(geometry.probe_points), *patches, geometry.cells.args())
     share = sparse.diags(1.0 / patch_area) @ select
     group = scene.face_group[face]
     lowest = np.full(u, np.iinfo(np.int64).max)
@@ -121,9 +129,9 @@ def build(scene: Scene, geometry: Geometry) -> LightPaths:
     lamp_of_patch = lamp_of_patch.ravel()
     summed = np.zeros((u, lamp_of_patch.max() + 1), np.float32)
     summed[np.arange(u), lamp_of_patch] = 1.0
-    probe_sh = probe_sh.reshape(p * 9, u)
-    return LightPaths(lights_key(scene, geometry), face, share.tocsr(), voxel_irradiance, probe_sh,
-                      lamp_of_patch, voxel_irradiance @ summed, probe_sh @ summed)
+    probes = {"inputs": (np.ascontiguousarray(geometry.probe_points), patches, geometry.cells.args(), summed)}
+    return LightPaths(lights_key(scene, geometry), face, share.tocsr(), voxel_irradiance, lamp_of_patch,
+                      voxel_irradiance @ summed, probes)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

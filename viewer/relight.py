@@ -9,11 +9,12 @@ Lambertian voxels solves
     R = rho / pi * E_d + rho * T (Le + R)                               (B = Le + R, eq. 23-30)
 
 whose Neumann series is the paper's Markov chain of bounces (eq. 30): R_0 = rho / pi * E_d + rho T Le
-is the first bounce, and each sweep R <- R_0 + rho T R adds one more. The sweeps start from the previous
-solution when there is one (an edit moves the answer a little) and stop once the largest change is below
-`tolerance` of the largest radiance; when the bounces decay geometrically (albedo near 1) the remaining
-tail of the series is added in closed form (Aitken), so a white furnace converges in tens of sweeps, not
-thousands. The probes are then one product: the SH basis of each probe direction times the radiance of
+is the first bounce, and each Jacobi sweep R <- R_0 + rho T R adds one more (how the truncated chain of
+`bounces` is summed, and how the GPU sweeps). To convergence the CPU sweeps Gauss-Seidel, which uses each
+row's update at once. The sweeps start from the previous solution when there is one (an edit moves the
+answer a little) and stop once the largest change is below `tolerance` of the largest radiance; when the
+change decays geometrically (albedo near 1) the remaining tail is added in closed form (Aitken), so a
+white furnace converges in tens of sweeps, not thousands. The probes are then one product: the SH basis of each probe direction times the radiance of
 the voxel it sees, plus the lamps' and the sun's direct light.
 """
 
@@ -98,7 +99,13 @@ def solve(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials,
     """The reflected light of every voxel (see the module docstring), with sweeps on the CPU."""
     first, direct = first_bounce(geometry, lights, sun, mat)
     t, rho = geometry.transport, mat.albedo
-    reflected, sweeps = iterate(first, lambda r: first + rho * gather(t, r), settings, previous)
+    # to convergence, Gauss-Seidel: each voxel gathers the light its predecessors in this sweep already
+    # updated; 11 sweeps instead of Jacobi's 17 on the Cornell box (one core, but a sweep is memory-bound
+    # and took 0.74 ms on one core against 0.66 on two). The paper's truncated chain needs Jacobi's
+    # bounce-by-bounce sums.
+    sweep = _jacobi_sweep if settings.bounces is not None else _gauss_seidel_sweep
+    reflected, sweeps = iterate(first, lambda r: sweep(t.indptr, t.indices, t.data, first, rho, r), settings,
+                                previous)
     return Lighting(reflected, direct, sweeps)
 
 
@@ -146,7 +153,7 @@ def probe_coefficients(geometry: Geometry, lights: LightPaths, sun: SunPaths, ma
     and with `include_emitted` the gathered emitters), plus the lamps' and the sun's direct light."""
     radiance = lighting.reflected + mat.emission if include_emitted else lighting.reflected
     radiance = np.vstack([radiance, np.zeros((1, 3), np.float32)])     # row K: nothing seen
-    coefficients = _project(geometry.probe_hits, geometry.probe_basis, np.asarray(radiance, np.float32))
+    coefficients = _project(geometry.probe_hits, geometry.probe_basis_t, np.asarray(radiance, np.float32))
     if include_emitted:
         coefficients += direct_sh(geometry, lights, sun, mat)
     return coefficients
@@ -208,6 +215,41 @@ def _dense_times(matrix, values):
     return out
 
 
+@numba.njit(cache=True, nogil=True)
+def _gauss_seidel_sweep(indptr, indices, data, first, albedo, values):
+    """One sweep of R = R_0 + albedo * T R in voxel order, each row reading the rows before it as they
+    are after this sweep (a new array: the caller keeps the old one to measure the change)."""
+    out = values.copy()
+    for i in range(len(indptr) - 1):
+        a = b = c = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            j, w = indices[e], data[e]
+            a += w * out[j, 0]
+            b += w * out[j, 1]
+            c += w * out[j, 2]
+        out[i, 0] = first[i, 0] + albedo[i, 0] * a
+        out[i, 1] = first[i, 1] + albedo[i, 1] * b
+        out[i, 2] = first[i, 2] + albedo[i, 2] * c
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _jacobi_sweep(indptr, indices, data, first, albedo, values):
+    """One sweep, R_0 + albedo * T R, every row from the previous R: one more bounce (eq. 30)."""
+    out = np.empty((len(indptr) - 1, 3), np.float32)
+    for i in numba.prange(len(indptr) - 1):
+        a = b = c = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            j, w = indices[e], data[e]
+            a += w * values[j, 0]
+            b += w * values[j, 1]
+            c += w * values[j, 2]
+        out[i, 0] = first[i, 0] + albedo[i, 0] * a
+        out[i, 1] = first[i, 1] + albedo[i, 1] * b
+        out[i, 2] = first[i, 2] + albedo[i, 2] * c
+    return out
+
+
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _csr_times(indptr, indices, data, values):
     out = np.empty((len(indptr) - 1, 3), np.float32)
@@ -222,26 +264,24 @@ def _csr_times(indptr, indices, data, values):
     return out
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _project(hits, basis, radiance):
-    """(P, 9, 3): sum over each probe's directions of basis x the radiance of the voxel it sees."""
+@numba.njit(cache=True, nogil=True, parallel=True, fastmath=True)
+def _project(hits, basis_t, radiance):
+    """(P, 9, 3): sum over each probe's directions of basis x the radiance of the voxel it sees. The
+    radiance seen is gathered first, so that each of the 27 sums is a dot product over the directions
+    that the compiler vectorizes (4x faster than accumulating direction by direction, measured)."""
     count, directions = hits.shape
     out = np.empty((count, 9, 3), np.float32)
     for p in numba.prange(count):
-        acc = np.zeros((9, 3))
+        seen = np.empty((3, directions), np.float32)
         for r in range(directions):
             j = hits[p, r]
-            l0, l1, l2 = radiance[j, 0], radiance[j, 1], radiance[j, 2]
-            if l0 == 0.0 and l1 == 0.0 and l2 == 0.0:
-                continue
-            for k in range(9):
-                b = basis[r, k]
-                acc[k, 0] += b * l0
-                acc[k, 1] += b * l1
-                acc[k, 2] += b * l2
+            seen[0, r], seen[1, r], seen[2, r] = radiance[j, 0], radiance[j, 1], radiance[j, 2]
         for k in range(9):
             for c in range(3):
-                out[p, k, c] = acc[k, c]
+                total = np.float32(0.0)
+                for r in range(directions):
+                    total += basis_t[k, r] * seen[c, r]
+                out[p, k, c] = total
     return out
 
 

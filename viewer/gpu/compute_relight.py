@@ -102,7 +102,10 @@ class ComputeRelight:
         gathered = bool(np.any(mat.emission > 0))
         if gathered:
             self.buffers["emission"].write(_vec4(mat.emission, extra_zero_row=True))
-        self.buffers["direct"].write(relight.direct_sh(geometry, lights, sun, mat).tobytes())
+        if include_emitted:
+            self.buffers["direct"].write(relight.direct_sh(geometry, lights, sun, mat).tobytes())
+        else:
+            self.buffers["direct"].clear()
         self._dispatch("relight_probes", p, {7: "hits", 8: "basis", 9: self._current, 10: "emission",
                                             11: "direct", 12: "emitted", 15: "indirect"},
                        probe_count=p, direction_count=d, with_emission=gathered)
