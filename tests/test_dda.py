@@ -95,7 +95,9 @@ def test_segments_are_blocked_by_a_wall_from_either_side():
 @pytest.mark.parametrize("voxels", [16, 32])
 def test_no_floor_point_in_shadow_sees_the_sun(voxels):
     """Sunny rooms of the stability study (a window, the sun through it): every point just above the
-    floor that an exact ray cast against the triangles finds in shadow is in shadow for the DDA too."""
+    floor that an exact ray cast against the triangles finds in shadow is in shadow for the DDA too.
+    (The cast is the stability study's Moller-Trumbore over every triangle; trimesh's own ray caster
+    needs the rtree package, which nothing else here uses.)"""
     from viewer.bench.stability.sun import blocked, sunny_room
 
     for number in range(3):

@@ -330,10 +330,11 @@ TITLE = "# Benchmark: every GI method, time and memory against error"
 
 
 def against_mitsuba(rows: list[dict], scenes: list[str]) -> str:
-    """Markdown: per scene, the physical GI's time from a new scene and from an edit to converged probes,
+    """Markdown: per scene, the physical GI's time from a new scene and from an edit to converged probes
+    (relit on the CPU, `numpy`, and in compute shaders, `compute`),
     next to the Mitsuba bake of the probes whose error is equal or larger (the slowest such bake: the
     one closest to our accuracy), measured in the same run, and how many times faster ours is."""
-    ours = [("compute", DEFAULTS["compute"], "new scene")]
+    ours = [(f, DEFAULTS[f], "new scene") for f in ("numpy", "compute")]
     ours += [(f, f"{DEFAULTS['compute']} {kind}", kind + " edit") for f in EDIT_FAMILIES for kind in ("colour", "lamp")]
     lines = ["| scene | GI source | what | ms | rel. RMSE | Mitsuba bake of equal or larger error | its ms | "
              "ours faster by |", "|---|---|---|---|---|---|---|---|"]
