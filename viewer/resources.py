@@ -42,6 +42,23 @@ def resident_mb(pid: int | str = "self", trim: bool = False) -> float:
     raise OSError(f"no VmRSS in /proc/{pid}/status")
 
 
+def children_mb() -> float:
+    """Resident memory of this process's child processes in MiB, as it is (the CPU solver's worker;
+    0 where /proc does not list children)."""
+    total = 0.0
+    for task in Path("/proc/self/task").iterdir():
+        try:
+            children = (task / "children").read_text().split()
+        except OSError:
+            continue
+        for pid in children:
+            try:
+                total += resident_mb(int(pid))
+            except OSError:   # gone meanwhile
+                pass
+    return total
+
+
 _LINE = re.compile(r"rss (?P<rss>[\d.]+) MB, gl objects (?P<total>\d+)(?: \((?P<kinds>[^)]*)\))?")
 
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from viewer.bench.report import replace_block
 from viewer.gi import GISettings
-from viewer.resources import Usage
+from viewer.resources import Usage, children_mb
 from viewer.scene import ASSETS
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -104,6 +104,8 @@ def soak_scenes(soak: Soak, source: str) -> None:
         for step in range(1, s.steps + 1):
             viewer.load(files[step % len(files)])
             soak.record("scenes", source, step, viewer.session.name, viewer.usage(s.held))
+            if source == "solver":   # its solves run in a worker process: that one's memory too, as it is
+                soak.record("scenes", "solver worker", step, viewer.session.name, Usage(children_mb()))
     finally:
         viewer.release()
 
@@ -160,7 +162,8 @@ def soak_drops(soak: Soak) -> None:
 # ---- the report --------------------------------------------------------------------------------------
 
 def summary(soak: Soak) -> list[dict]:
-    """Per part and source: resident memory and GL objects after the warm-up and at the end."""
+    """Per part and source: memory and GL objects after the warm-up step and at the end, and the most
+    memory from the warm-up step on."""
     rows = []
     groups: dict[tuple[str, str], list[Step]] = {}
     for step in soak.steps:
@@ -171,7 +174,7 @@ def summary(soak: Soak) -> list[dict]:
         rss = [x.usage.rss_mb for x in steps if x.step >= base.step]
         rows.append(dict(part=part, source=source, steps=end.step, base=base.step, rss_base=base.usage.rss_mb,
                          rss_end=end.usage.rss_mb, rss_max=max(rss), gl_base=base.usage.gl_total,
-                         gl_end=end.usage.gl_total, gl_kinds=str(end.usage).partition("gl objects ")[2]))
+                         gl_end=end.usage.gl_total))
     return rows
 
 

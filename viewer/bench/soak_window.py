@@ -14,9 +14,11 @@ from viewer.gi import GISettings
 from viewer.resources import Usage
 
 BAD_FILES = {
+    # first, so that a warm-up covers it: the first PLY, glTF or GLB file imports trimesh and scipy
+    # (tens of MB, once)
+    "empty.ply": "ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0 0\n",   # truncated body
     "broken.obj": "v 0 0 0\nv 1 0\nf 1 2 3\n",                       # a vertex with two coordinates
     "notes.txt": "not a scene\n",                                   # a format the viewer does not read
-    "empty.ply": "ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0 0\n",   # truncated body
 }
 
 
