@@ -41,10 +41,12 @@ def live_objects(ctx: moderngl.Context) -> Counter:
     only under `watch`) as `"dropped <Kind>"`. Collects garbage first, so that only what something
     still holds is counted."""
     gc.collect()
-    kinds = tuple(getattr(moderngl, name) for name in KINDS if hasattr(moderngl, name))
+    # exact types, not isinstance: that would ask every object in the process for its __class__, and some
+    # (torch's deprecated aliases) warn when asked
+    kinds = {getattr(moderngl, name) for name in KINDS if hasattr(moderngl, name)}
     counts: Counter = Counter()
     for obj in gc.get_objects():
-        if isinstance(obj, kinds) and getattr(obj, "ctx", None) is ctx and _alive(getattr(obj, "mglo", None)):
+        if type(obj) in kinds and getattr(obj, "ctx", None) is ctx and _alive(getattr(obj, "mglo", None)):
             counts[type(obj).__name__] += 1
     if ctx.gc_mode == "context_gc":
         # moderngl queues released wrappers too (their InvalidObject): keep only the live ones, so the
