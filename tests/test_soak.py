@@ -1,7 +1,7 @@
 """Hours of use without growth (issue 13): after a warm-up, solve after solve and scene after scene
 leave the resident memory where it was (within 10 MB) and not one more live GL object; bad files
 dropped onto the window leave nothing behind either. Memory is measured after glibc has handed its free
-heap back (viewer/resources.py), so that what is left is what something holds; GL objects are counted
+heap back (viewer/memory.py), so that what is left is what something holds; GL objects are counted
 with moderngl's context_gc mode on, so one freed without release() is still counted
 (viewer/gpu/gl_objects.py). The soak command (python -m viewer.bench.soak) runs the same longer."""
 
@@ -11,7 +11,7 @@ import pytest
 
 from test_app import display, x11  # noqa: F401  (fixtures)
 from viewer.gi import GISettings
-from viewer.resources import Usage
+from viewer.memory import Usage
 from viewer.scene import ASSETS, load
 
 WARMUP = 5

@@ -343,7 +343,7 @@ class ViewerApp(mglw.WindowConfig):
         if (not self.options.resources or key == self._resources_key or self.session.busy
                 or not self.viewport.settled):
             return
-        from viewer.resources import Usage
+        from viewer.memory import Usage
 
         self._resources_key = key
         usage = Usage.measure(self.ctx, trim=self.options.resources == "held")

@@ -135,7 +135,6 @@ def progressive(ctx, scene, size, light_samples: int, budget_ms: float | None, t
         for attachment in (*screen.color_attachments, screen.depth_attachment):
             attachment.release()   # simple_framebuffer made them; releasing the framebuffer leaves them
         screen.release()
-        gi.release()   # the compute solver's buffers and textures: the next budget runs on this context
         gi.close()
     frames, steps = np.asarray(frames), np.asarray(steps)
     return dict(frames=len(frames), seconds=seconds, budget=gi.compute_budget_ms,

@@ -12,7 +12,7 @@ from viewer.gi import GISettings
 from viewer.gpu.context import create_context
 from viewer.gpu.gl_objects import watch
 from viewer.gpu.renderer import RenderSettings, Renderer
-from viewer.resources import Usage
+from viewer.memory import Usage
 from viewer.scene import load
 from viewer.ui.gi_sources import GIController
 from viewer.ui.session import Session
@@ -67,8 +67,7 @@ class HeadlessViewer:
         return Usage.measure(self.ctx, trim)
 
     def release(self) -> None:
-        self.session.close()
-        self.gi.release()
+        self.session.close()   # and the GI sources: the CPU solver's process, the compute solver's GL objects
         self.viewport.release()
         self.renderer.release()
         for texture in self.screen.color_attachments:

@@ -14,7 +14,7 @@ Parts, each N steps after which resident memory (VmRSS) and the live GL objects 
 The scenes are the built-in Cornell box, paper-test and, where ../shared/scenes has it, the public
 CornellBox-Original. A part's growth is its last step against its step `--warmup` (allocators and
 caches fill during the first steps). Memory is read after glibc has handed its free heap memory back
-(viewer/resources.py): what something still holds, which is what a leak grows; `--resident` reads it as
+(viewer/memory.py): what something still holds, which is what a leak grows; `--resident` reads it as
 it is, what a user sees, allocator wobble of tens of MB included. `--write` puts the table into
 docs/STABILITY.md; tests/test_soak.py holds what must hold.
 """
@@ -32,7 +32,7 @@ import numpy as np
 
 from viewer.bench.report import replace_block
 from viewer.gi import GISettings
-from viewer.resources import Usage, children_mb
+from viewer.memory import Usage, children_mb
 from viewer.scene import ASSETS
 
 ROOT = Path(__file__).resolve().parents[2]

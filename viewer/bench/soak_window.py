@@ -11,7 +11,7 @@ from typing import Iterator
 
 from viewer.bench.x11 import X11, Viewer, start_xvfb, xvfb_available
 from viewer.gi import GISettings
-from viewer.resources import Usage
+from viewer.memory import Usage
 
 BAD_FILES = {
     # first, so that a warm-up covers it: the first PLY, glTF or GLB file imports trimesh and scipy

@@ -1,5 +1,5 @@
 """The GL objects alive in a context, by kind: how the soak (viewer/bench/soak.py), the viewer's
-`--resources` lines and the tests see what a solve or a scene load leaves behind (viewer.resources
+`--resources` lines and the tests see what a solve or a scene load leaves behind (viewer.memory
 puts them beside the resident memory).
 
 moderngl keeps no registry of the objects it made. What it does offer (moderngl >= 5.8) is a garbage

@@ -113,7 +113,6 @@ class ComputeSource:
         self._unpublished = False
 
     def release(self) -> None:
-        # issue 13: the solver's GL buffers and textures go with the source (GIController.release)
         if self.solver is not None:
             self.solver.release()
             self.solver = None
@@ -333,12 +332,8 @@ class GIController:
             return self._neural.status(), None, None
         return "Not available.", None, None
 
-    def release(self) -> None:
-        """Release the GL objects of the sources (the compute solver's); on the render thread, while
-        the context that made them is current. `close` stops the CPU solver's process."""
-        if self._compute is not None:
-            self._compute.release()
-
     def close(self) -> None:
         if self._cpu is not None:
             self._cpu.close()
+        if self._compute is not None:
+            self._compute.release()
