@@ -2,7 +2,7 @@
 renders it with indirect light, the panel's text is drawn, keys and the mouse do what the help says, a
 broken shader is reported while the old one keeps running, and without a display it renders headless.
 
-Input comes through the XTEST extension (tests/test_app_x11.py), as from a real keyboard and mouse.
+Input comes through the XTEST extension (viewer/bench/x11.py), as from a real keyboard and mouse.
 Image regions are fractions of the image: (top, bottom, left, right).
 """
 
@@ -21,7 +21,7 @@ import pytest
 from conftest import missing
 from PIL import Image
 
-from test_app_x11 import REPO, X11, Viewer, start_xvfb, xvfb_available
+from viewer.bench.x11 import REPO, X11, Viewer, start_xvfb, xvfb_available
 
 CEILING = (0.03, 0.09, 0.35, 0.65)
 RED_WALL = (0.3, 0.7, 0.15, 0.22)

@@ -1,4 +1,4 @@
-"""Drag and drop onto the real viewer window under Xvfb: a real XDND drop (tests/test_app_x11.py) of
+"""Drag and drop onto the real viewer window under Xvfb: a real XDND drop (viewer/bench/x11.py) of
 scene files. A good file replaces the scene; a broken or unsupported one is reported in the window and
 on stderr, and the scene shown before stays."""
 
@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 from test_app import display, x11  # noqa: F401  (fixtures)
-from test_app_x11 import REPO, Viewer
+from viewer.bench.x11 import REPO, Viewer
 
 trimesh = pytest.importorskip("trimesh")
 

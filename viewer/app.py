@@ -62,6 +62,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stats", help="write a JSON summary (frame times, scene, camera, messages) here at "
                                         "exit and after every screenshot")
     parser.add_argument("--shader-dir", help="load shaders from this folder instead of shaders/")
+    parser.add_argument("--resources", nargs="?", const="held", choices=("held", "resident"),
+                        help="log memory and live GL objects whenever the picture has settled after the start, "
+                             "a load or a failed load (python -m viewer.bench.soak reads them): resident memory "
+                             "after the C heap's free memory is handed back (held, the default) or as it is")
 
 
 def options_from(args) -> SimpleNamespace:
@@ -204,6 +208,11 @@ class ViewerApp(mglw.WindowConfig):
 
         self.options = options = self.argv or options_from(SimpleNamespace())
         self.gl_description = describe(self.ctx)
+        self._resources_key = None   # (loads, load errors) of the last --resources line
+        if options.resources:
+            from viewer.gpu.gl_objects import watch
+
+            watch(self.ctx)   # GL objects freed without release() are counted, not lost
         imgui.create_context()
         imgui.get_io().set_ini_filename(None)   # no imgui.ini in the user's folder
         self._load_font()
@@ -290,6 +299,7 @@ class ViewerApp(mglw.WindowConfig):
                 f"scene {session.name!r}")
         self._check_quit(settled_shot)
         self._bench()
+        self._log_resources()
         self._throttle(drew)
 
     def _view_rect(self) -> tuple[int, int, int, int]:
@@ -334,6 +344,19 @@ class ViewerApp(mglw.WindowConfig):
                 log(f"bench: settled after {time.perf_counter() - self._started:.1f} s; timing {count} redraws")
         elif self.frames - self._bench_from >= count + 3:   # + the GPU results still in flight
             self.wnd.close()
+
+    def _log_resources(self) -> None:
+        """--resources: one line of resident memory and live GL objects once the picture has settled
+        after the start, a load or a failed load."""
+        key = (self.session.loads, self.session.load_errors)
+        if (not self.options.resources or key == self._resources_key or self.session.busy
+                or not self.viewport.settled):
+            return
+        from viewer.memory import Usage
+
+        self._resources_key = key
+        usage = Usage.measure(self.ctx, trim=self.options.resources == "held")
+        log(f"resources: {usage}, loads {key[0]}, load errors {key[1]}")
 
     def _throttle(self, drew: bool) -> None:
         """Cap the frame rate: llvmpipe and the solvers share the same few cores. When nothing moves and

@@ -132,6 +132,8 @@ def progressive(ctx, scene, size, light_samples: int, budget_ms: float | None, t
     finally:
         viewport.release()
         renderer.release()
+        for attachment in (*screen.color_attachments, screen.depth_attachment):
+            attachment.release()   # simple_framebuffer made them; releasing the framebuffer leaves them
         screen.release()
         gi.close()
     frames, steps = np.asarray(frames), np.asarray(steps)

@@ -34,7 +34,7 @@ from viewer.gi import GISettings, Timings
 from viewer.gpu.compute_probes import ComputeProbes
 from viewer.gpu.compute_scene import ComputeScene, same_geometry
 from viewer.gpu.compute_transport import MAX_GROUPS, RECEIVERS, VISIBILITY_MODES, ComputeTransport, rows_per_dispatch
-from viewer.gpu.programs import ProgramLibrary
+from viewer.gpu.programs import ProgramLibrary, shared_library
 from viewer.probes import ProbeGrid, ProbeSettings
 from viewer.scene import DirectionalLight, Scene
 from viewer.transport import KERNELS, TransportSettings
@@ -84,7 +84,8 @@ class ComputeSolver:
                  settings: GISettings = GISettings(), bounds=None, options: ComputeSettings = ComputeSettings(),
                  programs: ProgramLibrary | None = None):
         self.ctx = ctx
-        self.programs = programs or ProgramLibrary(ctx)
+        # compiled once per context, not per solver: a solver per solve must not compile them again
+        self.programs = programs if programs is not None else shared_library(ctx)
         self.options = options
         self.scene: ComputeScene | None = None
         self.transport: ComputeTransport | None = None

@@ -211,6 +211,19 @@ class ProgramLibrary:
         self._programs.clear()
 
 
+def shared_library(ctx: moderngl.Context, directory: Path | str = SHADERS) -> ProgramLibrary:
+    """The one ProgramLibrary of `ctx` for the programs under `directory`, for code that makes a new
+    solver per solve (compute_solver.solve_probes, the command line, the benchmarks): each program is
+    compiled once per context and reused by every later solve. A library per solve compiled all of them
+    again each time and dropped them unreleased, about 3 MB a solve that llvmpipe never got back
+    (docs/STABILITY.md). The library is kept on the context itself, so it goes when the context goes."""
+    libraries = ctx.__dict__.setdefault("_viewer_program_libraries", {})
+    key = Path(directory).resolve()
+    if key not in libraries:
+        libraries[key] = ProgramLibrary(ctx, directory)
+    return libraries[key]
+
+
 def set_uniforms(program, **values) -> None:
     """Set the uniforms a program uses; names the compiler optimised away are skipped."""
     for name, value in values.items():

@@ -1,6 +1,6 @@
-"""Test helpers for the viewer window (no tests here): an Xvfb server, real X11 input through the XTEST
-extension, a real XDND drag-and-drop source, and the viewer run as a subprocess whose `viewer: ...`
-stderr lines can be waited for.
+"""Driving the viewer's real window (for the window tests and the soak, viewer/bench/soak.py): an Xvfb
+server, real X11 input through the XTEST extension, a real XDND drag-and-drop source, and the viewer run
+as a subprocess whose `viewer: ...` stderr lines can be waited for.
 
 Everything talks to libX11 / libXtst through ctypes (python-xlib is not installed). The XDND source
 follows the protocol (https://www.freedesktop.org/wiki/Specifications/XDND/, version 5): it owns the
@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 from urllib.parse import quote
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parent.parent.parent
 
 # ---- libX11 through ctypes ------------------------------------------------------------------------
 

@@ -1,0 +1,76 @@
+"""The viewer without its window: the pieces ViewerApp puts together (Renderer, GIController, Session,
+Viewport) on a headless EGL context, stepped a frame at a time as `ViewerApp.on_render` steps them
+(`Session.update`, then `Viewport.frame`). For the soak (viewer/bench/soak.py) and the tests that load,
+solve and edit scene after scene in one process, as a user does in the window."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from viewer.gi import GISettings
+from viewer.gpu.context import create_context
+from viewer.gpu.gl_objects import watch
+from viewer.gpu.renderer import RenderSettings, Renderer
+from viewer.memory import Usage
+from viewer.scene import load
+from viewer.ui.gi_sources import GIController
+from viewer.ui.session import Session
+from viewer.ui.viewport import Viewport
+
+
+class HeadlessViewer:
+    def __init__(self, source: str, settings: GISettings, scene: str | Path = "cornell",
+                 size: tuple[int, int] = (320, 180), light_samples: int = 4, timeout: float = 900.0):
+        self.ctx = create_context()
+        watch(self.ctx)   # GL objects freed without release() are counted, not lost
+        self.timeout = timeout
+        """Seconds `settle` waits before it gives up (a safety net, not a measurement)."""
+        self.renderer = Renderer(self.ctx, RenderSettings(light_samples=light_samples))
+        self.gi = GIController(self.ctx, source, settings)
+        self.log: list[str] = []
+        self.session = Session(self.renderer, self.gi, load(scene), scene, log=self.log.append, edit_interval=0.0)
+        self.viewport = Viewport(self.ctx, self.renderer)
+        self.screen = self.ctx.framebuffer(color_attachments=[self.ctx.texture(size, 4)])
+        self.frames = 0
+
+    def frame(self) -> bool:
+        """One frame as the window runs it; True if the scene was drawn."""
+        session = self.session
+        session.update("final")
+        preview = self.gi.source == "compute" and self.gi.busy
+        self.frames += 1
+        return self.viewport.frame(session.camera.camera(), "final", session.content_key(), self.screen,
+                                   preview=preview)
+
+    @property
+    def settled(self) -> bool:
+        """Nothing under way (loading, GI, edits) and the full-resolution image of it drawn."""
+        return not self.session.busy and self.viewport.settled
+
+    def settle(self) -> None:
+        """Frames until settled (a load finished or failed, the GI converged, the picture redrawn)."""
+        deadline = time.monotonic() + self.timeout
+        self.frame()
+        while not self.settled:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"not settled after {self.timeout:.0f} s: {self.gi.status()[0]}")
+            time.sleep(0.002)
+            self.frame()
+
+    def load(self, path: str | Path) -> None:
+        """Open a file as a drop does, and settle."""
+        self.session.load_file(path)
+        self.settle()
+
+    def usage(self, trim: bool = False) -> Usage:
+        return Usage.measure(self.ctx, trim)
+
+    def release(self) -> None:
+        self.session.close()   # and the GI sources: the CPU solver's process, the compute solver's GL objects
+        self.viewport.release()
+        self.renderer.release()
+        for texture in self.screen.color_attachments:
+            texture.release()
+        self.screen.release()
+        self.ctx.release()
