@@ -49,10 +49,14 @@ def test_a_gl_object_freed_without_release_is_still_counted(ctx):
     kept.release()
 
 
-def test_blocking_compute_solves_keep_memory_and_gl_objects_flat(ctx):
-    """compute_solver.solve_probes (the command line's and the benchmarks' solve): its programs are
-    compiled once per context, not compiled again and dropped by every solve."""
-    from viewer.gpu.compute_solver import solve_probes
+@pytest.mark.parametrize("module", ["compute_relight", "compute_solver"])
+def test_blocking_compute_solves_keep_memory_and_gl_objects_flat(ctx, module):
+    """The blocking compute solves (the command line's and the benchmarks': the relight in compute
+    shaders, and the all-pairs solver of the paper's kernel): their programs are compiled once per
+    context, not compiled again and dropped by every solve, and each solve releases its buffers."""
+    import importlib
+
+    solve_probes = importlib.import_module(f"viewer.gpu.{module}").solve_probes
 
     scenes = [load(path) for path in SCENES]
     for step in range(WARMUP + STEPS):

@@ -15,7 +15,7 @@ import numpy as np
 
 from viewer import relight
 from viewer.geometry import Geometry, SunPaths
-from viewer.gpu.programs import ProgramLibrary, set_uniforms
+from viewer.gpu.programs import ProgramLibrary, set_uniforms, shared_library
 from viewer.lightpaths import LightPaths
 
 
@@ -28,7 +28,7 @@ def _vec4(rows: np.ndarray, extra_zero_row: bool = False) -> bytes:
 class ComputeRelight:
     def __init__(self, ctx: moderngl.Context, programs: ProgramLibrary | None = None):
         self.ctx = ctx
-        self.programs = programs or ProgramLibrary(ctx)
+        self.programs = programs or shared_library(ctx)   # compiled once per context, not per solver
         self.geometry: Geometry | None = None
         self.buffers: dict[str, moderngl.Buffer] = {}
         self._current = "ping"
