@@ -229,7 +229,7 @@ def test_the_viewer_shows_a_baked_grid_until_another_scene_is_opened():
 def test_the_window_opens_a_baked_file_on_its_scene_with_the_baked_probes(cornell_bake, tmp_path):
     from conftest import missing
     from test_app import CEILING, assert_cornell_box, region
-    from test_app_x11 import Viewer, start_xvfb, xvfb_available
+    from viewer.bench.x11 import Viewer, start_xvfb, xvfb_available
 
     if not xvfb_available():
         missing("Xvfb is not installed (apt-get install xvfb): the window tests need an X server")

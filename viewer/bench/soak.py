@@ -6,7 +6,7 @@
 Parts, each N steps after which resident memory (VmRSS) and the live GL objects (by kind) are printed:
 - `scenes`: for each GI source, load one scene file after another into the viewer (headless, as a drop
   does: viewer/bench/headless.py) and wait until its indirect light has converged and been drawn;
-- `solves`: one blocking compute-shader solve after another (compute_solver.solve_probes: what
+- `solves`: one blocking compute-shader solve after another (compute_relight.solve_probes: what
   `python -m viewer sample --method compute`, `capture --gi compute` and the benchmarks run);
 - `lamp`: move the lamp a little every frame with the compute solver running, N frames, then settle;
 - `drops`: drop files into the real window under Xvfb, good and bad by turns (viewer/bench/soak_window.py).
@@ -112,7 +112,7 @@ def soak_scenes(soak: Soak, source: str) -> None:
 
 def soak_solves(soak: Soak) -> None:
     """Blocking compute-shader solves, one after another, on one context."""
-    from viewer.gpu.compute_solver import solve_probes
+    from viewer.gpu.compute_relight import solve_probes
     from viewer.gpu.context import create_context
     from viewer.gpu.gl_objects import watch
     from viewer.scene import load
