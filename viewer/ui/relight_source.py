@@ -26,7 +26,9 @@ SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "software")
 
 
 def relight_backend(ctx) -> str:
-    """`gpu` (compute shaders) on a GPU, `cpu` on a software rasterizer."""
+    """`gpu` (compute shaders) on a GPU, `cpu` on a software rasterizer or without a context."""
+    if ctx is None:
+        return "cpu"
     renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
     return "cpu" if any(name in renderer for name in SOFTWARE_GL) else "gpu"
 
