@@ -16,6 +16,16 @@ def missing(reason: str):
     pytest.skip(reason)
 
 
+@pytest.fixture(autouse=True)
+def _shared_gl_context_is_current(request):
+    """Tests that make a context of their own (a capture, an OffscreenRenderer) leave it current; GL
+    objects made on the shared context (a ComputeRelight's programs, compiled once per context) are
+    then invalid names until the shared context is current again."""
+    if "gl_context" in request.fixturenames:
+        request.getfixturevalue("gl_context").__enter__()
+    yield
+
+
 @pytest.fixture(scope="session")
 def gl_context():
     """One headless EGL context (Mesa llvmpipe here) shared by the GPU tests."""
