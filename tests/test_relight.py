@@ -124,7 +124,18 @@ def test_lamp_columns_give_the_patch_by_patch_light():
     g = geometry.build(scene, geometry.GeometrySettings(voxels=16, probes=8))
     lights = lightpaths.build(scene, g)
     mat = relight.materials(scene, g, lights)
-    voxel_matrix, probe_matrix, radiance = lights.columns(mat.lamp)
+    voxel_matrix, radiance = lights.columns(mat.lamp)
+    probe_matrix, _ = lights.columns(mat.lamp, probes=True)
     assert probe_matrix.shape[1] < lights.count
     assert np.allclose(probe_matrix @ radiance, lights.probe_matrix() @ mat.lamp, rtol=1e-4, atol=1e-6)
     assert np.allclose(voxel_matrix @ radiance, lights.voxel_irradiance @ mat.lamp, rtol=1e-4, atol=1e-6)
+
+
+def test_the_indirect_light_never_makes_the_lamps_probe_matrix():
+    """The renderer shades the lamps itself: its probes (include_emitted=False) need no lamp SH at the
+    probes, the costliest part of the lamp paths, so a lamp drag does not pay for it."""
+    physical, _ = solver(lit_room())
+    physical.probe_grid(include_emitted=False)
+    assert "patch" not in physical.lights._probes
+    physical.probe_grid(include_emitted=True)
+    assert "patch" in physical.lights._probes

@@ -56,16 +56,19 @@ class LightPaths:
     def count(self) -> int:
         return self.patch_of_sample.shape[0]
 
-    def columns(self, patch_radiance: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(voxel matrix, probe matrix, radiance per column): per lamp when every patch of each lamp
-        has the same radiance, else per patch."""
+    def columns(self, patch_radiance: np.ndarray, probes: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(matrix, radiance per column): the voxels' (or with `probes` the probes') matrix per lamp when
+        every patch of each lamp has the same radiance, else per patch."""
         lamps = self.lamp_voxel_irradiance.shape[1]
         first = np.zeros(lamps, np.int64)
         first[self.lamp_of_patch[::-1]] = np.arange(self.count)[::-1]
         radiance = patch_radiance[first]
-        if np.array_equal(patch_radiance, radiance[self.lamp_of_patch]):
-            return self.lamp_voxel_irradiance, self.probe_matrix(per_lamp=True), radiance
-        return self.voxel_irradiance, self.probe_matrix(per_lamp=False), patch_radiance
+        per_lamp = np.array_equal(patch_radiance, radiance[self.lamp_of_patch])
+        if probes:
+            return self.probe_matrix(per_lamp), radiance if per_lamp else patch_radiance
+        if per_lamp:
+            return self.lamp_voxel_irradiance, radiance
+        return self.voxel_irradiance, patch_radiance
 
     def probe_matrix(self, per_lamp: bool = False) -> np.ndarray:
         """(P * 9, U) float32 incident-radiance SH at each probe per unit radiance of each patch, or

@@ -82,7 +82,7 @@ class Lighting:
 
 def direct_irradiance(lights: LightPaths, sun: SunPaths, mat: Materials) -> np.ndarray:
     """(K, 3) irradiance straight from the lamps and the sun."""
-    voxel_matrix, _, radiance = lights.columns(mat.lamp)
+    voxel_matrix, radiance = lights.columns(mat.lamp)
     direct = dense_times(voxel_matrix, radiance)
     return direct + sun.voxel_cosine[:, None] * mat.sun[None].astype(np.float32)
 
@@ -164,7 +164,7 @@ def direct_sh(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materi
     p = len(geometry.probe_points)
     out = np.zeros((p, 9, 3), np.float32)
     if lights.count:
-        _, probe_matrix, radiance = lights.columns(mat.lamp)
+        probe_matrix, radiance = lights.columns(mat.lamp, probes=True)
         out += dense_times(probe_matrix, radiance).reshape(p, 9, 3)
     if sun.direction is not None and np.any(mat.sun > 0):
         out += sun.probe_visible[:, None, None] * sh.project_delta(sun.direction, mat.sun)[None].astype(np.float32)
