@@ -215,18 +215,25 @@ def _dense_times(matrix, values):
     return out
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _row(indptr, indices, data, values, i):
+    """Row i of a CSR matrix times (K, 3) values: what receiver i's gather rays find."""
+    a = b = c = 0.0
+    for e in range(indptr[i], indptr[i + 1]):
+        j, w = indices[e], data[e]
+        a += w * values[j, 0]
+        b += w * values[j, 1]
+        c += w * values[j, 2]
+    return a, b, c
+
+
 @numba.njit(cache=True, nogil=True)
 def _gauss_seidel_sweep(indptr, indices, data, first, albedo, values):
     """One sweep of R = R_0 + albedo * T R in voxel order, each row reading the rows before it as they
     are after this sweep (a new array: the caller keeps the old one to measure the change)."""
     out = values.copy()
     for i in range(len(indptr) - 1):
-        a = b = c = 0.0
-        for e in range(indptr[i], indptr[i + 1]):
-            j, w = indices[e], data[e]
-            a += w * out[j, 0]
-            b += w * out[j, 1]
-            c += w * out[j, 2]
+        a, b, c = _row(indptr, indices, data, out, i)
         out[i, 0] = first[i, 0] + albedo[i, 0] * a
         out[i, 1] = first[i, 1] + albedo[i, 1] * b
         out[i, 2] = first[i, 2] + albedo[i, 2] * c
@@ -238,12 +245,7 @@ def _jacobi_sweep(indptr, indices, data, first, albedo, values):
     """One sweep, R_0 + albedo * T R, every row from the previous R: one more bounce (eq. 30)."""
     out = np.empty((len(indptr) - 1, 3), np.float32)
     for i in numba.prange(len(indptr) - 1):
-        a = b = c = 0.0
-        for e in range(indptr[i], indptr[i + 1]):
-            j, w = indices[e], data[e]
-            a += w * values[j, 0]
-            b += w * values[j, 1]
-            c += w * values[j, 2]
+        a, b, c = _row(indptr, indices, data, values, i)
         out[i, 0] = first[i, 0] + albedo[i, 0] * a
         out[i, 1] = first[i, 1] + albedo[i, 1] * b
         out[i, 2] = first[i, 2] + albedo[i, 2] * c
@@ -254,12 +256,7 @@ def _jacobi_sweep(indptr, indices, data, first, albedo, values):
 def _csr_times(indptr, indices, data, values):
     out = np.empty((len(indptr) - 1, 3), np.float32)
     for i in numba.prange(len(indptr) - 1):
-        a = b = c = 0.0
-        for e in range(indptr[i], indptr[i + 1]):
-            j, w = indices[e], data[e]
-            a += w * values[j, 0]
-            b += w * values[j, 1]
-            c += w * values[j, 2]
+        a, b, c = _row(indptr, indices, data, values, i)
         out[i, 0], out[i, 1], out[i, 2] = a, b, c
     return out
 
