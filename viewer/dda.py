@@ -19,8 +19,6 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from viewer.voxels import VoxelGrid
-
 MISS = -1
 """The ray left the grid (or reached the end of its segment) without crossing a surface."""
 BACKFACE = -2

@@ -146,8 +146,7 @@ class PhysicalGI:
         clock = time.perf_counter()
         wanted = geometry_settings(self.settings)
         found, lights, sun, ran = self.geometry, self.lights, self.sun, []
-        lamp_moved_only = stale_geometry and found is not None and found.faces.shape[1] == len(scene.faces)
-        if found is None or (found.key != geometry.scene_key(scene, wanted) and not lamp_moved_only):
+        if not self.geometry_fits(scene, stale_geometry):
             voxelization = voxels.voxelize_with_faces(scene, wanted.voxels, wanted.normal_mode)
             now = time.perf_counter()
             timings.stages["voxelize"] = timings.stages.get("voxelize", 0.0) + now - clock
@@ -166,14 +165,20 @@ class PhysicalGI:
 
     def needs_tracing(self, scene: Scene, stale_geometry: bool = False) -> bool:
         """Whether `scene` needs more than a relight (cheap to ask: it hashes the triangles)."""
-        g = self.geometry
-        if g is None or self.lights is None or self.sun is None:
+        if self.lights is None or self.sun is None or not self.geometry_fits(scene, stale_geometry):
             return True
-        if g.key != geometry.scene_key(scene, geometry_settings(self.settings)) and not (
-                stale_geometry and g.faces.shape[1] == len(scene.faces)):
-            return True
-        return (self.lights.key != lightpaths.lights_key(scene, g)
+        return (self.lights.key != lightpaths.lights_key(scene, self.geometry)
                 or not _same_direction(self.sun.direction, None if scene.sun is None else scene.sun.direction))
+
+    def geometry_fits(self, scene: Scene, stale_geometry: bool = False) -> bool:
+        """Whether the traced geometry serves `scene`: it is the scene's own, or (with `stale_geometry`)
+        the scene differs only where faces moved, as when a lamp is dragged."""
+        g = self.geometry
+        if g is None:
+            return False
+        if g.key == geometry.scene_key(scene, geometry_settings(self.settings)):
+            return True
+        return stale_geometry and g.faces.shape[1] == len(scene.faces)
 
     def install(self, prepared: "Prepared") -> None:
         if prepared.geometry is not self.geometry:

@@ -39,7 +39,7 @@ class ComputeRelight:
             return
         self.release()
         t = geometry.transport
-        k, (p, d) = geometry.voxels.count, geometry.probe_hits.shape
+        k, p = geometry.voxels.count, len(geometry.probe_hits)
         ctx = self.ctx
         self.buffers = {
             "row_start": ctx.buffer(t.indptr.astype(np.int32).tobytes()),

@@ -103,7 +103,7 @@ class RelightSource:
             self._new_solver(settings)
         if self.backend == "gpu" and not self.gi.needs_tracing(scene, stale_geometry=True):
             grid = self._relight_here(request)
-            self._exact_later = request if self.gi.needs_tracing(scene) else None
+            self._exact_later = None if self.gi.geometry_fits(scene) else request
             return grid
         self._start(request, stale_geometry=True)
         return None
@@ -150,14 +150,8 @@ class RelightSource:
 
         self._working_on = request
         self.work = BackgroundTask("trace" if not cpu else "relight", work)
-        if stale_geometry and gi.geometry is not None and gi.geometry.faces.shape[1] == len(scene.faces):
-            self._exact_later = request if gi.geometry.key != self._geometry_key(scene) else None
-
-    def _geometry_key(self, scene: Scene) -> str:
-        from viewer.geometry import scene_key
-        from viewer.gi import geometry_settings
-
-        return scene_key(scene, geometry_settings(self.gi.settings))
+        if stale_geometry and gi.geometry_fits(scene, stale_geometry=True):
+            self._exact_later = None if gi.geometry_fits(scene) else request
 
     def _after_tracing(self, request) -> ProbeGrid | None:
         """GPU: install what the worker traced and relight here (a new geometry's first bounce first)."""
