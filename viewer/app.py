@@ -1,7 +1,7 @@
 """`python -m viewer [view] [SCENE]`: the interactive viewer (moderngl-window, glfw, imgui).
 
 Without a display (no DISPLAY / WAYLAND_DISPLAY), or when no window can be opened, it says so and
-renders the scene headless through EGL to `<scene>.png` instead.
+renders the scene headless through EGL to `<scene>.png` instead (viewer.capture).
 
 The window is a moderngl-window `WindowConfig` (`ViewerApp`, its class attributes are its settings) on
 the glfw backend: the pyglet backend never delivers file drops on X11 (../shared/DESIGN.md). The pieces
@@ -24,70 +24,14 @@ from types import SimpleNamespace
 
 import moderngl_window as mglw
 
+from viewer.errors import exit_status
 from viewer.gi import GISettings
-
-VIEW_CHOICES = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
-GI_CHOICES = ("off", "compute", "solver", "neural")
+from viewer.ui.options import add_arguments, options_from, parse_size
 
 
 def log(message: str) -> None:
     """One line on stderr; tests and users read these (`viewer: ...`)."""
     print(f"viewer: {message}", file=sys.stderr, flush=True)
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The viewer's own flags (cheap to call: no GL or imgui import)."""
-    d = GISettings()
-    parser.add_argument("--gi", choices=GI_CHOICES, default="compute",
-                        help="indirect light source at start (compute: the compute-shader solver)")
-    parser.add_argument("--view", choices=VIEW_CHOICES, default="final", help="what the view shows at start")
-    parser.add_argument("--size", default="1280x720", help="window size WxH")
-    parser.add_argument("--voxels", type=int, default=d.voxels, help="voxels per axis")
-    parser.add_argument("--probes", type=int, default=d.probes, help="probes per axis")
-    parser.add_argument("--bounces", type=int, default=d.bounces, help="most bounces summed")
-    parser.add_argument("--kernel", choices=("physical", "paper"), default=d.kernel)
-    parser.add_argument("--directions", type=int, default=d.directions, help="directions gathered per probe")
-    parser.add_argument("--screenshot", help="save the rendered image (no panels) here once it has settled "
-                                             "(GI done, full resolution), then quit")
-    parser.add_argument("--screenshot-window", help="with --screenshot: also save the whole window, panels "
-                                                    "included")
-    parser.add_argument("--frames", type=int, help="quit after this many frames")
-    parser.add_argument("--quit-after", type=float, help="quit after this many seconds")
-    parser.add_argument("--hide-panel", action="store_true", help="start with the settings panel hidden (Tab)")
-    parser.add_argument("--bench", type=int, metavar="FRAMES",
-                        help="once the picture has settled (GI done), draw the scene this many more frames at "
-                             "full resolution, print their CPU and GPU ms, and quit")
-    parser.add_argument("--redraw-always", action="store_true",
-                        help="draw the scene every frame, not only when it changes (for timing)")
-    parser.add_argument("--stats", help="write a JSON summary (frame times, scene, camera, messages) here at "
-                                        "exit and after every screenshot")
-    parser.add_argument("--shader-dir", help="load shaders from this folder instead of shaders/")
-    parser.add_argument("--resources", nargs="?", const="held", choices=("held", "resident"),
-                        help="log memory and live GL objects whenever the picture has settled after the start, "
-                             "a load or a failed load (python -m viewer.bench.soak reads them): resident memory "
-                             "after the C heap's free memory is handed back (held, the default) or as it is")
-
-
-def options_from(args) -> SimpleNamespace:
-    """The command line's namespace with every viewer flag present (defaults for missing ones)."""
-    parser = argparse.ArgumentParser(add_help=False)
-    parser.add_argument("scene", nargs="?", default="cornell")
-    add_arguments(parser)
-    options = vars(parser.parse_args([]))
-    options.update({k: v for k, v in vars(args).items() if v is not None})
-    return SimpleNamespace(**options)
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    from viewer.cli import InputError
-
-    try:
-        width, height = (int(v) for v in str(text).lower().split("x"))
-    except ValueError:
-        raise InputError(f"--size {text!r}: expected WxH, e.g. 1280x720") from None
-    if not (64 <= width <= 16384 and 64 <= height <= 16384):
-        raise InputError(f"--size {text!r}: each side must be 64..16384")
-    return width, height
 
 
 def run(args) -> int:
@@ -105,7 +49,7 @@ def run(args) -> int:
         scene = baked_files.load_scene(baked, options.scene)
         log(f"showing the probes baked in {options.scene} on {baked_files.scene_source(baked, options.scene)}")
     else:
-        scene = load(options.scene)   # a bad scene fails here: one line and exit status 2 (viewer.cli)
+        scene = load(options.scene)   # a bad scene fails here: one line and exit status 2 (viewer.errors)
     try:
         window = open_window(options)
     except Exception as exc:  # no X server behind DISPLAY, no GL 4.3, glfw missing ...
@@ -136,7 +80,7 @@ def open_window(options):
 
 def render_headless(options) -> int:
     """What the viewer does without a window: a PNG of the scene through EGL (`python -m viewer capture`)."""
-    from viewer.cli import run_capture
+    from viewer.capture import run_capture
 
     out = getattr(options, "screenshot", None) or f"{Path(str(options.scene)).stem}.png"
     gi = options.gi if options.gi in ("off", "solver", "compute") else "compute"
@@ -530,21 +474,13 @@ class ViewerApp(mglw.WindowConfig):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """`python -m viewer.app [SCENE] [flags]`: the viewer with all of its flags (`python -m viewer view`
-    passes only the scene until viewer/cli.py adds them). Exit status as in viewer.cli."""
-    from viewer.baked import BakedError
-    from viewer.cli import InputError
-    from viewer.scene import SceneError
-
+    """`python -m viewer.app [SCENE] [flags]`: the viewer alone, as `python -m viewer view` runs it; bad
+    input exits with status 2 in one line (viewer.errors), a crash shows its traceback."""
     parser = argparse.ArgumentParser(prog="python -m viewer.app", description="The interactive GI viewer.")
     parser.add_argument("scene", nargs="?", default="cornell", help="a built-in scene name or a scene file")
     add_arguments(parser)
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    try:
-        return run(args)
-    except (SceneError, InputError, BakedError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    return exit_status(lambda: run(args), internal_errors=False)
 
 
 if __name__ == "__main__":

@@ -6,29 +6,21 @@ Exit status 0 on success, 2 for bad input (one line on stderr, no traceback), 1 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from viewer.baked import BakedError
+from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
+from viewer.capture import run_capture
+from viewer.errors import ArgumentParser, InputError, exit_status
 from viewer.gi import GISettings, Timings
-from viewer.scene import SceneError
+from viewer.ui.options import add_arguments as view_arguments  # no GL or imgui import
 
 
 VIEWS = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
 """The renderer's view modes (viewer.gpu.renderer.VIEWS; listed here so parsing needs no GL)."""
-
-
-class InputError(Exception):
-    """Bad input from the user: reported in one line with exit status 2."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise InputError(f"{self.prog}: {message}")
 
 
 def _gi_arguments(p: argparse.ArgumentParser):
@@ -58,14 +50,12 @@ def gi_settings(args) -> GISettings:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="python -m viewer", description="Real-time diffuse global illumination viewer.")
-    sub = parser.add_subparsers(dest="command", parser_class=_Parser)
+    parser = ArgumentParser(prog="python -m viewer", description="Real-time diffuse global illumination viewer.")
+    sub = parser.add_subparsers(dest="command", parser_class=ArgumentParser)
 
     view = sub.add_parser("view", help="the interactive viewer (default)")
     view.add_argument("scene", nargs="?", default="cornell")
-    from viewer.app import add_arguments  # the viewer's own flags; no GL import
-
-    add_arguments(view)
+    view_arguments(view)
 
     sample = sub.add_parser("sample", help="incident-radiance SH at points, as the renderer sees it")
     sample.add_argument("scene", help="a built-in scene name or a scene file (.obj .glb .gltf .ply)")
@@ -101,8 +91,6 @@ def build_parser() -> argparse.ArgumentParser:
     _gi_arguments(bake)
 
     bench = sub.add_parser("bench", help="every GI method's time, memory and error against Mitsuba: CSV, charts")
-    from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
-
     bench_arguments(bench)
     return parser
 
@@ -111,21 +99,12 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] not in ("view", "sample", "capture", "bake", "bench", "-h", "--help"):
         argv = ["view", *argv]
-    try:
-        args = build_parser().parse_args(argv)
-        return {"view": run_view, "sample": run_sample, "capture": run_capture,
-                "bench": run_bench, "bake": run_bake}[args.command](args)
-    except (InputError, SceneError, BakedError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
-    except Exception as exc:  # an internal error: one line, and the traceback only when asked for
-        if os.environ.get("VIEWER_DEBUG"):
-            raise
-        print(f"internal error: {type(exc).__name__}: {exc} (set VIEWER_DEBUG=1 for a traceback)",
-              file=sys.stderr)
-        return 1
+    return exit_status(lambda: run_command(build_parser().parse_args(argv)))
+
+
+def run_command(args) -> int:
+    return {"view": run_view, "sample": run_sample, "capture": run_capture,
+            "bench": run_bench, "bake": run_bake}[args.command](args)
 
 
 def load_points(path: str) -> np.ndarray:
@@ -195,16 +174,6 @@ def neural_field(args):
         raise InputError(f"--method neural: {exc}") from None
 
 
-def run_capture(args) -> int:
-    from viewer.gpu import offscreen
-
-    probe_source = baked_probe_source(args)
-    try:
-        return offscreen.run_capture(args, probe_source)
-    except offscreen.CaptureError as exc:
-        raise InputError(str(exc)) from None
-
-
 def run_bench(args) -> int:
     from viewer.bench import run
 
@@ -243,22 +212,3 @@ def run_bake(args) -> int:
     print(f"bake: {args.out}{' and ' + args.dds if args.dds else ''} ({grid.radiance.resolution}^3 probes); "
           f"{timings}", file=sys.stderr)
     return 0
-
-
-def baked_probe_source(args):
-    """For `capture FILE.npz` (and the headless `gi-viewer FILE.npz`): point args at the scene the grid was
-    baked from, with its sun, and return a probe source that hands over the baked indirect light whatever
-    `--gi` names (`--gi off` still shows direct light only). None when args.scene is not a baked file."""
-    from viewer import baked
-
-    if not baked.is_baked_file(args.scene):
-        return None
-    if getattr(args, "sun", None):
-        raise InputError("--sun: a baked grid keeps the sun it was baked with")
-    grid, path = baked.read_npz(args.scene), args.scene
-    args.scene, args.sun = baked.scene_source(grid, path), grid.sun
-
-    def probe_source(scene, gi, ctx):
-        print(f"capture: the probes baked in {path} stand in for --gi {gi}", file=sys.stderr)
-        return grid.indirect
-    return probe_source

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer.errors import ArgumentParser, InputError, exit_status
+
 ROOT = Path(__file__).resolve().parents[2]
 SLOW_SECONDS = 10.0
 """A method whose first run takes longer than this runs once; faster ones run three times (median). On an
@@ -80,7 +82,6 @@ class Paths:
 def scene_sources(names: list[str], quick: bool) -> list[str]:
     """Scene arguments -> sources for viewer.scene.load (a folder gives its scene files, sorted)."""
     from viewer.bench.accuracy import PUBLIC_BOX
-    from viewer.cli import InputError
     from viewer.scene import SUPPORTED_SUFFIXES, builtin_names
 
     if not names:
@@ -250,8 +251,6 @@ def run(args) -> int:
             print(f"{name:40s} {m.memory_bytes / 1024:10.1f} KiB  {m.about}")
         return 0
     if args.stability and (args.quick or args.out):
-        from viewer.cli import InputError
-
         raise InputError("--stability writes docs/STABILITY.md: not with --quick or --out")
     out = args.out or (ROOT / "out" / "bench-quick" if args.quick else ROOT / "docs")
     paths = Paths.under(Path(out))
@@ -282,10 +281,11 @@ def run(args) -> int:
 
 
 def main(argv=None) -> int:
-    """`python -m viewer.bench.run ...` is `python -m viewer bench ...` (one place parses the command line)."""
-    from viewer import cli
-
-    return cli.main(["bench", *(sys.argv[1:] if argv is None else argv)])
+    """`python -m viewer.bench.run ...` is `python -m viewer bench ...`: the same flags (add_arguments) and
+    exit statuses (viewer.errors)."""
+    parser = ArgumentParser(prog="python -m viewer bench")
+    add_arguments(parser)
+    return exit_status(lambda: run(parser.parse_args(sys.argv[1:] if argv is None else argv)))
 
 
 if __name__ == "__main__":

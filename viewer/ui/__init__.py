@@ -1,5 +1,6 @@
 """The interactive window's pieces (viewer/app.py puts them together):
 
+options          the viewer's command-line flags (no GL: viewer/cli.py adds them to `view`)
 imgui_renderer   imgui draw data -> moderngl (imgui >= 1.92 texture protocol)
 imgui_input      window events -> imgui's input queue
 controls         input imgui does not want -> camera gestures and hotkeys

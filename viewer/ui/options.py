@@ -1,0 +1,68 @@
+"""The viewer's command-line flags (`python -m viewer [view] ...`, `python -m viewer.app ...`), their
+defaults, and the window size they give. Cheap to import: no GL or imgui (viewer/cli.py adds these flags
+to its `view` command)."""
+
+from __future__ import annotations
+
+import argparse
+from types import SimpleNamespace
+
+from viewer.errors import InputError
+from viewer.gi import GISettings
+
+VIEW_CHOICES = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
+GI_CHOICES = ("off", "compute", "solver", "neural")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The viewer's own flags (cheap to call: no GL or imgui import)."""
+    d = GISettings()
+    parser.add_argument("--gi", choices=GI_CHOICES, default="compute",
+                        help="indirect light source at start (compute: the compute-shader solver)")
+    parser.add_argument("--view", choices=VIEW_CHOICES, default="final", help="what the view shows at start")
+    parser.add_argument("--size", default="1280x720", help="window size WxH")
+    parser.add_argument("--voxels", type=int, default=d.voxels, help="voxels per axis")
+    parser.add_argument("--probes", type=int, default=d.probes, help="probes per axis")
+    parser.add_argument("--bounces", type=int, default=d.bounces, help="most bounces summed")
+    parser.add_argument("--kernel", choices=("physical", "paper"), default=d.kernel)
+    parser.add_argument("--directions", type=int, default=d.directions, help="directions gathered per probe")
+    parser.add_argument("--screenshot", help="save the rendered image (no panels) here once it has settled "
+                                             "(GI done, full resolution), then quit")
+    parser.add_argument("--screenshot-window", help="with --screenshot: also save the whole window, panels "
+                                                    "included")
+    parser.add_argument("--frames", type=int, help="quit after this many frames")
+    parser.add_argument("--quit-after", type=float, help="quit after this many seconds")
+    parser.add_argument("--hide-panel", action="store_true", help="start with the settings panel hidden (Tab)")
+    parser.add_argument("--bench", type=int, metavar="FRAMES",
+                        help="once the picture has settled (GI done), draw the scene this many more frames at "
+                             "full resolution, print their CPU and GPU ms, and quit")
+    parser.add_argument("--redraw-always", action="store_true",
+                        help="draw the scene every frame, not only when it changes (for timing)")
+    parser.add_argument("--stats", help="write a JSON summary (frame times, scene, camera, messages) here at "
+                                        "exit and after every screenshot")
+    parser.add_argument("--shader-dir", help="load shaders from this folder instead of shaders/")
+    parser.add_argument("--resources", nargs="?", const="held", choices=("held", "resident"),
+                        help="log memory and live GL objects whenever the picture has settled after the start, "
+                             "a load or a failed load (python -m viewer.bench.soak reads them): resident memory "
+                             "after the C heap's free memory is handed back (held, the default) or as it is")
+
+
+def options_from(args) -> SimpleNamespace:
+    """The command line's namespace with every viewer flag present (defaults for missing ones)."""
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("scene", nargs="?", default="cornell")
+    add_arguments(parser)
+    options = vars(parser.parse_args([]))
+    options.update({k: v for k, v in vars(args).items() if v is not None})
+    return SimpleNamespace(**options)
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """--size WxH -> (width, height); anything else is bad input."""
+    try:
+        width, height = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise InputError(f"--size {text!r}: expected WxH, e.g. 1280x720") from None
+    if not (64 <= width <= 16384 and 64 <= height <= 16384):
+        raise InputError(f"--size {text!r}: each side must be 64..16384")
+    return width, height
