@@ -173,3 +173,60 @@ def test_capture_with_compute_gi_is_brighter_in_shadow_than_gi_off(tmp_path):
     # the ceiling gets no direct light: only GI lights it
     ceiling = (slice(2, 8), slice(20, 44))
     assert images["compute"][ceiling].mean() > images["off"][ceiling].mean() + 10
+
+
+# ---- the command line is the top floor --------------------------------------------------------------------
+
+def imported_modules(source: str, package: str) -> set[str]:
+    """The modules a file's source imports anywhere, inside functions too: `from viewer import cli` counts
+    as viewer.cli, relative imports are resolved against package, import_module("...") is an import."""
+    import ast
+
+    found = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")[:len(package.split(".")) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            found |= {base} | {f"{base}.{alias.name}" for alias in node.names}
+        elif (isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", None))
+              in ("import_module", "__import__") and node.args and isinstance(node.args[0], ast.Constant)):
+            found.add(str(node.args[0].value))
+    return found
+
+
+def viewer_imports() -> dict[str, set[str]]:
+    """Every module of viewer/ -> the modules it imports."""
+    modules = {}
+    for path in sorted((ROOT / "viewer").rglob("*.py")):
+        name = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        modules[name.removesuffix(".__init__")] = imported_modules(path.read_text(), package)
+    return modules
+
+
+def test_the_import_walk_sees_imports_inside_functions():
+    source = "def run():\n    from viewer import cli\n    from .cli import InputError\n"
+    assert {"viewer.cli", "viewer.cli.InputError"} <= imported_modules(source, "viewer")
+    assert "viewer.cli" in imported_modules("importlib.import_module('viewer.cli')", "viewer")
+
+
+def test_nothing_below_the_command_line_imports_it():
+    """viewer/cli.py imports the commands (the viewer, the benchmark, the capture); none of them imports it
+    back: what they share with it (InputError, run_capture) lives below, in viewer.errors and viewer.capture."""
+    modules = viewer_imports()
+    importers = {name for name, imports in modules.items()
+                 if any(m == "viewer.cli" or m.startswith("viewer.cli.") for m in imports)}
+    assert importers == {"viewer.__main__"}
+    assert {"viewer.ui.options", "viewer.bench.run", "viewer.capture", "viewer.errors"} <= modules["viewer.cli"]
+
+
+def test_the_viewer_and_the_benchmark_do_not_import_each_others_command_line():
+    modules = viewer_imports()
+    viewer_side, bench_side = ("viewer.app", "viewer.ui.options"), ("viewer.bench.run",)
+    for module, other_side in [*((m, bench_side) for m in viewer_side), *((m, viewer_side) for m in bench_side)]:
+        crossing = {m for m in modules[module] if m.startswith(other_side)}
+        assert not crossing, f"{module} imports {crossing}"
