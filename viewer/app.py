@@ -5,15 +5,14 @@ renders the scene headless through EGL to `<scene>.png` instead (viewer.capture)
 
 The window is a moderngl-window `WindowConfig` (`ViewerApp`, its class attributes are its settings) on
 the glfw backend: the pyglet backend never delivers file drops on X11 (../shared/DESIGN.md). The pieces
-live in viewer/ui/: the imgui renderer and input, panels, frame-time graph, camera controller, the 3D
-viewport, background loading and the GI sources.
+live in viewer/ui/: its flags (options), the imgui renderer and input, panels, frame-time graph, camera
+controller, the 3D viewport, background loading, the GI sources, and what it does on its own for tests
+and benchmarks (unattended).
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
 import logging
 import os
 import sys
@@ -135,7 +134,6 @@ class ViewerApp(mglw.WindowConfig):
     def __init__(self, scene=None, baked=None, **kwargs):
         super().__init__(**kwargs)
         import glfw
-        from imgui_bundle import imgui
 
         from viewer.gpu.context import describe
         from viewer.gpu.programs import SHADERS
@@ -145,21 +143,19 @@ class ViewerApp(mglw.WindowConfig):
         from viewer.ui.frame_graph import FrameTimes
         from viewer.ui.gi_sources import GIController
         from viewer.ui.imgui_input import ImguiInput
-        from viewer.ui.imgui_renderer import ImguiRenderer
+        from viewer.ui.imgui_renderer import ImguiRenderer, create_imgui_context
         from viewer.ui.panels import Message, ViewOptions
         from viewer.ui.session import Session
+        from viewer.ui.unattended import UnattendedRun
         from viewer.ui.viewport import Viewport
 
         self.options = options = self.argv or options_from(SimpleNamespace())
         self.gl_description = describe(self.ctx)
-        self._resources_key = None   # (loads, load errors) of the last --resources line
         if options.resources:
             from viewer.gpu.gl_objects import watch
 
             watch(self.ctx)   # GL objects freed without release() are counted, not lost
-        imgui.create_context()
-        imgui.get_io().set_ini_filename(None)   # no imgui.ini in the user's folder
-        self._load_font()
+        create_imgui_context(self.font_size)
         self.imgui_renderer = ImguiRenderer(self.ctx)
         self.imgui_input = ImguiInput(self.wnd.size, self.wnd.buffer_size)
         keys = self.wnd.keys
@@ -190,20 +186,11 @@ class ViewerApp(mglw.WindowConfig):
                                 show_panel=not options.hide_panel)
         self.shader_error: str | None = None
         self._screenshot_requested: str | None = None   # "view" (S) or "window" (shift+S)
-        self._screenshot_taken = False
-        self._bench_from: int | None = None   # frame number the --bench frames started at
         self.frames = 0
-        self._started = self._frame_started = time.perf_counter()
+        self._frame_started = time.perf_counter()
+        self.unattended = UnattendedRun(options, self.ctx, self.session, self.viewport, self.times, self.view, log)
         self._drop_callback = glfw.set_drop_callback(self.wnd._window, self._glfw_drop)
         self._x11_window = glfw.get_x11_window(self.wnd._window) if sys.platform.startswith("linux") else 0
-
-    def _load_font(self) -> None:
-        from imgui_bundle import imgui
-        import imgui_bundle
-
-        font = Path(imgui_bundle.__file__).parent / "assets" / "fonts" / "DroidSans.ttf"
-        if font.is_file():
-            imgui.get_io().fonts.add_font_from_file_ttf(str(font), self.font_size)
 
     # ---- the frame ------------------------------------------------------------------------------------
     def on_render(self, time_now: float, frame_time: float) -> None:
@@ -222,7 +209,7 @@ class ViewerApp(mglw.WindowConfig):
             if self._screenshot_requested == "view":
                 self._screenshot_requested = None
                 self._save(self.viewport.read(screen), self._screenshot_path())
-            settled_shot = self._settled_screenshot_due()
+            settled_shot = self.unattended.screenshot_due(self.frames)
             if settled_shot:
                 self._save(self.viewport.read(screen), self.options.screenshot)
             if screen.viewport != full:   # the panel's strip: nothing of the scene is drawn there
@@ -241,9 +228,8 @@ class ViewerApp(mglw.WindowConfig):
             width, height = self.wnd.buffer_size
             log(f"ready: window 0x{self._x11_window:x}, {width}x{height}, {self.gl_description}, "
                 f"scene {session.name!r}")
-        self._check_quit(settled_shot)
-        self._bench()
-        self._log_resources()
+        if self.unattended.after_frame(self.frames, settled_shot):
+            self.wnd.close()
         self._throttle(drew)
 
     def _view_rect(self) -> tuple[int, int, int, int]:
@@ -262,45 +248,6 @@ class ViewerApp(mglw.WindowConfig):
 
         gi = self.session.gi
         return self.controls.moving or imgui.is_any_item_active() or (gi.source == "compute" and gi.busy)
-
-    def _settled_screenshot_due(self) -> bool:
-        return (bool(self.options.screenshot) and not self._screenshot_taken and self.frames >= 2
-                and self.viewport.settled and not self.session.busy)
-
-    def _check_quit(self, settled_shot: bool) -> None:
-        o = self.options
-        if settled_shot:
-            self._screenshot_taken = True
-        if (settled_shot or (o.frames is not None and self.frames >= o.frames)
-                or (o.quit_after is not None and time.perf_counter() - self._started >= o.quit_after)):
-            self.wnd.close()
-
-    def _bench(self) -> None:
-        """--bench N: when settled, time N full redraws (the summary printed at exit), then quit."""
-        count = self.options.bench
-        if not count:
-            return
-        if self._bench_from is None:
-            if self.frames >= 2 and self.viewport.settled and not self.session.busy:
-                self._bench_from = self.frames
-                self.view.redraw_always = True
-                self.times.restart_summary()
-                log(f"bench: settled after {time.perf_counter() - self._started:.1f} s; timing {count} redraws")
-        elif self.frames - self._bench_from >= count + 3:   # + the GPU results still in flight
-            self.wnd.close()
-
-    def _log_resources(self) -> None:
-        """--resources: one line of resident memory and live GL objects once the picture has settled
-        after the start, a load or a failed load."""
-        key = (self.session.loads, self.session.load_errors)
-        if (not self.options.resources or key == self._resources_key or self.session.busy
-                or not self.viewport.settled):
-            return
-        from viewer.memory import Usage
-
-        self._resources_key = key
-        usage = Usage.measure(self.ctx, trim=self.options.resources == "held")
-        log(f"resources: {usage}, loads {key[0]}, load errors {key[1]}")
 
     def _throttle(self, drew: bool) -> None:
         """Cap the frame rate: llvmpipe and the solvers share the same few cores. When nothing moves and
@@ -323,37 +270,14 @@ class ViewerApp(mglw.WindowConfig):
     def _draw_ui(self, frame_time: float) -> None:
         from imgui_bundle import imgui
 
-        from viewer.ui import panels
+        from viewer.ui.panels import draw_windows
 
-        s = self.session
         imgui.get_io().delta_time = max(frame_time, 1e-4)
         imgui.new_frame()
-        gi_line = s.gi.status()[0]
-        panels.settings_panel(self.view.show_panel, {
-            "Scene": (self._scene_section, True),
-            "Global illumination": (lambda: panels.gi_section(s.gi), True),
-            "Light": (lambda: panels.light_section(s.edits, s.scene_size), True),
-            "Materials": (lambda: panels.materials_section(s.edits), False),
-            "View": (lambda: panels.view_section(self.view, self.renderer.settings, self.viewport), True),
-        })
-        panels.frame_time_overlay(self.times, gi_line, self.view.show_frame_times)
-        panels.help_window(self.view)
-        panels.messages_window(s.messages, self.shader_error or self.viewport.error)
-        panels.loading_overlay(s.loading)
+        draw_windows(self.session, self.view, self.renderer.settings, self.viewport, self.times,
+                     self.shader_error or self.viewport.error)
         imgui.render()
         self.imgui_renderer.render(imgui.get_draw_data(), self.wnd.fbo)
-
-    def _scene_section(self) -> None:
-        from imgui_bundle import imgui
-
-        from viewer.ui import panels
-
-        s = self.session
-        if panels.scene_section(s.name, len(s.scene.faces), s.edits, s.loading):
-            s.edits.reset()
-        imgui.same_line()
-        if imgui.button("Reset camera (Z)"):
-            s.camera.reset()
 
     # ---- actions --------------------------------------------------------------------------------------
     def _screenshot_path(self, suffix: str = "") -> Path:
@@ -378,8 +302,7 @@ class ViewerApp(mglw.WindowConfig):
             self.session.messages.append(Message(f"Cannot save {path}: {exc}", error=True))
             return
         self.session.messages.append(Message(f"Saved {path}"))
-        if self.options.stats:
-            self._write_stats()   # before the log line: whoever waits for it can read the state
+        self._write_stats()   # --stats: before the log line, so that whoever waits for it can read the state
         log(f"saved screenshot {os.path.abspath(path)}")
 
     def reload_shaders(self) -> None:
@@ -451,26 +374,10 @@ class ViewerApp(mglw.WindowConfig):
             f"{redraws.get('cpu_median_ms', nan):.1f} ms, GPU median {redraws.get('gpu_median_ms', nan):.1f} ms; "
             f"all frames: CPU median {every.get('cpu_median_ms', nan):.1f} ms, GPU median "
             f"{every.get('gpu_median_ms', nan):.1f} ms")
-        if self.options.stats:
-            self._write_stats()
+        self._write_stats()
 
     def _write_stats(self) -> None:
-        """The state a test or a benchmark wants to see, as JSON (`--stats FILE`)."""
-        redraws, every = self.times.summary(redrawn_only=True), self.times.summary()
-        s = self.session
-        camera = s.camera.camera()
-        stats = {
-            "scene": s.name, "source": s.source, "triangles": int(len(s.scene.faces)),
-            "groups": list(s.scene.groups), "loads": s.loads, "load_errors": s.load_errors,
-            "gi_source": s.gi.source, "gi_status": s.gi.status()[0], "view": self.view.view,
-            "gi_settings": dataclasses.asdict(s.gi.settings),
-            "camera": {"origin": list(camera.origin), "target": list(camera.target), "fov": camera.fov},
-            "frames": self.frames, "frame_times_redraws": redraws, "frame_times_all": every,
-            "window": list(self.wnd.buffer_size), "gl": self.gl_description,
-            "messages": [{"text": m.text, "error": m.error} for m in s.messages],
-            "shader_error": self.shader_error, "help_shown": self.view.show_help,
-        }
-        Path(self.options.stats).write_text(json.dumps(stats, indent=2))
+        self.unattended.write_stats(self.frames, self.wnd.buffer_size, self.gl_description, self.shader_error)
 
 
 def main(argv: list[str] | None = None) -> int:

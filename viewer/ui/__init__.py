@@ -12,4 +12,5 @@ gi_sources       off / compute solver / CPU solver / neural: restarts and hand-o
 background       threads and the CPU solver's worker process
 frame_graph      CPU and GPU frame times (GL timer queries) and their graph
 panels           the imgui windows
+unattended       --screenshot, --frames, --quit-after, --bench, --resources, --stats: the window on its own
 """

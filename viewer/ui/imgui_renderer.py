@@ -11,7 +11,9 @@ protocol is the one of imgui's `imgui_impl_opengl3.cpp`, `ImGui_ImplOpenGL3_Upda
 from __future__ import annotations
 
 import ctypes
+from pathlib import Path
 
+import imgui_bundle
 import moderngl
 import numpy as np
 from imgui_bundle import imgui
@@ -43,6 +45,16 @@ void main() {
 """
 
 TEXTURE_UNIT = 0
+
+
+def create_imgui_context(font_size: float) -> None:
+    """A new current imgui context: no imgui.ini in the user's folder, and imgui_bundle's DroidSans at
+    font_size (imgui's own font where the file is missing)."""
+    imgui.create_context()
+    imgui.get_io().set_ini_filename(None)
+    font = Path(imgui_bundle.__file__).parent / "assets" / "fonts" / "DroidSans.ttf"
+    if font.is_file():
+        imgui.get_io().fonts.add_font_from_file_ttf(str(font), font_size)
 
 
 class ImguiRenderer:

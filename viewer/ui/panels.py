@@ -290,3 +290,27 @@ def loading_overlay(task: BackgroundTask | None) -> None:
     # An indeterminate bar: a block sweeping across (the loader has no percentage to report).
     imgui.progress_bar(-1.0 * time.perf_counter(), imgui.ImVec2(260, 0), "")
     imgui.end()
+
+
+def draw_windows(session, view: ViewOptions, settings: RenderSettings, viewport, times: FrameTimes,
+                 shader_error: str | None) -> None:
+    """Every imgui window of a frame, wired to the session (viewer.ui.session: scene, edits, GI, camera)
+    and the view; between imgui.new_frame() and imgui.render()."""
+    def scene() -> None:
+        if scene_section(session.name, len(session.scene.faces), session.edits, session.loading):
+            session.edits.reset()
+        imgui.same_line()
+        if imgui.button("Reset camera (Z)"):
+            session.camera.reset()
+
+    settings_panel(view.show_panel, {
+        "Scene": (scene, True),
+        "Global illumination": (lambda: gi_section(session.gi), True),
+        "Light": (lambda: light_section(session.edits, session.scene_size), True),
+        "Materials": (lambda: materials_section(session.edits), False),
+        "View": (lambda: view_section(view, settings, viewport), True),
+    })
+    frame_time_overlay(times, session.gi.status()[0], view.show_frame_times)
+    help_window(view)
+    messages_window(session.messages, shader_error)
+    loading_overlay(session.loading)
