@@ -13,12 +13,11 @@
 // of a 2x2 block sums a different quarter of the emitter samples and writes the pieces that
 // interleave_resolve.glsl recombines: everything but the reflected direct light, the direct irradiance,
 // albedo / pi, and the surface's plane (inverse view depth and its screen-space gradient).
-// BAKED (1: direct irradiance read from the lightmaps of viewer/gpu/direct_bake.py). HALF_INDIRECT (1:
-// indirect irradiance upsampled from a half-resolution target, see indirect_half.glsl, with weights that
-// keep only texels on this fragment's plane). DISPLAY (1: write the sRGB-encoded display value, exposure
-// and tone curve applied as present.glsl does (display_value, tonemap.glsl, with its TONE_CURVE and RAW):
-// one pass into an 8-bit image instead of a float image and a full-screen tone-mapping pass, which cost
-// about a third of a frame on llvmpipe).
+// BAKED (1: the direct and indirect irradiance read from the lightmaps of viewer/gpu/direct_bake.py and
+// indirect_bake.py, one fetch each). DISPLAY (1: write
+// the sRGB-encoded display value, exposure and tone curve applied as present.glsl does (display_value,
+// tonemap.glsl, with its TONE_CURVE and RAW): one pass into an 8-bit image instead of a float image and
+// a full-screen tone-mapping pass, which cost about a third of a frame on llvmpipe).
 
 #define VIEW_FINAL 0
 #define VIEW_DIRECT 1
@@ -37,9 +36,6 @@
 #endif
 #ifndef BAKED
 #define BAKED 0
-#endif
-#ifndef HALF_INDIRECT
-#define HALF_INDIRECT 0
 #endif
 #ifndef DISPLAY
 #define DISPLAY 0
@@ -64,17 +60,10 @@ flat out vec3 v_emission;
 in vec2 in_lightmap;             // atlas coordinate of this corner
 out vec2 v_lightmap;
 #endif
-#if HALF_INDIRECT
-#include "octahedral.glsl"
-flat out uvec2 v_normal_keys;    // the octahedral codes of the front and back normals (indirect_half.glsl)
-#endif
 
 void main() {
 #if BAKED
     v_lightmap = in_lightmap;
-#endif
-#if HALF_INDIRECT
-    v_normal_keys = uvec2(octahedral_encode(in_normal), octahedral_encode(-in_normal));
 #endif
     v_position = in_position;
     v_normal = in_normal;
@@ -95,53 +84,9 @@ flat in vec3 v_albedo;
 flat in vec3 v_emission;
 #if BAKED
 in vec2 v_lightmap;
-uniform sampler2D lightmap;   // direct irradiance: front sides of the faces left, back sides right
+uniform sampler2D lightmap;            // direct irradiance: front sides of the faces left, back sides right
+uniform sampler2D indirect_lightmap;   // the probe grid's indirect irradiance, the same texels
 #endif
-#if HALF_INDIRECT
-flat in uvec2 v_normal_keys;
-uniform sampler2D half_irradiance;   // indirect irradiance at half resolution (indirect_half.glsl)
-uniform usampler2D half_plane;       // the plane key of each of its texels
-uniform float plane_tolerance;       // world distance off this fragment's plane that still counts as on it
-uniform float half_scale;            // the half target's size over the full target's (1/2 or 1/4)
-
-// Bilinear upsampling of the half-resolution indirect irradiance that leaves out the texels of other
-// planes (another facing normal, or off this fragment's plane by more than plane_tolerance), so no light
-// bleeds across geometric edges. Normals are compared by their octahedral codes (a plane's faces share
-// one normal, so one code). One gather reads the four planes; the filtering is then steered into
-// one hardware bilinear fetch by moving the sample point: the per-axis weights of the texels that remain
-// (exact when an edge splits the footprint 2 + 2, a small leak of the far texel when it splits 3 + 1).
-// Where no texel is on the plane, the plain bilinear filter is used.
-vec3 upsampled_indirect(vec3 p, vec3 n, uint normal_key) {
-    vec2 size = vec2(textureSize(half_plane, 0));
-    vec2 u = gl_FragCoord.xy * half_scale - 0.5;
-    vec2 f = fract(u);
-    vec2 base = floor(u);
-    uvec4 keys = textureGather(half_plane, (base + 1.0) / size, 0);  // (0,1), (1,1), (1,0), (0,0)
-    vec4 w = vec4((1.0 - f.x) * f.y, f.x * f.y, f.x * (1.0 - f.y), (1.0 - f.x) * (1.0 - f.y));
-    float offset = dot(n, p);
-    vec4 on_plane;
-    for (int k = 0; k < 4; ++k) {
-        bool same = (keys[k] >> 16) == normal_key
-                 && abs(unpackHalf2x16(keys[k] & 0xffffu).x - offset) <= plane_tolerance;
-        on_plane[k] = same ? 1.0 : 0.0;
-    }
-    vec4 kept = w * on_plane;
-    float total = kept.x + kept.y + kept.z + kept.w;
-    vec2 g = total > 0.0 ? vec2(kept.y + kept.z, kept.x + kept.y) / total : f;
-    // Where an edge cuts off one corner (3 + 1), the per-axis weights still give the corner some weight:
-    // move the sample point to the nearer side away from it.
-    const vec2 corners[4] = vec2[4](vec2(0.0, 1.0), vec2(1.0, 1.0), vec2(1.0, 0.0), vec2(0.0, 0.0));
-    for (int k = 0; k < 4; ++k) {
-        vec2 away = abs(corners[k] - g);   // how far g already is from the corner, per axis
-        bool off = on_plane[k] == 0.0 && total > 0.0;
-        bool along_x = away.x >= away.y;   // the shorter move
-        g.x = off && along_x ? 1.0 - corners[k].x : g.x;
-        g.y = off && !along_x ? 1.0 - corners[k].y : g.y;
-    }
-    return textureLod(half_irradiance, (base + 0.5 + g) / size, 0.0).rgb;
-}
-#endif
-
 layout(location = 0) out vec4 frag_color;
 #if INTERLEAVE
 layout(location = 1) out vec4 frag_direct_irradiance;
@@ -168,21 +113,23 @@ void main() {
     // 1 / view depth is linear in screen space on a plane: its value and gradient identify the plane.
     frag_plane = vec4(gl_FragCoord.w, dFdx(gl_FragCoord.w), dFdy(gl_FragCoord.w), 1.0);
     result += emission;
-#elif VIEW != VIEW_INDIRECT
-#if BAKED
+#elif BAKED
     // The back sides' lightmap lies to the right of the front sides' (direct_bake.py).
-    vec3 direct = textureLod(lightmap, v_lightmap + vec2(gl_FrontFacing ? 0.0 : 0.5, 0.0), 0.0).rgb;
-#else
-    vec3 direct = direct_irradiance(v_position, n);
-#endif
-    result += v_albedo / PI * direct + emission;
+    vec2 texel = v_lightmap + vec2(gl_FrontFacing ? 0.0 : 0.5, 0.0);
+    vec3 irradiance = vec3(0.0);
+#if VIEW != VIEW_INDIRECT
+    irradiance += textureLod(lightmap, texel, 0.0).rgb;
+    result += emission;
 #endif
 #if VIEW != VIEW_DIRECT && INDIRECT
-#if HALF_INDIRECT
-    result += v_albedo / PI * upsampled_indirect(v_position, n, gl_FrontFacing ? v_normal_keys.x : v_normal_keys.y);
-#else
-    result += v_albedo / PI * probe_irradiance(v_position, n);
+    irradiance += textureLod(indirect_lightmap, texel, 0.0).rgb;
 #endif
+    result += v_albedo / PI * irradiance;
+#elif VIEW != VIEW_INDIRECT
+    result += v_albedo / PI * direct_irradiance(v_position, n) + emission;
+#endif
+#if VIEW != VIEW_DIRECT && INDIRECT && !BAKED
+    result += v_albedo / PI * probe_irradiance(v_position, n);
 #endif
 #endif
 #if DISPLAY

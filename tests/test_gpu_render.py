@@ -203,7 +203,7 @@ def test_interleaved_direct_light_matches_the_full_sum(ctx, cornell):
     images = {}
     for interleave in (False, True):
         # the exact per-fragment path: the baked lightmap would make both images the same by construction
-        settings = RenderSettings(interleave=interleave, baked_direct=False)
+        settings = RenderSettings(interleave=interleave, baked=False)
         offscreen = OffscreenRenderer(SIZE, settings, samples=0, ctx=ctx)
         try:
             offscreen.renderer.set_scene(cornell)
@@ -248,7 +248,7 @@ def test_indirect_light_equals_the_probe_grids_irradiance(ctx, cornell, falloff,
     coefficients[..., 1:, :] = 0.15 * rng.standard_normal((m, m, m, 8, 3))
     valid = rng.random((m, m, m)) > (0.2 if falloff else 0.0)
     probes = ProbeGrid(lo, hi, coefficients, valid)
-    settings = RenderSettings(probe_normal_offset=normal_offset, probe_plane_falloff=falloff)
+    settings = RenderSettings(probe_normal_offset=normal_offset, probe_plane_falloff=falloff, baked=False)
     offscreen = OffscreenRenderer(SIZE, settings, samples=0, ctx=ctx)
     try:
         offscreen.renderer.set_scene(cornell)
@@ -325,7 +325,7 @@ def test_box_faces_are_not_darkened_by_the_probes_inside_the_boxes(ctx, cornell)
 
 
 @pytest.mark.parametrize("settings", [RenderSettings(light_samples=8), RenderSettings(
-    light_samples=8, tonemap="reinhard", exposure=1.0, baked_direct=False, half_indirect=False)])
+    light_samples=8, tonemap="reinhard", exposure=1.0, baked=False)])
 def test_display_image_is_the_hdr_image_tone_mapped(ctx, cornell, settings):
     """Into a display target the surface views are tone-mapped as they are shaded (one pass); the
     voxels and probes views go through an HDR image and the tone-mapping pass. Both give the bytes of
@@ -341,7 +341,7 @@ def test_display_image_is_the_hdr_image_tone_mapped(ctx, cornell, settings):
             offscreen.renderer.present(offscreen.hdr, reference, view)
             np.testing.assert_array_equal(image, reference.read(), err_msg=view)
         # the exact path's interleaved direct light is recombined by a filter: through the HDR image
-        assert offscreen.renderer.fused(offscreen.display, "final") == settings.baked_direct
+        assert offscreen.renderer.fused(offscreen.display, "final") == settings.baked
     finally:
         reference.release()
         offscreen.release()

@@ -52,6 +52,73 @@ def block_ratios(ours: np.ndarray, truth: np.ndarray, normals: np.ndarray) -> np
     return np.asarray(ratios)
 
 
+STREAK_BLOCK = 16
+"""Block size (pixels) of the streak metric (`face_blocks`)."""
+
+
+def face_blocks(ours: np.ndarray, truth: np.ndarray, normals: np.ndarray, block: int = STREAK_BLOCK):
+    """Ours / Mitsuba luminance of the block x block blocks lying wholly on one plane's normal, emitters
+    left out (a block whose brightest truth pixel is over 4x its median holds an emitter's edge):
+    (ratios (K,), block corners (K, 2) as (x, y), off_axis (K,) whether the block's normal is off the
+    room's axes). The dark vertical streaks of the probe grid on the boxes' faces were this metric's
+    worst blocks (0.78-0.80 of Mitsuba on cornell and paper-test at 256x256)."""
+    h, w = ours.shape[:2]
+    ratios, corners, tilted = [], [], []
+    for y in range(0, h - block + 1, block):
+        for x in range(0, w - block + 1, block):
+            n = normals[y:y + block, x:x + block].reshape(-1, 3)
+            if np.abs(n - n[0]).max() > 1e-3 or np.linalg.norm(n[0]) < 0.5:
+                continue
+            t = truth[y:y + block, x:x + block] @ LUMINANCE
+            if t.mean() < 1e-3 or t.max() > 4.0 * np.median(t):
+                continue
+            ratios.append((ours[y:y + block, x:x + block] @ LUMINANCE).mean() / t.mean())
+            corners.append((x, y))
+            tilted.append(bool(off_axis(n[0])))
+    return np.asarray(ratios), np.asarray(corners).reshape(-1, 2), np.asarray(tilted, bool)
+
+
+def silhouette_steps(indirect: np.ndarray, normals: np.ndarray, depth: np.ndarray, jump: float = 0.05) -> np.ndarray:
+    """Steps of the indirect light along silhouettes (P,): the pixels at the edge of a face in front of
+    another (a neighbour across the edge has another normal and lies more than `jump` x its view depth
+    further away) form lines; between two consecutive pixels of such a line (the next row's, or
+    column's, edge pixel of the same face within one pixel), |L(next) / L(this) - 1| of the indirect
+    luminance. Indirect light varies over a probe spacing, many pixels here, so along an edge it is
+    smooth when each pixel gets the light of its own surface point; an upsampling from a lower
+    resolution that mixes in the face behind in some pixels of the edge and not others makes steps
+    (quarter resolution: a period of 4 pixels)."""
+    lum = indirect @ LUMINANCE
+    steps = []
+    for axis in (0, 1):
+        for flip in (False, True):
+            n, l, d = (np.moveaxis(a, axis, 0) for a in (normals, lum, depth))
+            if flip:
+                n, l, d = n[::-1], l[::-1], d[::-1]
+            same = np.all(np.abs(n[1:] - n[:-1]) < 1e-3, axis=-1)    # rows i and i+1 share a normal
+            edge = np.zeros(l.shape, bool)
+            edge[:-1] = ~same & (d[1:] > (1.0 + jump) * d[:-1]) & (np.linalg.norm(n, axis=-1)[:-1] > 0.5)
+            for i, j in zip(*np.nonzero(edge)):
+                for dj in (0, -1, 1):           # the line goes on in the next column, within a pixel
+                    k = j + 1
+                    if 0 <= i + dj < l.shape[0] and k < l.shape[1] and edge[i + dj, k] \
+                            and np.abs(n[i + dj, k] - n[i, j]).max() < 1e-3 and l[i, j] > 1e-4:
+                        steps.append(abs(l[i + dj, k] / l[i, j] - 1.0))
+                        break
+    return np.asarray(steps)
+
+
+def view_depth(offscreen, camera, bounds) -> np.ndarray:
+    """(H, W) view-space depth of the last frame drawn into the offscreen renderer's HDR target
+    (single-sampled), from its depth buffer; the far plane where nothing was drawn."""
+    from viewer.gpu.camera import clip_range
+
+    near, far = clip_range(camera, *bounds)
+    w, h = offscreen.size
+    z = np.frombuffer(offscreen.hdr.framebuffer.read(attachment=-1, dtype="f4", components=1), np.float32)
+    z = z.reshape(h, w)[::-1].astype(np.float64)
+    return near * far / (far - z * (far - near))
+
+
 def surface_points(scene, count: int, seed: int = 0):
     """Random points (count, 3) uniform by area on the scene's non-emitting faces, with their normals."""
     rng = np.random.default_rng(seed)

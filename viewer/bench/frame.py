@@ -48,7 +48,7 @@ def frame_table(ctx, scene, probes, size, light_samples, exact: bool, frames: in
     """Median ms (and frames per second) of each view, fast path (and exact)."""
     paths = {"fast": {}}
     if exact:
-        paths["exact"] = dict(baked_direct=False, half_indirect=False)
+        paths["exact"] = dict(baked=False)
     lines = [f"| path | light samples | {' | '.join(VIEWS)} | final fps |", "|---|---|" + "---|" * (len(VIEWS) + 1)]
     for samples in light_samples:
         for path, overrides in paths.items():

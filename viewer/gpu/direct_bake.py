@@ -1,6 +1,6 @@
 """Baked direct light: diffuse direct irradiance is view-independent, so it is computed once per scene
 (and light setting) into a lightmap atlas, and the per-frame surface pass only reads it with one
-bilinear fetch (RenderSettings.baked_direct).
+bilinear fetch (RenderSettings.baked).
 
 Every triangle (A, B, C) gets a tile of (n + 2)^2 texels: the point A + u (B - A) + v (C - A) lies at
 tile texel (1 + n u, 1 + n v), n = ceil(longest of |B - A|, |C - A| / texel size); the triangle fills
@@ -46,13 +46,15 @@ def lightmap_layout(scene: Scene, texel: float):
 
 
 def lightmap_texels(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple[int, int], inset: float = 0.25):
-    """(H, W, 4) world positions (w = 1 where a tile covers the texel) and (H, W, 4) front normals of the
-    atlas texels: a tile texel's position is the nearest point of its triangle, `inset` texels inside."""
+    """(H, W, 4) world positions (w = 1 where a tile covers the texel), (H, W, 4) front normals and (H, W)
+    tile (the index among the non-degenerate faces, -1 where none) of the atlas texels: a tile texel's
+    position is the nearest point of its triangle, `inset` texels inside."""
     keep = scene.face_areas > 0
     corners = scene.triangles[keep].astype(np.float64)
     normals = scene.face_normals[keep]
     position = np.zeros((size[1], size[0], 4), np.float32)
     normal = np.zeros((size[1], size[0], 4), np.float32)
+    tile = np.full((size[1], size[0]), -1, np.int64)
     for f in range(len(n)):
         m = int(n[f])
         k = np.arange(m + 2)
@@ -68,7 +70,8 @@ def lightmap_texels(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple
         position[y:y + m + 2, x:x + m + 2, :3] = points
         position[y:y + m + 2, x:x + m + 2, 3] = 1.0
         normal[y:y + m + 2, x:x + m + 2, :3] = normals[f]
-    return position, normal
+        tile[y:y + m + 2, x:x + m + 2] = f
+    return position, normal, tile
 
 
 def lightmap_vertices(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -97,7 +100,13 @@ class BakedDirectLight(TriangleBuffer):
         vertices = lightmap_vertices(scene, origin, n, self.size)
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(vertices.tobytes())
-        position, normal = lightmap_texels(scene, origin, n, self.size)
+        position, normal, tile = lightmap_texels(scene, origin, n, self.size)
+        self.covered = position[..., 3] > 0
+        """(H, W) the atlas texels a tile covers."""
+        self.texel_points, self.texel_normals = position[self.covered, :3], normal[self.covered, :3]
+        """(T, 3) each covered texel's world position and front normal (row-major order)."""
+        self.texel_faces = tile[self.covered]
+        """(T,) each covered texel's face, as an index into the non-degenerate faces."""
         self._inputs = [ctx.texture(self.size, 4, position.tobytes(), dtype="f4"),
                         ctx.texture(self.size, 4, normal.tobytes(), dtype="f4")]
         for texture in self._inputs:
@@ -124,6 +133,11 @@ class BakedDirectLight(TriangleBuffer):
         """Bind the lightmap; returns the surface shader's uniforms."""
         self.texture.use(location=unit)
         return dict(lightmap=unit)
+
+    @property
+    def normal_texture(self) -> moderngl.Texture:
+        """(W, H) the texels' front normals (what viewer/gpu/indirect_bake.py reads)."""
+        return self._inputs[1]
 
     def release(self) -> None:
         super().release()

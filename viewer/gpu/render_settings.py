@@ -51,26 +51,19 @@ class RenderSettings:
     """Interleaved direct light: each pixel of a 2x2 block shades a quarter of the emitter samples and a
     3x3 plane-aware tent filter recombines them (on llvmpipe about 45% less work for the direct light;
     the penumbra gets smoother, shadow edges blur by about a pixel). Applies to the `final` and
-    `direct` views of targets without multisampling, with 8 light samples or more, when `baked_direct` is
+    `direct` views of targets without multisampling, with 8 light samples or more, when `baked` is
     off."""
-    baked_direct: bool = True
-    """Direct light baked once per scene and light setting into a lightmap atlas
-    (viewer/gpu/direct_bake.py) and read with one bilinear fetch per fragment, instead of summing the
-    emitter samples per fragment: the same shadows and penumbrae, linear between texels `lightmap_texel`
-    apart. Applies to the `final` and `direct` views (interleave then has nothing to do). False: the
-    exact per-fragment sum."""
+    baked: bool = True
+    """`final`, `direct` and `indirect` views: the irradiance is read from a lightmap atlas with one
+    bilinear fetch per fragment, instead of summing the emitter samples and interpolating the probe grid
+    per fragment. The direct light is baked once per scene and light setting (viewer/gpu/direct_bake.py:
+    the same shadows and penumbrae, linear between texels `lightmap_texel` apart), the probe grid once
+    per GI update (viewer/gpu/indirect_bake.py) with per-texel probe weights that add the probes'
+    visibility to validity and back-face weights (viewer/probe_weights.py). False: the exact per-fragment
+    path (direct light summed per fragment, probes interpolated with `probe_normal_offset` and
+    `probe_plane_falloff`)."""
     lightmap_texel: float = 0.02
-    """Lightmap texel spacing of the baked direct light, in scene units (metres for the Cornell box)."""
-    half_indirect: bool = True
-    """`final` view: the probe grid is sampled per fragment at a lower resolution (`indirect_divisor`)
-    and upsampled bilinearly among the texels on the same plane (indirect light is smooth over a probe
-    spacing): on llvmpipe the probe grid's seven trilinear fetches and SH convolution cost about 30 ms per
-    1280x720 frame at full resolution. False: per fragment at full resolution (the `indirect` view always
-    is)."""
-    indirect_divisor: int = 4
-    """With `half_indirect`: the probe grid is sampled at 1/indirect_divisor of the width and height (4:
-    about 10 ms less per 1280x720 frame than 2 on llvmpipe; faces only a few pixels wide get the nearest
-    texels' light)."""
+    """Lightmap texel spacing of the baked light, in scene units (metres for the Cornell box)."""
 
     def __post_init__(self):
         if self.tonemap not in TONEMAPS:

@@ -11,15 +11,12 @@ Without multisampling the direct light is interleaved over 2x2 pixel blocks and 
 (RenderSettings.interleave, shaders/interleave_resolve.glsl): the renderer's largest cost on a CPU
 rasterizer.
 
-The interactive default is faster still, and holds the look (RenderSettings.baked_direct and
-half_indirect; both False give the exact path above, for comparisons with the reference): diffuse direct
-light is view-independent, so it is baked into a lightmap once per scene and light setting
-(viewer/gpu/direct_bake.py) and read with one fetch; indirect light is smooth, so the probe grid is
-sampled per fragment at a quarter of the width and height (shaders/indirect_half.glsl) and upsampled
-among the texels of the same plane. On llvmpipe, 1280x720 Cornell box, 16 light samples: the final view
-from ~160-180 ms to ~35-40 ms, and to ~23 ms with the tone mapping in the surface pass (drawing into a
-DisplayTarget; docs/PERFORMANCE.md); against the exact path, the median pixel differs by 0.06%, 99% of
-lit pixels by less than 4.5% (penumbra texels and face edges).
+The interactive default is faster still, and holds the look (RenderSettings.baked; False gives the
+exact path above, for comparisons with the reference): diffuse light is view-independent, so the direct
+light is baked into a lightmap once per scene and light setting (viewer/gpu/direct_bake.py), the probe
+grid's indirect light into the same texels once per GI update (viewer/gpu/indirect_bake.py, with per-texel
+DDGI-style probe weights and exact probe visibility, viewer/probe_weights.py), and the surface pass reads
+their sum with one fetch per fragment: no screen-space upsampling, so no edges to step over.
 
 The renderer does not know where its pixels go: it draws into any HdrTarget or DisplayTarget and
 presents into any framebuffer (the window's screen, or an offscreen image, see viewer/gpu/offscreen.py).
@@ -33,7 +30,9 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from viewer import dda
 from viewer.gpu.direct_bake import BakedDirectLight
+from viewer.gpu.indirect_bake import BakedIndirectLight, lattice_key
 from viewer.gpu.camera import clip_range, gl_bytes, perspective, view_matrix, view_projection
 from viewer.gpu.lights import emitter_samples
 from viewer.gpu.mesh import SceneMesh, cube, in_draw_order
@@ -41,13 +40,16 @@ from viewer.gpu.probe_textures import ProbeTextures, empty_grid
 from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
 from viewer.gpu.render_settings import TONEMAPS, VIEWS, VOXEL_COLORS, RenderSettings  # noqa: F401 (re-exported)
 from viewer.gpu.shadows import EmitterShadows, SunShadow
-from viewer.gpu.targets import DisplayTarget, HalfIndirectBuffers, HdrTarget, InterleaveBuffers
+from viewer.gpu.targets import DisplayTarget, HdrTarget, InterleaveBuffers
+from viewer.geometry import voxelize_with_faces
 from viewer.probes import ProbeGrid
 from viewer.scene import Camera, Scene
 from viewer.voxels import VoxelGrid
 
 SURFACE_VIEWS = {"final": 0, "direct": 1, "indirect": 2, "albedo": 3, "normals": 4, "probes": 0}
-PROBE_UNIT, ATLAS_UNIT, SUN_UNIT, HDR_UNIT, INTERLEAVE_UNIT, BAKED_UNIT, HALF_UNIT = 0, 7, 8, 9, 10, 14, 16
+PROBE_UNIT, ATLAS_UNIT, SUN_UNIT, HDR_UNIT, INTERLEAVE_UNIT, BAKED_UNIT, INDIRECT_UNIT = 0, 7, 8, 9, 10, 14, 15
+VISIBILITY_VOXELS = 32
+"""Cells per axis of the triangle grid that the probe visibility of the baked indirect light is traced in."""
 
 
 class Renderer:
@@ -71,7 +73,7 @@ class Renderer:
         self.settings = settings or RenderSettings()
         self.programs = ProgramLibrary(ctx, shader_dir)
         for name in ("surface", "shadow_depth", "present", "voxel_cubes", "probe_spheres", "interleave_resolve",
-                     "direct_bake", "indirect_half"):
+                     "direct_bake"):
             self.programs.get(name)  # compile everything now: a broken shader fails here, not mid-frame
         self.scene: Scene | None = None
         self.bounds: tuple[np.ndarray, np.ndarray] | None = None
@@ -90,7 +92,9 @@ class Renderer:
         self._present_arrays: dict[tuple, moderngl.VertexArray] = {}
         self._resolve_array = ctx.vertex_array(self.programs.get("interleave_resolve"), [])
         self._interleave: InterleaveBuffers | None = None
-        self._half: HalfIndirectBuffers | None = None
+        self._indirect: BakedIndirectLight | None = None
+        self._indirect_fresh = False
+        self._cells: dda.Cells | None = None
         self._baked: BakedDirectLight | None = None
         self._baked_key = None
         self._scratch: HdrTarget | None = None
@@ -105,9 +109,8 @@ class Renderer:
         """Upload the scene's triangles; its shadow maps are rendered on the next draw."""
         if self.mesh is not None:
             self.mesh.release()
-        if self._baked is not None:
-            self._baked.release()
-            self._baked, self._baked_key = None, None
+        self._release_baked()
+        self._cells = None
         self.scene = scene
         self.bounds = scene.bounds   # (lo, hi); Scene.bounds scans the faces, so not once per frame
         self._draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
@@ -118,6 +121,7 @@ class Renderer:
         """The indirect light (incident radiance without emitters and sun), or None for GI off."""
         self.probes = probes
         self._probe_textures.update(probes if probes is not None else empty_grid())
+        self._indirect_fresh = False
         self._release_instances("_probe_instances")
         if probes is not None:
             index = np.argwhere(probes.valid if probes.valid.any() else np.ones_like(probes.valid)).astype(np.int32)
@@ -181,6 +185,7 @@ class Renderer:
             self._ensure_shadows()
             if self._baked_applies(view):
                 self._ensure_baked()
+                self._ensure_indirect()
         lo, hi = self.bounds
         view_proj = view_projection(camera, target.aspect, lo, hi)
         ctx = self.ctx
@@ -192,13 +197,8 @@ class Renderer:
         if view == "voxels":
             self._draw_voxels(view_proj)
         elif self._baked_applies(view):
-            if self._half_applies(target, view):
-                with self._timed("indirect (low resolution)"):
-                    self._draw_half_indirect(target, view_proj)
-                target.framebuffer.use()
             with self._timed("surfaces"):
-                self._draw_surfaces(view_proj, view, target.framebuffer, baked=True,
-                                    half=self._half_applies(target, view), display=display)
+                self._draw_surfaces(view_proj, view, target.framebuffer, baked=True, display=display)
         elif self._interleaved(target, view):
             with self._timed("surfaces (interleaved)"):
                 self._draw_interleaved(target, view_proj, view)
@@ -225,28 +225,10 @@ class Renderer:
         return self._scratch
 
     def _baked_applies(self, view: str) -> bool:
-        return self.settings.baked_direct and view in ("final", "direct")
-
-    def _half_applies(self, target: HdrTarget, view: str) -> bool:
         s = self.settings
-        return s.half_indirect and view == "final" and s.indirect and self.probes is not None
-
-    def _draw_half_indirect(self, target: HdrTarget, view_proj: np.ndarray) -> None:
-        """The probe grid's irradiance and plane keys at 1/indirect_divisor resolution (indirect_half.glsl)."""
-        divisor = max(1, int(self.settings.indirect_divisor))
-        if self._half is None or (self._half.full_size, self._half.divisor) != (target.size, divisor):
-            if self._half is not None:
-                self._half.release()
-            self._half = HalfIndirectBuffers(self.ctx, target.size, divisor)
-        buffers = self._half
-        buffers.framebuffer.use()
-        buffers.clear()
-        program = self.programs.get("indirect_half")
-        units = self._probe_textures.use(PROBE_UNIT)
-        set_uniforms(program, view_proj=gl_bytes(view_proj), probe_sh=units, **self._probe_uniforms(self.probes))
-        self._depth_prepass(view_proj, buffers.framebuffer, self.mesh)
-        self.mesh.render(program)
-        self.ctx.depth_func = "<"
+        if view == "indirect":   # without probes the per-fragment path draws it black
+            return s.baked and s.indirect and self.probes is not None
+        return s.baked and view in ("final", "direct")
 
     def _interleaved(self, target: HdrTarget, view: str) -> bool:
         s = self.settings
@@ -329,6 +311,7 @@ class Renderer:
         if key != self._baked_key:
             if self._baked is not None:
                 self._baked.release()
+            self._release_baked()
             self._baked = BakedDirectLight(self.ctx, self._draw_scene, self.settings.lightmap_texel)
             program = self.programs.get("direct_bake")
             self._emitter_shadows.use(ATLAS_UNIT)
@@ -340,22 +323,46 @@ class Renderer:
             self._baked_key = key
         return self._baked
 
+    def _ensure_indirect(self) -> BakedIndirectLight | None:
+        """The probe grid baked into the lightmap's texels (None while GI is off): the per-texel weights
+        when the lightmap or the probe lattice changed, then an update whenever the probes did."""
+        if self.probes is None or not self.settings.indirect:
+            return None
+        if self._indirect is None:
+            self._indirect = BakedIndirectLight(self.ctx, self._baked)
+        if self._indirect.weights_key != lattice_key(self.probes):
+            if self._cells is None:
+                self._cells = dda.Cells.of(voxelize_with_faces(self._draw_scene, VISIBILITY_VOXELS), self._draw_scene)
+            self._indirect.set_weights(self.probes, self._cells)
+            self._indirect_fresh = False
+        if not self._indirect_fresh:
+            self._indirect.update(self.probes)
+            self._indirect_fresh = True
+        return self._indirect
+
+    def _release_baked(self) -> None:
+        for obj in (self._indirect, self._baked):
+            if obj is not None:
+                obj.release()
+        self._indirect, self._baked, self._baked_key = None, None, None
+
     def _draw_surfaces(self, view_proj: np.ndarray, view: str, framebuffer: moderngl.Framebuffer,
-                       interleave: bool = False, baked: bool = False, half: bool = False,
-                       display: bool = False) -> None:
+                       interleave: bool = False, baked: bool = False, display: bool = False) -> None:
         s = self.settings
         probes = self.probes if s.indirect else None
         mesh = self.mesh
         extra = {}
-        if baked:
+        if baked:   # the lightmap with the irradiance this view shows
             mesh = self._ensure_baked()
+            indirect = self._ensure_indirect()
             framebuffer.use()
             extra.update(self._baked.use(BAKED_UNIT))
-        if half:
-            lo, hi = self.bounds
-            extra.update(self._half.use(HALF_UNIT), plane_tolerance=1e-3 * float(np.linalg.norm(hi - lo)))
+            if indirect is not None:
+                extra.update(indirect.use(INDIRECT_UNIT))
+            else:
+                probes = None
         defines = dict(VIEW=SURFACE_VIEWS[view], INDIRECT=int(probes is not None), INTERLEAVE=int(interleave),
-                       BAKED=int(baked), HALF_INDIRECT=int(half), DISPLAY=int(display))
+                       BAKED=int(baked), DISPLAY=int(display))
         if display:   # tone mapping as present.glsl does it (tonemap.glsl)
             defines.update(TONE_CURVE=TONEMAPS[s.tonemap], RAW=int(view in ("albedo", "normals")))
             extra.update(exposure_scale=float(2.0 ** s.exposure))
@@ -437,8 +444,8 @@ class Renderer:
         array.release()
 
     def release(self) -> None:
-        for obj in (self.mesh, self._emitter_shadows, self._sun_shadow, self._probe_textures, self._baked,
-                    self._half, self._scratch):
+        self._release_baked()
+        for obj in (self.mesh, self._emitter_shadows, self._sun_shadow, self._probe_textures, self._scratch):
             if obj is not None:
                 obj.release()
         self._release_instances("_probe_instances")

@@ -122,36 +122,3 @@ class InterleaveBuffers:
         self.depth.release()
         for texture in self.textures:
             texture.release()
-
-
-class HalfIndirectBuffers:
-    """Indirect irradiance at 1/divisor resolution (RGBA16F, bilinear) and the plane key of each texel (R32UI),
-    from indirect_half.glsl, for surface.glsl's plane-aware upsampling (HALF_INDIRECT)."""
-
-    def __init__(self, ctx: moderngl.Context, full_size: tuple[int, int], divisor: int = 2):
-        self.full_size = (int(full_size[0]), int(full_size[1]))
-        self.divisor = int(divisor)
-        self.size = tuple(-(-side // self.divisor) for side in self.full_size)
-        self.irradiance = ctx.texture(self.size, 4, dtype="f2")
-        self.irradiance.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self.plane = ctx.texture(self.size, 1, dtype="u4")
-        self.plane.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        for texture in (self.irradiance, self.plane):
-            texture.repeat_x = texture.repeat_y = False
-        self.depth = ctx.depth_renderbuffer(self.size)
-        self.framebuffer = ctx.framebuffer([self.irradiance, self.plane], self.depth)
-
-    def use(self, first_unit: int) -> dict:
-        self.irradiance.use(location=first_unit)
-        self.plane.use(location=first_unit + 1)
-        return {"half_irradiance": first_unit, "half_plane": first_unit + 1, "half_scale": 1.0 / self.divisor}
-
-    def clear(self) -> None:
-        """Zero irradiance, plane key 0 (no plane) and far depth."""
-        self.framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-
-    def release(self) -> None:
-        self.framebuffer.release()
-        self.depth.release()
-        self.irradiance.release()
-        self.plane.release()
