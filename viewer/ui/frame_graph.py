@@ -4,6 +4,13 @@ drawn as a two-line graph.
 
 A timer query's result is read a few frames after it was issued, when the GPU has long finished it,
 so reading it never stalls the frame (a ring of queries, one per frame in flight).
+
+On a software rasterizer (Mesa llvmpipe) the "GPU" is the CPU's cores, and its timer queries do not
+measure the frame's work: a query can come back as -1 (read as 4295 ms), and a query around a
+frame's blit reads 1 ns while the copy runs later, when the next command waits for it. There the
+frame's GL work is timed on the wall clock up to a glFinish at the end of the frame's GL commands
+(which llvmpipe would wait for at the buffer swap anyway), and a result that cannot be a duration
+(-1, or over a minute) is never recorded on either path.
 """
 
 from __future__ import annotations
@@ -18,13 +25,26 @@ import numpy as np
 from imgui_bundle import imgui
 
 QUERIES_IN_FLIGHT = 3
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swiftshader", "swrast")
+FAILED_QUERY_NS = (1 << 32) - 1
+"""What a failed timer query reads (-1 as a 32-bit unsigned number: 4295 ms)."""
+IMPLAUSIBLE_MS = 60_000.0
+"""No frame takes a minute: a longer result is not a duration either."""
+
+
+def is_software(ctx: moderngl.Context) -> bool:
+    """Whether the context renders on the CPU (its GL_RENDERER names a software rasterizer)."""
+    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return any(name in renderer for name in SOFTWARE_RENDERERS)
 CPU_COLOUR = (1.0, 0.62, 0.2, 1.0)
 GPU_COLOUR = (0.35, 0.8, 1.0, 1.0)
 
 
 class FrameTimes:
-    def __init__(self, ctx: moderngl.Context, history: int = 240):
+    def __init__(self, ctx: moderngl.Context, history: int = 240, software: bool | None = None):
         self.ctx = ctx
+        self.software = is_software(ctx) if software is None else software
+        """Time the GL work on the wall clock to a glFinish instead of with timer queries."""
         self.cpu_ms: deque[float] = deque(maxlen=history)
         self.gpu_ms: deque[float] = deque(maxlen=history)
         self.redrawn: deque[bool] = deque(maxlen=history)
@@ -52,23 +72,34 @@ class FrameTimes:
     @contextmanager
     def gpu(self):
         """Time the GL commands issued inside the block (one block per frame)."""
+        if self.software:
+            started = time.perf_counter()
+            yield
+            self.ctx.finish()
+            self._record(1e6 * (time.perf_counter() - started))
+            return
         slot = self._frame % QUERIES_IN_FLIGHT
         query = self._queries[slot]
         if self._issued[slot]:  # issued QUERIES_IN_FLIGHT frames ago: finished by now
-            gpu = query.elapsed / 1e6
-            self.gpu_ms.append(gpu)
-            if self._skip_gpu > 0:
-                self._skip_gpu -= 1
-            else:
-                self.all_gpu_ms.append(gpu)
+            self._record(query.elapsed)
         with query:
             yield
         self._issued[slot] = True
 
+    def _record(self, nanoseconds: float) -> None:
+        gpu = nanoseconds / 1e6
+        if nanoseconds == FAILED_QUERY_NS or not 0.0 <= gpu < IMPLAUSIBLE_MS:
+            gpu = math.nan   # a failed query: shown as a gap, left out of the summary
+        self.gpu_ms.append(gpu)
+        if self._skip_gpu > 0:
+            self._skip_gpu -= 1
+        else:
+            self.all_gpu_ms.append(gpu)
+
     def restart_summary(self) -> None:
         """Forget the frames so far for `summary` (e.g. once the indirect light has settled)."""
         self.all_cpu_ms, self.all_gpu_ms, self.all_redrawn = [], [], []
-        self._skip_gpu = sum(self._issued)   # results still in flight belong to the forgotten frames
+        self._skip_gpu = 0 if self.software else sum(self._issued)   # results in flight: forgotten frames
 
     def summary(self, redrawn_only: bool = False) -> dict[str, float]:
         """Medians and 90th percentiles of CPU and GPU ms (of frames that redrew the scene, if asked)."""
@@ -79,7 +110,7 @@ class FrameTimes:
             cpu = cpu[mask]
             gpu = gpu[mask[:len(gpu)]]
         out = {"frames": float(len(cpu))}
-        for name, values in (("cpu", cpu), ("gpu", gpu)):
+        for name, values in (("cpu", cpu), ("gpu", gpu[np.isfinite(gpu)])):
             if len(values):
                 out[f"{name}_median_ms"] = float(np.median(values))
                 out[f"{name}_p90_ms"] = float(np.percentile(values, 90))
@@ -87,7 +118,9 @@ class FrameTimes:
 
     def release(self) -> None:
         for query in self._queries:
-            query.release()
+            release = getattr(query, "release", None)   # moderngl 5 queries have none: the context owns them
+            if release is not None:
+                release()
 
 
 def _u32(rgba) -> int:
@@ -113,7 +146,7 @@ def draw_frame_graph(times: FrameTimes, height: float = 80.0) -> None:
     origin = imgui.get_cursor_screen_pos()
     draw = imgui.get_window_draw_list()
     low = 1.0
-    top = 10.0 ** max(2, math.ceil(math.log10(max([1.0, *cpu, *gpu]))))
+    top = 10.0 ** max(2, math.ceil(math.log10(max([1.0, *cpu, *(g for g in gpu if math.isfinite(g))]))))
     x0, y0, y1 = origin.x, origin.y, origin.y + height
 
     def y_of(ms: float) -> float:
@@ -132,6 +165,7 @@ def draw_frame_graph(times: FrameTimes, height: float = 80.0) -> None:
         if len(values) < 2:
             continue
         start = x0 + width - step * (len(values) - 1)
-        points = [imgui.ImVec2(start + i * step, y_of(v)) for i, v in enumerate(values)]
-        draw.add_polyline(points, col=_u32(colour), thickness=1.5, flags=0)
+        points = [imgui.ImVec2(start + i * step, y_of(v)) for i, v in enumerate(values) if math.isfinite(v)]
+        if len(points) >= 2:
+            draw.add_polyline(points, col=_u32(colour), thickness=1.5, flags=0)
     imgui.dummy(imgui.ImVec2(width, height))
