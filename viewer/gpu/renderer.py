@@ -33,9 +33,10 @@ import numpy as np
 from viewer import dda
 from viewer.gpu.direct_bake import BakedDirectLight
 from viewer.gpu.indirect_bake import BakedIndirectLight, lattice_key
-from viewer.gpu.camera import clip_range, gl_bytes, perspective, view_matrix, view_projection
+from viewer.gpu.camera import gl_bytes, view_projection
+from viewer.gpu.debug_views import DebugViews
 from viewer.gpu.lights import emitter_samples
-from viewer.gpu.mesh import SceneMesh, cube, in_draw_order
+from viewer.gpu.mesh import SceneMesh, in_draw_order
 from viewer.gpu.probe_textures import ProbeTextures, empty_grid
 from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
 from viewer.gpu.render_settings import TONEMAPS, VIEWS, VOXEL_COLORS, RenderSettings  # noqa: F401 (re-exported)
@@ -83,12 +84,7 @@ class Renderer:
         self._shadow_key = None
         self.probes: ProbeGrid | None = None
         self._probe_textures = ProbeTextures(ctx, empty_grid())
-        self._probe_instances = None
-        self._voxel_instances = None
-        self._voxel_data = None
-        self._voxel_key = None
-        self._cube = ctx.buffer(cube().tobytes())
-        self._quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
+        self._debug = DebugViews(ctx, self.programs)
         self._present_arrays: dict[tuple, moderngl.VertexArray] = {}
         self._resolve_array = ctx.vertex_array(self.programs.get("interleave_resolve"), [])
         self._interleave: InterleaveBuffers | None = None
@@ -122,31 +118,11 @@ class Renderer:
         self.probes = probes
         self._probe_textures.update(probes if probes is not None else empty_grid())
         self._indirect_fresh = False
-        self._release_instances("_probe_instances")
-        if probes is not None:
-            index = np.argwhere(probes.valid if probes.valid.any() else np.ones_like(probes.valid)).astype(np.int32)
-            self._probe_instances = (self.ctx.buffer(index.tobytes()), len(index))
+        self._debug.set_probes(probes)
 
     def set_voxels(self, voxels: VoxelGrid | None, radiance: np.ndarray | None = None) -> None:
         """Voxels for the `voxels` view, with their outgoing radiance (K, 3) if known."""
-        self._release_instances("_voxel_instances")
-        self._voxel_data = None
-        if voxels is None or voxels.count == 0:
-            return
-        cells = voxels.cells()
-        _, inverse = np.unique(voxels.hash_id, return_inverse=True)   # the cells' order, as in cells()
-        if radiance is not None:  # area-weighted mean over the voxels (facings) of each cell
-            weighted = np.asarray(radiance, np.float64) * voxels.area[:, None]
-            total = np.stack([np.bincount(inverse, weighted[:, c]) for c in range(3)], axis=1)
-            radiance = total / cells["area"][:, None]
-        self._voxel_data = (cells["center"], cells["albedo"], radiance, voxels.voxel_size)
-        self._voxel_key = None
-
-    def _release_instances(self, name: str) -> None:
-        instances = getattr(self, name)
-        if instances is not None:
-            instances[0].release()
-        setattr(self, name, None)
+        self._debug.set_voxels(voxels, radiance)
 
     def reload_shaders(self) -> None:
         """Recompile the shaders from their files; on a ShaderError the old programs stay in use."""
@@ -195,7 +171,7 @@ class Renderer:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         if view == "voxels":
-            self._draw_voxels(view_proj)
+            self._debug.draw_voxels(view_proj, self.settings.voxel_color)
         elif self._baked_applies(view):
             with self._timed("surfaces"):
                 self._draw_surfaces(view_proj, view, target.framebuffer, baked=True, display=display)
@@ -206,7 +182,10 @@ class Renderer:
             with self._timed("surfaces"):
                 self._draw_surfaces(view_proj, view, target.framebuffer, display=display)
             if view == "probes":
-                self._draw_probes(camera, target.aspect)
+                if self.probes is not None:
+                    self._debug.draw_probes(camera, target.aspect, self.probes, self._probe_textures.use(PROBE_UNIT),
+                                            (self._probe_textures.lo, self._probe_textures.hi), self.bounds,
+                                            self.settings.probe_radius)
         with self._timed("resolve"):
             target.resolve()
 
@@ -270,7 +249,7 @@ class Renderer:
     def _tone_map(self, target: HdrTarget | DisplayTarget, framebuffer: moderngl.Framebuffer, view: str) -> None:
         """The full-screen pass of present.glsl from the target's texture into `framebuffer`'s viewport."""
         s = self.settings
-        raw = view in ("albedo", "normals") or (view == "voxels" and not self._voxel_radiance_shown())
+        raw = view in ("albedo", "normals") or (view == "voxels" and not self._debug.radiance_shown(s.voxel_color))
         same_size = tuple(framebuffer.viewport[2:]) == target.size
         defines = dict(TONE_CURVE=TONEMAPS[s.tonemap], RAW=int(raw), SAME_SIZE=int(same_size),
                        ENCODED=int(isinstance(target, DisplayTarget)))
@@ -402,56 +381,14 @@ class Renderer:
         framebuffer.color_mask = (True,) * 4 if attachments == 1 else ((True,) * 4,) * attachments
         self.ctx.depth_func = "<="
 
-    def _draw_probes(self, camera: Camera, aspect: float) -> None:
-        if self._probe_instances is None:
-            return
-        program = self.programs.get("probe_spheres")
-        buffer, count = self._probe_instances
-        units = self._probe_textures.use(PROBE_UNIT)
-        m = self.probes.resolution
-        lo, hi = self.bounds
-        near, far = clip_range(camera, lo, hi)
-        set_uniforms(program, view=gl_bytes(view_matrix(camera)),
-                     projection=gl_bytes(perspective(camera.fov, aspect, near, far)), probe_sh=units,
-                     probe_lo=tuple(self._probe_textures.lo), probe_hi=tuple(self._probe_textures.hi),
-                     probe_count=(m, m, m),
-                     sphere_radius=self.settings.probe_radius * float(np.min(self.probes.spacing)))
-        array = self.ctx.vertex_array(program, [(self._quad, "2f", "in_corner"), (buffer, "3i/i", "in_probe")])
-        array.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
-        array.release()
-
-    def _voxel_radiance_shown(self) -> bool:
-        return (self.settings.voxel_color == "radiance" and self._voxel_data is not None
-                and self._voxel_data[2] is not None)
-
-    def _draw_voxels(self, view_proj: np.ndarray) -> None:
-        if self._voxel_data is None:
-            return
-        centers, albedo, radiance, size = self._voxel_data
-        shown = self._voxel_radiance_shown()
-        if self._voxel_instances is None or self._voxel_key != shown:
-            self._release_instances("_voxel_instances")
-            colors = radiance if shown else albedo
-            data = np.concatenate([centers, colors], axis=1).astype(np.float32)
-            self._voxel_instances = (self.ctx.buffer(data.tobytes()), len(data))
-            self._voxel_key = shown
-        program = self.programs.get("voxel_cubes")
-        buffer, count = self._voxel_instances
-        set_uniforms(program, view_proj=gl_bytes(view_proj), cube_size=size, shade=not shown)
-        array = self.ctx.vertex_array(program, [(self._cube, "3f 3f", "in_position", "in_normal"),
-                                                (buffer, "3f 3f/i", "in_center", "in_color")])
-        array.render(moderngl.TRIANGLES, vertices=36, instances=count)
-        array.release()
-
     def release(self) -> None:
         self._release_baked()
         for obj in (self.mesh, self._emitter_shadows, self._sun_shadow, self._probe_textures, self._scratch):
             if obj is not None:
                 obj.release()
-        self._release_instances("_probe_instances")
-        self._release_instances("_voxel_instances")
+        self._debug.release()
         if self._interleave is not None:
             self._interleave.release()
-        for obj in (self._cube, self._quad, *self._present_arrays.values(), self._resolve_array):
+        for obj in (*self._present_arrays.values(), self._resolve_array):
             obj.release()
         self.programs.release()
