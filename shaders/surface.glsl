@@ -13,8 +13,9 @@
 // of a 2x2 block sums a different quarter of the emitter samples and writes the pieces that
 // interleave_resolve.glsl recombines: everything but the reflected direct light, the direct irradiance,
 // albedo / pi, and the surface's plane (inverse view depth and its screen-space gradient).
-// BAKED (1: the direct and indirect irradiance read from the lightmaps of viewer/gpu/direct_bake.py and
-// indirect_bake.py, one fetch each). DISPLAY (1: write
+// BAKED (1: the direct irradiance read from the lightmap of viewer/gpu/direct_bake.py), BAKED_INDIRECT
+// (1: the indirect irradiance from the lightmap of viewer/gpu/indirect_bake.py; 0: the probe grid per
+// fragment, as without BAKED). DISPLAY (1: write
 // the sRGB-encoded display value, exposure and tone curve applied as present.glsl does (display_value,
 // tonemap.glsl, with its TONE_CURVE and RAW): one pass into an 8-bit image instead of a float image and
 // a full-screen tone-mapping pass, which cost about a third of a frame on llvmpipe).
@@ -36,6 +37,9 @@
 #endif
 #ifndef BAKED
 #define BAKED 0
+#endif
+#ifndef BAKED_INDIRECT
+#define BAKED_INDIRECT 0
 #endif
 #ifndef DISPLAY
 #define DISPLAY 0
@@ -121,14 +125,14 @@ void main() {
     irradiance += textureLod(lightmap, texel, 0.0).rgb;
     result += emission;
 #endif
-#if VIEW != VIEW_DIRECT && INDIRECT
+#if VIEW != VIEW_DIRECT && INDIRECT && BAKED_INDIRECT
     irradiance += textureLod(indirect_lightmap, texel, 0.0).rgb;
 #endif
     result += v_albedo / PI * irradiance;
 #elif VIEW != VIEW_INDIRECT
     result += v_albedo / PI * direct_irradiance(v_position, n) + emission;
 #endif
-#if VIEW != VIEW_DIRECT && INDIRECT && !BAKED
+#if VIEW != VIEW_DIRECT && INDIRECT && !BAKED_INDIRECT
     result += v_albedo / PI * probe_irradiance(v_position, n);
 #endif
 #endif

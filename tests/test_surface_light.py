@@ -95,3 +95,28 @@ def test_no_steps_along_silhouettes(gl_context, cornell, cornell_probes):
     steps = silhouette_steps(images["final"] - images["direct"], images["normals"], images["depth"])
     assert len(steps) > 500
     assert steps.max() < 0.2, np.sort(steps)[-5:]
+
+
+def test_a_new_lattice_is_read_per_fragment_until_its_weights_are_ready(gl_context, cornell, cornell_probes):
+    """The viewer computes a new scene's probe weights on a worker (Renderer.background_bake): the
+    frames meanwhile read the probes per fragment (lit, not black), `bake_version` changes when the
+    weights are in, and the image is then the one a synchronous renderer draws."""
+    import time
+
+    expected = render(gl_context, cornell, cornell_probes, (96, 96), ("indirect",))["indirect"]
+    offscreen = OffscreenRenderer((96, 96), samples=0, ctx=gl_context)
+    try:
+        renderer = offscreen.renderer
+        renderer.background_bake = True
+        renderer.set_scene(cornell)
+        renderer.set_probes(cornell_probes)
+        early = offscreen.render_hdr(view="indirect")
+        version = renderer.bake_version()
+        assert version[1], "the weights are computed in the background"
+        assert early.mean() > 0.5 * expected.mean()
+        while renderer.bake_version()[1]:
+            time.sleep(0.02)
+        assert renderer.bake_version() != version
+        np.testing.assert_allclose(offscreen.render_hdr(view="indirect"), expected, rtol=1e-3, atol=1e-5)
+    finally:
+        offscreen.release()

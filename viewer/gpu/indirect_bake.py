@@ -15,16 +15,22 @@ and each face reads its own texels.
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
+
 import moderngl
 import numpy as np
 
 from viewer import dda
+from viewer.geometry import voxelize_with_faces
 from viewer.gpu.direct_bake import BakedDirectLight
 from viewer.probe_weights import SurfaceBake, SurfaceWeights
 from viewer.probes import ProbeGrid
+from viewer.scene import Scene
+
+VISIBILITY_VOXELS = 32
+"""Cells per axis of the triangle grid that the probes' visibility is traced in."""
 
 
-TEXTURE_DTYPE = "f4"
 
 
 def lattice_key(probes: ProbeGrid) -> tuple:
@@ -34,24 +40,60 @@ def lattice_key(probes: ProbeGrid) -> tuple:
 
 
 class BakedIndirectLight:
-    """The indirect irradiance of every lightmap texel, front sides | back sides as the direct lightmap."""
+    """The indirect irradiance of every lightmap texel, front sides | back sides as the direct lightmap.
 
-    def __init__(self, ctx: moderngl.Context, lightmap: BakedDirectLight):
+    The weights of a new probe lattice take a few tenths of a second: with `background`, they are
+    computed on a worker thread (numba releases the GIL) and `ready_for` answers False until they are
+    installed, so that the caller can draw the probes per fragment meanwhile instead of stalling."""
+
+    def __init__(self, ctx: moderngl.Context, lightmap: BakedDirectLight, scene: Scene, background: bool = False):
         self.lightmap = lightmap
+        self.scene = scene
         height, width = lightmap.covered.shape
-        self.texture = ctx.texture((2 * width, height), 3, dtype=TEXTURE_DTYPE)
+        self.texture = ctx.texture((2 * width, height), 3, dtype="f2")
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
         self._image = np.zeros((height * 2 * width, 3), np.float32)
         rows, columns = np.nonzero(lightmap.covered)           # the order of lightmap.texel_points
         self._pixels = np.concatenate([rows * 2 * width + columns, rows * 2 * width + width + columns])
         """Each texel's pixel in the (front | back) image: the front sides', then the back sides'."""
+        self._cells: dda.Cells | None = None
         self._bake: SurfaceBake | None = None
         self.weights_key = None
-        """lattice_key of the probe grid the weights belong to (None: none yet)."""
+        """lattice_key of the probe grid whose weights are installed (None: none yet)."""
+        self._executor = ThreadPoolExecutor(1, thread_name_prefix="indirect-weights") if background else None
+        self._job: tuple[tuple, Future] | None = None
 
-    def set_weights(self, probes: ProbeGrid, cells: dda.Cells) -> None:
+    def ready_for(self, probes: ProbeGrid) -> bool:
+        """Whether the weights of the probes' lattice are installed; starts computing them if not (at
+        once, or on the worker with `background`)."""
+        key = lattice_key(probes)
+        if self.weights_key == key:
+            return True
+        if self._job is None or self._job[0] != key:
+            if self._executor is None:
+                self._install(key, self.weights_of(probes))
+                return True
+            self._job = (key, self._executor.submit(self.weights_of, probes))
+        return self.poll()
+
+    def poll(self) -> bool:
+        """Install the worker's weights if they are done; True when they were."""
+        if self._job is None or not self._job[1].done():
+            return False
+        key, job = self._job
+        self._job = None
+        self._install(key, job.result())
+        return True
+
+    @property
+    def pending(self) -> bool:
+        return self._job is not None
+
+    def weights_of(self, probes: ProbeGrid) -> SurfaceBake:
         """Every texel's probe weights for both sides (the back sides with their normals negated)."""
+        if self._cells is None:
+            self._cells = dda.Cells.of(voxelize_with_faces(self.scene, VISIBILITY_VOXELS), self.scene)
         lightmap = self.lightmap
         faces = lightmap.texel_faces
         face_normal = np.zeros((int(faces.max()) + 1, 3))
@@ -59,14 +101,17 @@ class BakedIndirectLight:
         normals, ids = np.unique(np.round(np.concatenate([face_normal, -face_normal]), 6), axis=0,
                                  return_inverse=True)
         normal_id = np.concatenate([ids[faces], ids[len(face_normal) + faces]])
-        weights = SurfaceWeights.of(np.concatenate([lightmap.texel_points] * 2), normals[normal_id], probes, cells)
-        self._bake = SurfaceBake.of(weights, normal_id, normals)
-        self.weights_key = lattice_key(probes)
+        weights = SurfaceWeights.of(np.concatenate([lightmap.texel_points] * 2), normals[normal_id], probes,
+                                    self._cells)
+        return SurfaceBake.of(weights, normal_id, normals)
+
+    def _install(self, key: tuple, bake: SurfaceBake) -> None:
+        self._bake, self.weights_key = bake, key
 
     def update(self, probes: ProbeGrid) -> None:
-        """Evaluate and upload the indirect irradiance of `probes` (the lattice of set_weights)."""
+        """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
         self._bake.irradiance(probes.coefficients, self._image, self._pixels)
-        self.texture.write(self._image.astype(np.float16 if TEXTURE_DTYPE == "f2" else np.float32).tobytes())
+        self.texture.write(self._image.astype(np.float16).tobytes())
 
     def use(self, unit: int) -> dict:
         """Bind the indirect lightmap; returns the surface shader's uniforms."""
@@ -74,4 +119,6 @@ class BakedIndirectLight:
         return dict(indirect_lightmap=unit)
 
     def release(self) -> None:
+        if self._executor is not None:
+            self._executor.shutdown(wait=False, cancel_futures=True)
         self.texture.release()

@@ -30,9 +30,8 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from viewer import dda
 from viewer.gpu.direct_bake import BakedDirectLight
-from viewer.gpu.indirect_bake import BakedIndirectLight, lattice_key
+from viewer.gpu.indirect_bake import BakedIndirectLight
 from viewer.gpu.camera import gl_bytes, view_projection
 from viewer.gpu.debug_views import DebugViews
 from viewer.gpu.lights import emitter_samples
@@ -42,15 +41,12 @@ from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
 from viewer.gpu.render_settings import TONEMAPS, VIEWS, VOXEL_COLORS, RenderSettings  # noqa: F401 (re-exported)
 from viewer.gpu.shadows import EmitterShadows, SunShadow
 from viewer.gpu.targets import DisplayTarget, HdrTarget, InterleaveBuffers
-from viewer.geometry import voxelize_with_faces
 from viewer.probes import ProbeGrid
 from viewer.scene import Camera, Scene
 from viewer.voxels import VoxelGrid
 
 SURFACE_VIEWS = {"final": 0, "direct": 1, "indirect": 2, "albedo": 3, "normals": 4, "probes": 0}
 PROBE_UNIT, ATLAS_UNIT, SUN_UNIT, HDR_UNIT, INTERLEAVE_UNIT, BAKED_UNIT, INDIRECT_UNIT = 0, 7, 8, 9, 10, 14, 15
-VISIBILITY_VOXELS = 32
-"""Cells per axis of the triangle grid that the probe visibility of the baked indirect light is traced in."""
 
 
 class Renderer:
@@ -90,7 +86,10 @@ class Renderer:
         self._interleave: InterleaveBuffers | None = None
         self._indirect: BakedIndirectLight | None = None
         self._indirect_fresh = False
-        self._cells: dda.Cells | None = None
+        self.background_bake = False
+        """Compute the per-texel probe weights of a new scene or probe lattice on a worker thread and read
+        the probes per fragment until they are ready (the interactive viewer), instead of stalling the
+        frame that needs them (captures and tests: the same image every time)."""
         self._baked: BakedDirectLight | None = None
         self._baked_key = None
         self._scratch: HdrTarget | None = None
@@ -106,7 +105,6 @@ class Renderer:
         if self.mesh is not None:
             self.mesh.release()
         self._release_baked()
-        self._cells = None
         self.scene = scene
         self.bounds = scene.bounds   # (lo, hi); Scene.bounds scans the faces, so not once per frame
         self._draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
@@ -303,21 +301,28 @@ class Renderer:
         return self._baked
 
     def _ensure_indirect(self) -> BakedIndirectLight | None:
-        """The probe grid baked into the lightmap's texels (None while GI is off): the per-texel weights
-        when the lightmap or the probe lattice changed, then an update whenever the probes did."""
+        """The probe grid baked into the lightmap's texels, or None: while GI is off, or while the
+        weights of a new probe lattice are computed in the background (the probes are then read per
+        fragment)."""
         if self.probes is None or not self.settings.indirect:
             return None
         if self._indirect is None:
-            self._indirect = BakedIndirectLight(self.ctx, self._baked)
-        if self._indirect.weights_key != lattice_key(self.probes):
-            if self._cells is None:
-                self._cells = dda.Cells.of(voxelize_with_faces(self._draw_scene, VISIBILITY_VOXELS), self._draw_scene)
-            self._indirect.set_weights(self.probes, self._cells)
-            self._indirect_fresh = False
-        if not self._indirect_fresh:
+            self._indirect = BakedIndirectLight(self.ctx, self._baked, self._draw_scene, self.background_bake)
+        installed = self._indirect.weights_key
+        if not self._indirect.ready_for(self.probes):
+            return None
+        if not self._indirect_fresh or self._indirect.weights_key != installed:
             self._indirect.update(self.probes)
             self._indirect_fresh = True
         return self._indirect
+
+    def bake_version(self) -> tuple:
+        """Changes when background work that changes the image has finished (for a viewer that
+        redraws only when something changed)."""
+        if self._indirect is None:
+            return (None,)
+        self._indirect.poll()
+        return (self._indirect.weights_key, self._indirect.pending)
 
     def _release_baked(self) -> None:
         for obj in (self._indirect, self._baked):
@@ -338,10 +343,8 @@ class Renderer:
             extra.update(self._baked.use(BAKED_UNIT))
             if indirect is not None:
                 extra.update(indirect.use(INDIRECT_UNIT))
-            else:
-                probes = None
         defines = dict(VIEW=SURFACE_VIEWS[view], INDIRECT=int(probes is not None), INTERLEAVE=int(interleave),
-                       BAKED=int(baked), DISPLAY=int(display))
+                       BAKED=int(baked), BAKED_INDIRECT=int(baked and indirect is not None), DISPLAY=int(display))
         if display:   # tone mapping as present.glsl does it (tonemap.glsl)
             defines.update(TONE_CURVE=TONEMAPS[s.tonemap], RAW=int(view in ("albedo", "normals")))
             extra.update(exposure_scale=float(2.0 ** s.exposure))

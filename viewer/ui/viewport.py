@@ -69,7 +69,7 @@ class Viewport:
         nothing changed."""
         window_size = tuple(framebuffer.viewport[2:])
         key = (astuple(camera), view, content_key, self._settings_key(), window_size, self.render_scale,
-               self.samples)
+               self.samples, self.renderer.bake_version())
         self._key = key
         quality = "preview" if preview and self.preview_scale < 1.0 else "full"
         drew = False
