@@ -8,7 +8,8 @@ import time
 
 import numpy as np
 
-from viewer.ui.frame_graph import FrameTimes, is_software
+from viewer.gpu.context import is_software
+from viewer.ui.frame_graph import FrameTimes
 
 
 def test_on_a_software_gl_the_gpu_time_is_the_frames_work_not_the_time_between_frames(gl_context):

@@ -6,9 +6,10 @@
     timer.frame()                     # {"indirect": (gpu_ms, cpu_ms), "surface": ..., "present": ...}
 
 With `finish` (the default) every pass ends with glFinish, so its CPU time is the time until its
-pixels exist: on a software rasterizer (llvmpipe) that is the cost of the pass, and the two clocks
-agree. That serializes the frame, so benchmarks time whole frames separately (without a timer) and use
-the per-pass numbers for where the time goes.
+pixels exist. On a software rasterizer (llvmpipe) that is the cost of the pass, and the GPU figure is
+that same wall clock: its timer queries do not measure the work (viewer.gpu.context.is_software). The
+glFinish serializes the frame, so benchmarks time whole frames separately (without a timer) and use the
+per-pass numbers for where the time goes.
 """
 
 from __future__ import annotations
@@ -18,11 +19,14 @@ from contextlib import contextmanager
 
 import moderngl
 
+from viewer.gpu.context import is_software
+
 
 class PassTimer:
     def __init__(self, ctx: moderngl.Context, finish: bool = True):
         self.ctx = ctx
         self.finish = finish
+        self.software = is_software(ctx)
         self._queries: dict[str, moderngl.Query] = {}
         self._cpu: dict[str, float] = {}
         self._order: list[str] = []
@@ -43,7 +47,7 @@ class PassTimer:
 
     def frame(self) -> dict[str, tuple[float, float]]:
         """(GPU ms, CPU ms) of each pass timed since the last call, in the order they first ran."""
-        out = {name: (self._queries[name].elapsed / 1e6, self._cpu[name]) for name in self._order
-               if name in self._cpu}
+        out = {name: (self._cpu[name] if self.software and self.finish else self._queries[name].elapsed / 1e6,
+                      self._cpu[name]) for name in self._order if name in self._cpu}
         self._cpu.clear()
         return out

@@ -24,20 +24,13 @@ import moderngl
 import numpy as np
 from imgui_bundle import imgui
 
+from viewer.gpu.context import is_software
+
 QUERIES_IN_FLIGHT = 3
-SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swiftshader", "swrast")
 FAILED_QUERY_NS = (1 << 32) - 1
 """What a failed timer query reads (-1 as a 32-bit unsigned number: 4295 ms)."""
 IMPLAUSIBLE_MS = 60_000.0
 """No frame takes a minute: a longer result is not a duration either."""
-
-
-def is_software(ctx: moderngl.Context) -> bool:
-    """Whether the context renders on the CPU (its GL_RENDERER names a software rasterizer)."""
-    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
-    return any(name in renderer for name in SOFTWARE_RENDERERS)
-CPU_COLOUR = (1.0, 0.62, 0.2, 1.0)
-GPU_COLOUR = (0.35, 0.8, 1.0, 1.0)
 
 
 class FrameTimes:
