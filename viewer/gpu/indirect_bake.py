@@ -107,10 +107,36 @@ class BakedIndirectLight:
 
     def _install(self, key: tuple, bake: SurfaceBake) -> None:
         self._bake, self.weights_key = bake, key
+        self._fill = self._dark_fill(bake)
+
+    def _dark_fill(self, bake: SurfaceBake) -> tuple[np.ndarray, np.ndarray]:
+        """(pixels, sources): the texels that see no probe (a face's strip under the floor, the ceiling
+        above a lamp) next to one of their tile's texels that does take that texel's light, so that the
+        bilinear fetch of a visible pixel near the edge never mixes in their darkness."""
+        height, width = self.lightmap.covered.shape
+        dark = bake.weights.sum(axis=1) == 0.0
+        tile = np.full(height * 2 * width, -1, np.int64)
+        faces = self.lightmap.texel_faces
+        tile[self._pixels] = np.concatenate([2 * faces, 2 * faces + 1])
+        lit = np.zeros(height * 2 * width, bool)
+        lit[self._pixels[~dark]] = True
+        pixels, sources = [], []
+        for step in (1, -1, 2 * width, -2 * width):
+            candidate = self._pixels[dark] + step
+            inside = (candidate >= 0) & (candidate < len(tile))
+            candidate = np.where(inside, candidate, 0)
+            ok = inside & lit[candidate] & (tile[candidate] == tile[self._pixels[dark]])
+            pixels.append(self._pixels[dark][ok])
+            sources.append(candidate[ok])
+        pixels, sources = np.concatenate(pixels), np.concatenate(sources)
+        first = np.unique(pixels, return_index=True)[1]
+        return pixels[first], sources[first]
 
     def update(self, probes: ProbeGrid) -> None:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
         self._bake.irradiance(probes.coefficients, self._image, self._pixels)
+        pixels, sources = self._fill
+        self._image[pixels] = self._image[sources]
         self.texture.write(self._image.astype(np.float16).tobytes())
 
     def use(self, unit: int) -> dict:
