@@ -169,6 +169,7 @@ class ViewerApp(mglw.WindowConfig):
         settings = RenderSettings(light_samples=self.light_samples, interleave=self.interleave)
         self.renderer = Renderer(self.ctx, settings, options.shader_dir or SHADERS)
         self.renderer.background_bake = True   # a new scene's probe weights never stall a frame
+        self.renderer.warm_up()
         self.viewport = Viewport(self.ctx, self.renderer, self.render_scale, self.preview_scale, samples=self.msaa)
         self.times = FrameTimes(self.ctx)
         gi = GIController(self.ctx, "baked" if baked else options.gi,

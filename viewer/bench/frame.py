@@ -102,6 +102,8 @@ def progressive(ctx, scene, size, light_samples: int, budget_ms: float | None, t
     from viewer.ui.viewport import Viewport
 
     renderer = Renderer(ctx, RenderSettings(light_samples=light_samples))
+    renderer.background_bake = True   # as the viewer: a new lattice's texel weights on a worker
+    renderer.warm_up()
     renderer.set_scene(scene)
     options = {} if budget_ms is None else {"compute_budget_ms": budget_ms}
     gi = GIController(ctx, "compute", GISettings(), **options)

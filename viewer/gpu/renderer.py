@@ -1,22 +1,15 @@
 """The renderer: a Scene and a ProbeGrid -> linear HDR radiance -> a tone-mapped sRGB image.
 
-Per fragment (shaders/surface.glsl): outgoing = albedo / pi * (E_direct + E_indirect) + emission, with
-E_direct from fixed samples on the area emitters and the sun, shadowed by shadow maps
-(viewer/gpu/shadows.py), and E_indirect the cosine-lobe convolution of the probe grid's SH, which holds
-indirect incident radiance only, interpolated with DDGI-style weights against leaks (validity, and a
-smooth fade of the probes behind the surface: shaders/probe_grid.glsl). Exposure, a tone curve and the
-sRGB encoding make the display image: in the surface pass itself when drawing into a DisplayTarget (the
-window's and the PNG captures' path), or by `present` from an HdrTarget of linear radiance.
-Without multisampling the direct light is interleaved over 2x2 pixel blocks and recombined by a filter
-(RenderSettings.interleave, shaders/interleave_resolve.glsl): the renderer's largest cost on a CPU
-rasterizer.
-
-The interactive default is faster still, and holds the look (RenderSettings.baked; False gives the
-exact path above, for comparisons with the reference): diffuse light is view-independent, so the direct
-light is baked into a lightmap once per scene and light setting (viewer/gpu/direct_bake.py), the probe
-grid's indirect light into the same texels once per GI update (viewer/gpu/indirect_bake.py, with per-texel
-DDGI-style probe weights and exact probe visibility, viewer/probe_weights.py), and the surface pass reads
-their sum with one fetch per fragment: no screen-space upsampling, so no edges to step over.
+Per fragment (shaders/surface.glsl): outgoing = albedo / pi * (E_direct + E_indirect) + emission. By
+default (RenderSettings.baked) both irradiances are read from lightmaps, one fetch each: the direct light
+baked once per scene and light setting (viewer/gpu/direct_bake.py: emitter samples and the sun, with
+shadow maps, viewer/gpu/shadows.py), the probe grid's indirect light once per GI update
+(viewer/gpu/indirect_bake.py, with DDGI-style per-texel probe weights and exact probe visibility,
+viewer/probe_weights.py). The exact path (baked=False, for comparisons with the reference) sums the
+emitter samples per fragment, interleaved over 2x2 pixel blocks without multisampling
+(shaders/interleave_resolve.glsl), and interpolates the probes per fragment (shaders/probe_grid.glsl).
+Exposure, a tone curve and the sRGB encoding are applied in the surface pass when drawing into a
+DisplayTarget (the window's and the captures' path), or by `present` from an HdrTarget.
 
 The renderer does not know where its pixels go: it draws into any HdrTarget or DisplayTarget and
 presents into any framebuffer (the window's screen, or an offscreen image, see viewer/gpu/offscreen.py).
@@ -87,9 +80,8 @@ class Renderer:
         self._indirect: BakedIndirectLight | None = None
         self._indirect_fresh = False
         self.background_bake = False
-        """Compute the per-texel probe weights of a new scene or probe lattice on a worker thread and read
-        the probes per fragment until they are ready (the interactive viewer), instead of stalling the
-        frame that needs them (captures and tests: the same image every time)."""
+        """New texel weights on a worker, the probes read per fragment meanwhile (the viewer), instead of in
+        the frame that needs them (captures and tests: the same image every time)."""
         self._baked: BakedDirectLight | None = None
         self._baked_key = None
         self._scratch: HdrTarget | None = None
@@ -301,9 +293,8 @@ class Renderer:
         return self._baked
 
     def _ensure_indirect(self) -> BakedIndirectLight | None:
-        """The probe grid baked into the lightmap's texels, or None: while GI is off, or while the
-        weights of a new probe lattice are computed in the background (the probes are then read per
-        fragment)."""
+        """The probe grid baked into the lightmap's texels, or None: while GI is off, or while a new
+        lattice's weights are made in the background (the probes are then read per fragment)."""
         if self.probes is None or not self.settings.indirect:
             return None
         if self._indirect is None:
@@ -317,12 +308,10 @@ class Renderer:
         return self._indirect
 
     def bake_version(self) -> tuple:
-        """Changes when background work that changes the image has finished (for a viewer that
-        redraws only when something changed)."""
-        if self._indirect is None:
-            return (None,)
-        self._indirect.poll()
-        return (self._indirect.weights_key, self._indirect.pending)
+        """Changes when background work that changes the image has finished (a redraw key)."""
+        if self._indirect is not None:
+            self._indirect.poll()
+        return (None,) if self._indirect is None else (self._indirect.weights_key, self._indirect.pending)
 
     def _release_baked(self) -> None:
         for obj in (self._indirect, self._baked):
@@ -343,10 +332,9 @@ class Renderer:
             extra.update(self._baked.use(BAKED_UNIT))
             if indirect is not None:
                 extra.update(indirect.use(INDIRECT_UNIT))
-        defines = dict(VIEW=SURFACE_VIEWS[view], INDIRECT=int(probes is not None), INTERLEAVE=int(interleave),
-                       BAKED=int(baked), BAKED_INDIRECT=int(baked and indirect is not None), DISPLAY=int(display))
-        if display:   # tone mapping as present.glsl does it (tonemap.glsl)
-            defines.update(TONE_CURVE=TONEMAPS[s.tonemap], RAW=int(view in ("albedo", "normals")))
+        defines = self._surface_defines(view, probes is not None, interleave, baked,
+                                        baked and indirect is not None, display)
+        if display:
             extra.update(exposure_scale=float(2.0 ** s.exposure))
         program = self.programs.get("surface", **defines)
         units = self._probe_textures.use(PROBE_UNIT)
@@ -361,6 +349,22 @@ class Renderer:
             self._depth_prepass(view_proj, framebuffer, mesh)
         mesh.render(program)
         self.ctx.depth_func = "<"
+
+    def _surface_defines(self, view: str, indirect: bool, interleave: bool, baked: bool, baked_indirect: bool,
+                         display: bool) -> dict:
+        defines = dict(VIEW=SURFACE_VIEWS[view], INDIRECT=int(indirect), INTERLEAVE=int(interleave),
+                       BAKED=int(baked), BAKED_INDIRECT=int(baked_indirect), DISPLAY=int(display))
+        if display:   # tone mapping as present.glsl does it (tonemap.glsl)
+            defines.update(TONE_CURVE=TONEMAPS[self.settings.tonemap], RAW=int(view in ("albedo", "normals")))
+        return defines
+
+    def warm_up(self) -> None:
+        """Compile the surface shader's variants that the final view goes through when GI arrives (no
+        probes, probes read per fragment while their texel weights are made, baked probes): a variant
+        compiles in a few hundred ms on llvmpipe, a stalled frame when first met."""
+        for indirect, baked_indirect in ((False, False), (True, False), (True, True)):
+            self.programs.get("surface", **self._surface_defines("final", indirect, False, self.settings.baked,
+                                                                  baked_indirect, True))
 
     def _probe_uniforms(self, probes: ProbeGrid | None) -> dict:
         """probe_grid.glsl's uniforms: the grid's box, and the normal offset and plane falloff in world

@@ -31,6 +31,8 @@ FAILED_QUERY_NS = (1 << 32) - 1
 """What a failed timer query reads (-1 as a 32-bit unsigned number: 4295 ms)."""
 IMPLAUSIBLE_MS = 60_000.0
 """No frame takes a minute: a longer result is not a duration either."""
+CPU_COLOUR = (1.0, 0.62, 0.2, 1.0)
+GPU_COLOUR = (0.35, 0.8, 1.0, 1.0)
 
 
 class FrameTimes:
