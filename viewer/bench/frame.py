@@ -152,6 +152,40 @@ def progressive_line(result: dict) -> str:
             f"{result['redraws']} |")
 
 
+def gi_update_table(ctx, scene, probes, size, frames: int) -> str:
+    """Milliseconds from new probes (a relight, a network update) to the frame that shows them: the
+    renderer's texel bake (viewer/gpu/indirect_bake.py: the weighted sum per texel on the CPU and its
+    upload) and the frame, against a frame alone; the texel weights themselves are made once per scene
+    and probe lattice, and timed apart (`weights`)."""
+    offscreen = OffscreenRenderer(size, RenderSettings(), samples=0, ctx=ctx)
+    renderer = offscreen.renderer
+    try:
+        renderer.set_scene(scene)
+        offscreen.render()
+        start = time.perf_counter()
+        renderer.set_probes(probes)
+        offscreen.render()
+        weights = 1e3 * (time.perf_counter() - start)
+        updates, plain = [], []
+        for k in range(frames):
+            renderer.set_probes(probes.with_coefficients(probes.coefficients * (1.0 + 0.01 * (k % 2))))
+            start = time.perf_counter()
+            renderer.draw(offscreen.display, None, "final")
+            ctx.finish()
+            updates.append(1e3 * (time.perf_counter() - start))
+            start = time.perf_counter()
+            renderer.draw(offscreen.display, None, "final")
+            ctx.finish()
+            plain.append(1e3 * (time.perf_counter() - start))
+    finally:
+        offscreen.release()
+    text = ("| GI update: new probes to the frame that shows them | frame alone | first probes of a lattice "
+            "(weights) |\n|---|---|---|\n"
+            f"| {np.median(updates):.1f} ms | {np.median(plain):.1f} ms | {weights:.0f} ms |")
+    print(text, flush=True)
+    return text
+
+
 def machine(ctx, loads) -> str:
     return (f"{platform.machine()}, {os.cpu_count()} CPU cores shared with other work (load average "
             f"{min(loads):.1f}-{max(loads):.1f} over the run), {describe(ctx)}")
@@ -179,6 +213,8 @@ def main(argv=None):
     print(describe(ctx), f"load average {loads[0]:.2f}", flush=True)
     probes = solve_probes(ctx, scene, GISettings(), include_emitted=False)
     sections = [frame_table(ctx, scene, probes, size, args.light_samples, args.exact, args.frames)]
+    loads.append(os.getloadavg()[0])
+    sections.append(gi_update_table(ctx, scene, probes, size, args.frames))
     loads.append(os.getloadavg()[0])
     if args.passes:
         sections.append(pass_table(ctx, scene, probes, size, args.light_samples[0], args.frames))
