@@ -1,23 +1,27 @@
-"""How even the indirect light is on faces, against Mitsuba: the measure of the probe grid's dark
-blotches (leaks) on the boxes of the Cornell scenes.
+"""How even the indirect light is on faces, against Mitsuba: the probe grid's dark streaks and blotches
+on the boxes of the Cornell scenes, and steps along silhouettes.
 
     python -m viewer.bench.blotches [--scenes cornell paper-test] [--size 256] [--spp 256]
-                                    [--points 4000] [--falloff 3 0]
+                                    [--points 4000]
 
-Two numbers per scene, for each RenderSettings.probe_plane_falloff given (0: the back-side weight off,
-validity weights only):
+For the default renderer (the probes baked per lightmap texel with the weights of
+viewer/probe_weights.py) and the exact path (the probes interpolated per fragment,
+shaders/probe_grid.glsl), per scene:
 
-- **blocks**: the final view (256x256, 4x MSAA, linear HDR) against Mitsuba's render, on 8x8-pixel
-  blocks that lie wholly on one face not aligned with the room's axes (the boxes' sides, the sphere's
-  facets): the ratio of the blocks' mean luminance, ours / Mitsuba, as median, 5-95% range and RMS
-  distance from 1. Mitsuba's noise (256 spp) widens the spread a little.
-- **points**: `ProbeGrid.surface_irradiance` (what the renderer's probe lookup computes, tested against
-  the shader) at random points on the faces against Mitsuba's indirect irradiance there
-  (`reference.irradiance(indirect_only=True)`), relative RMS error of the luminance (errors relative
-  to the point's own value, or to a fifth of the median where that is darker), for the faces off the
-  axes and for the others (walls, floor, ceiling) apart. Points that another surface covers closely
-  (within 2% of the scene's size along the normal: the ceiling 1 cm behind the lamp) or that lie
-  inside a solid (no light at all: the floor under the boxes) are left out: no camera sees them.
+- **streaks** (`face_blocks`): the final view (no MSAA, linear HDR) against Mitsuba's render, on
+  16x16-pixel blocks lying wholly on one face: ours / Mitsuba of the blocks' mean luminance, the worst
+  block on the faces off the room's axes (the boxes' sides) and on all faces, and the RMS distance
+  from 1 over all blocks.
+- **silhouette steps** (`silhouette_steps`, at 640x360): the largest and the 99th percentile jump of
+  the indirect light between consecutive pixels along silhouettes.
+- **points**: the renderer's lookup at random points on the faces (`SurfaceWeights`, or
+  `ProbeGrid.surface_irradiance` for the exact path, tested against the shaders) against Mitsuba's
+  indirect irradiance there (`reference.irradiance(indirect_only=True)`), relative RMS error of the
+  luminance (errors relative to the point's own value, or to a fifth of the median where that is
+  darker), for the faces off the axes and for the others (walls, floor, ceiling) apart. Points that
+  another surface covers closely (within 2% of the scene's size along the normal: the ceiling 1 cm
+  behind the lamp) or that lie inside a solid (the floor under the boxes) are left out: no camera sees
+  them.
 
 Probes come from the compute solver at the GISettings defaults, indirect light only.
 """
@@ -29,27 +33,9 @@ import argparse
 import numpy as np
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-BLOCK = 8
-
-
 def off_axis(normals: np.ndarray) -> np.ndarray:
     """Unit normals (..., 3) not along one of the coordinate axes."""
     return np.abs(normals).max(axis=-1) < 0.99
-
-
-def block_ratios(ours: np.ndarray, truth: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Ours / Mitsuba luminance of the BLOCK x BLOCK blocks lying wholly on one off-axis face."""
-    h, w = ours.shape[:2]
-    ratios = []
-    for y in range(0, h - BLOCK + 1, BLOCK):
-        for x in range(0, w - BLOCK + 1, BLOCK):
-            n = normals[y:y + BLOCK, x:x + BLOCK].reshape(-1, 3)
-            if not off_axis(n[0]) or np.abs(n - n[0]).max() > 1e-3:
-                continue
-            o = ours[y:y + BLOCK, x:x + BLOCK] @ LUMINANCE
-            t = truth[y:y + BLOCK, x:x + BLOCK] @ LUMINANCE
-            ratios.append(o.mean() / max(t.mean(), 1e-9))
-    return np.asarray(ratios)
 
 
 STREAK_BLOCK = 16
@@ -155,13 +141,15 @@ def relative_rms(ours: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt(np.mean(((o - t) / np.maximum(t, 0.2 * np.median(t))) ** 2)))
 
 
-def measure(ctx, name: str, size: int, spp: int, points: int, falloffs) -> list[dict]:
-    from viewer import reference
+def measure(ctx, name: str, size: int, spp: int, points: int) -> list[dict]:
+    from viewer import dda, reference
     from viewer import scene as scenes
+    from viewer.geometry import voxelize_with_faces
     from viewer.gi import GISettings
     from viewer.gpu.compute_relight import solve_probes
     from viewer.gpu.offscreen import OffscreenRenderer
     from viewer.gpu.renderer import RenderSettings
+    from viewer.probe_weights import SurfaceWeights
 
     scene = scenes.load(name)
     probes = solve_probes(ctx, scene, GISettings(), include_emitted=False)
@@ -171,27 +159,42 @@ def measure(ctx, name: str, size: int, spp: int, points: int, falloffs) -> list[
     lo, hi = scene.bounds
     seen = ~covered(scene, p, n, 0.02 * float(np.linalg.norm(hi - lo))) & (indirect.max(axis=1) > 1e-4)
     p, n, indirect = p[seen], n[seen], indirect[seen]
+    tilted = off_axis(n)
+    cells = dda.Cells.of(voxelize_with_faces(scene, 32), scene)
     rows = []
-    for falloff in falloffs:
-        settings = RenderSettings(probe_plane_falloff=falloff)
-        offscreen = OffscreenRenderer((size, size), settings, ctx=ctx)
-        try:
-            offscreen.renderer.set_scene(scene)
-            offscreen.renderer.set_probes(probes)
-            ours = offscreen.render_hdr(view="final")
-            normals = 2.0 * _srgb(offscreen.render_hdr(view="normals")) - 1.0
-        finally:
-            offscreen.release()
-        ratios = block_ratios(ours, truth, normals)
-        lookup = probes.surface_irradiance(p, n, settings.probe_normal_offset, falloff)
-        tilted = off_axis(n)
-        rows.append(dict(scene=name, falloff=falloff, blocks=len(ratios), median=np.median(ratios),
-                         low=np.percentile(ratios, 5), high=np.percentile(ratios, 95),
-                         rms=float(np.sqrt(np.mean((ratios - 1.0) ** 2))),
+    for path, settings in (("baked", RenderSettings()), ("exact", RenderSettings(baked=False))):
+        images = {}
+        for image_size, views in (((size, size), ("final", "normals")), ((640, 360), ("final", "direct", "normals"))):
+            offscreen = OffscreenRenderer(image_size, settings, samples=0, ctx=ctx)
+            try:
+                offscreen.renderer.set_scene(scene)
+                offscreen.renderer.set_probes(probes)
+                for view in views:
+                    images[image_size, view] = offscreen.render_hdr(view=view)
+                images[image_size, "depth"] = view_depth(offscreen, scene.camera, scene.bounds)
+            finally:
+                offscreen.release()
+        ratios, _, on_tilted = face_blocks(images[(size, size), "final"], truth,
+                                           2.0 * _srgb(images[(size, size), "normals"]) - 1.0)
+        wide = (640, 360)
+        steps = silhouette_steps(images[wide, "final"] - images[wide, "direct"],
+                                 2.0 * _srgb(images[wide, "normals"]) - 1.0, images[wide, "depth"])
+        if path == "baked":
+            lookup = SurfaceWeights.of(p, n, probes, cells).irradiance(probes, n)
+        else:
+            lookup = probes.surface_irradiance(p, n, settings.probe_normal_offset, settings.probe_plane_falloff)
+        rows.append(dict(scene=name, path=path, worst_tilted=_worst(ratios[on_tilted]), worst=_worst(ratios),
+                         rms=float(np.sqrt(np.mean((ratios - 1.0) ** 2))), step_max=float(steps.max()),
+                         step_p99=float(np.percentile(steps, 99)),
                          tilted=relative_rms(lookup[tilted], indirect[tilted]),
                          aligned=relative_rms(lookup[~tilted], indirect[~tilted])))
         print(line(rows[-1]), flush=True)
     return rows
+
+
+def _worst(ratios: np.ndarray) -> float:
+    """The ratio farthest from 1."""
+    return float(ratios[np.argmax(np.abs(ratios - 1.0))])
 
 
 def _srgb(x: np.ndarray) -> np.ndarray:
@@ -200,13 +203,14 @@ def _srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
-HEADER = ("| scene | plane falloff | blocks | ours / Mitsuba: median | 5-95% | RMS off 1 | "
-          "points: faces off the axes | points: walls |\n|---|---|---|---|---|---|---|---|")
+HEADER = ("| scene | path | worst 16-px block, boxes' faces | worst block, all faces | RMS off 1 | "
+          "silhouette steps: largest, 99% | points: faces off the axes | points: walls |\n"
+          "|---|---|---|---|---|---|---|---|")
 
 
 def line(r: dict) -> str:
-    return (f"| {r['scene']} | {r['falloff']:g} | {r['blocks']} | {r['median']:.2f} | {r['low']:.2f}-{r['high']:.2f} | "
-            f"{r['rms']:.3f} | {r['tilted']:.3f} | {r['aligned']:.3f} |")
+    return (f"| {r['scene']} | {r['path']} | {r['worst_tilted']:.3f} | {r['worst']:.3f} | {r['rms']:.3f} | "
+            f"{r['step_max']:.3f}, {r['step_p99']:.3f} | {r['tilted']:.3f} | {r['aligned']:.3f} |")
 
 
 def main(argv=None) -> int:
@@ -217,13 +221,12 @@ def main(argv=None) -> int:
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--spp", type=int, default=256)
     parser.add_argument("--points", type=int, default=4000)
-    parser.add_argument("--falloff", type=float, nargs="+", default=[3.0, 0.0])
     args = parser.parse_args(argv)
     ctx = create_context()
     print(HEADER)
     try:
         for name in args.scenes:
-            measure(ctx, name, args.size, args.spp, args.points, args.falloff)
+            measure(ctx, name, args.size, args.spp, args.points)
     finally:
         ctx.release()
     return 0
