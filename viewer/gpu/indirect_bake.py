@@ -31,8 +31,6 @@ VISIBILITY_VOXELS = 32
 """Cells per axis of the triangle grid that the probes' visibility is traced in."""
 
 
-
-
 def lattice_key(probes: ProbeGrid) -> tuple:
     """What the weights depend on, of a probe grid: its box, resolution and validity."""
     return (tuple(np.round(probes.lo, 9)), tuple(np.round(probes.hi, 9)), probes.resolution,
@@ -96,7 +94,7 @@ class BakedIndirectLight:
             self._cells = dda.Cells.of(voxelize_with_faces(self.scene, VISIBILITY_VOXELS), self.scene)
         lightmap = self.lightmap
         faces = lightmap.texel_faces
-        face_normal = np.zeros((int(faces.max()) + 1, 3))
+        face_normal = np.zeros((int(faces.max()) + 1 if len(faces) else 0, 3))
         face_normal[faces] = lightmap.texel_normals
         normals, ids = np.unique(np.round(np.concatenate([face_normal, -face_normal]), 6), axis=0,
                                  return_inverse=True)
