@@ -120,3 +120,28 @@ def test_a_new_lattice_is_read_per_fragment_until_its_weights_are_ready(gl_conte
         np.testing.assert_allclose(offscreen.render_hdr(view="indirect"), expected, rtol=1e-3, atol=1e-5)
     finally:
         offscreen.release()
+
+
+def test_toggling_between_two_lattices_keeps_both_weights(gl_context, cornell, cornell_probes, monkeypatch):
+    """Switching GI sources with different probe grids (the network's, the solver's) reuses the texel
+    weights of a lattice met before instead of tracing them again."""
+    from viewer.gpu import indirect_bake
+
+    coarse = ProbeGrid(cornell_probes.lo, cornell_probes.hi, cornell_probes.coefficients[::2, ::2, ::2].copy(),
+                       cornell_probes.valid[::2, ::2, ::2].copy())
+    offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
+    made = []
+    original = indirect_bake.BakedIndirectLight.weights_of
+    monkeypatch.setattr(indirect_bake.BakedIndirectLight, "weights_of",
+                        lambda self, probes: made.append(probes.resolution) or original(self, probes))
+    try:
+        offscreen.renderer.set_scene(cornell)
+        images = []
+        for probes in (cornell_probes, coarse, cornell_probes, coarse):
+            offscreen.renderer.set_probes(probes)
+            images.append(offscreen.render_hdr(view="indirect"))
+        assert made == [24, 12]
+        np.testing.assert_array_equal(images[0], images[2])
+        np.testing.assert_array_equal(images[1], images[3])
+    finally:
+        offscreen.release()

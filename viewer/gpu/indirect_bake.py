@@ -31,6 +31,10 @@ VISIBILITY_VOXELS = 32
 """Cells per axis of the triangle grid that the probes' visibility is traced in."""
 
 
+KEPT_LATTICES = 2
+"""Weights kept per scene: the GI sources' lattices (the network's and the solver's) when they differ."""
+
+
 def lattice_key(probes: ProbeGrid) -> tuple:
     """What the weights depend on, of a probe grid: its box, resolution and validity."""
     return (tuple(np.round(probes.lo, 9)), tuple(np.round(probes.hi, 9)), probes.resolution,
@@ -61,12 +65,17 @@ class BakedIndirectLight:
         """lattice_key of the probe grid whose weights are installed (None: none yet)."""
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="indirect-weights") if background else None
         self._job: tuple[tuple, Future] | None = None
+        self._kept: dict[tuple, SurfaceBake] = {}
+        """The weights of the last KEPT_LATTICES lattices, newest last."""
 
     def ready_for(self, probes: ProbeGrid) -> bool:
         """Whether the weights of the probes' lattice are installed; starts computing them if not (at
         once, or on the worker with `background`)."""
         key = lattice_key(probes)
         if self.weights_key == key:
+            return True
+        if key in self._kept:   # a lattice met before (the viewer toggling between GI sources)
+            self._install(key, self._kept[key])
             return True
         if self._job is None or self._job[0] != key:
             if self._executor is None:
@@ -105,6 +114,10 @@ class BakedIndirectLight:
 
     def _install(self, key: tuple, bake: SurfaceBake) -> None:
         self._bake, self.weights_key = bake, key
+        self._kept = {k: v for k, v in self._kept.items() if k != key}
+        self._kept[key] = bake
+        while len(self._kept) > KEPT_LATTICES:
+            del self._kept[next(iter(self._kept))]
         self._fill = self._dark_fill(bake)
 
     def _dark_fill(self, bake: SurfaceBake) -> tuple[np.ndarray, np.ndarray]:
