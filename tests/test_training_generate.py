@@ -48,7 +48,8 @@ def test_the_command_writes_shards_and_a_manifest(made):
     assert sorted(rooms) == ["train-00000", "train-00001", "train-00002", "val-00000"]
     manifest = json.loads((root / "manifest.json").read_text())
     assert manifest["settings"] == {"format": 2, "seed": 3, "ranges": "v2", "truth": "physical", "directions": 32,
-                                    "probes": [8, 4], "voxels": 16, "shard_size": 2}
+                                    "probes": [8, 4], "voxels": 16, "mitsuba_directions": 0,
+                                    "shard_size": 2}
     assert manifest["splits"]["train"]["count"] == manifest["splits"]["train"]["done"] == 3
     assert manifest["splits"]["val"]["done"] == 1 and manifest["splits"]["paper"]["done"] == 0
     assert manifest["ranges"]["albedo"] == [0.01, 0.95] and manifest["versions"]["ray"]
@@ -134,3 +135,24 @@ def test_float16_targets_keep_their_precision():
     assert stored["sh_2"].dtype == np.float16 and stored["sh_3"].dtype == np.float32  # past float16's range
     assert "sh_2_filled" not in stored
     np.testing.assert_allclose(stored["sh_2"].astype(np.float32), small, rtol=5e-4, atol=1e-7)
+
+
+def test_a_room_can_carry_mitsubas_unbiased_probes_beside_the_solvers():
+    """--mitsuba-directions: the finest grid also gets Mitsuba's probes at few directions (noisy but
+    unbiased); on a room's mean they agree with the solver's (the solver is 4-30% off per probe)."""
+    if not truth.mitsuba_available():
+        pytest.skip("Mitsuba 3 is not installed")
+    settings = shards.Settings(seed=3, ranges="v2", truth="physical", directions=32, probes=(8, 4), voxels=16,
+                               mitsuba_directions=16)
+    name, payload, _ = generate.make_room(settings, "train", 1)
+    assert generate.room_ok(payload, settings.generator("train", 1), settings.probes)
+    with np.load(io.BytesIO(payload)) as data:
+        assert "sh_8_mitsuba" in data.files and "sh_4_mitsuba" not in data.files
+        example = dataset.example_from(data, dataset.Path("x"))
+    assert sorted(example.mitsuba) == [8] and example.mitsuba[8].shape == (8, 8, 8, 9, 3)
+    valid = example.valid[8]
+    mean_mitsuba = example.mitsuba[8][valid][:, 0].mean()
+    mean_solver = example.raw[8][valid][:, 0].mean()
+    assert abs(mean_mitsuba / mean_solver - 1) < 0.25
+    reflected = (example.mitsuba[8] - example.mitsuba_direct[8])[valid][:, 0].mean()
+    assert 0 < reflected < mean_mitsuba

@@ -30,6 +30,9 @@ Keys of one room's `.npz` (`FORMAT` below):
                              sun itself)
     sh_{M}_filled            format 1 only: sh_{M} with invalid probes filled (format 2 fills on loading,
                              `probes.fill_invalid`, the rule the renderer and the physical solver use)
+    sh_{M}_mitsuba, sh_{M}_mitsuba_direct
+                             with --mitsuba-directions, at the finest M only: Mitsuba's probes at that
+                             many directions beside the physical solver's (noisy, unbiased; float16)
     valid_{M} (M, M, M) bool False for probes inside solid objects
     seconds () float64       time spent making the room
 The scene is stored exactly as the truth saw it (rounded to the stored precisions first).
@@ -42,7 +45,7 @@ import io
 import json
 import sys
 import zipfile
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator
 
@@ -86,6 +89,11 @@ class Example:
     """{M: (M, M, M) bool} False inside solid objects."""
     params: dict
     generator: dict
+    mitsuba: dict[int, np.ndarray] = field(default_factory=dict)
+    """{M: (M, M, M, 9, 3) float32} Mitsuba's probes at few directions, filled like `targets`, where the
+    dataset has them beside another truth (`--mitsuba-directions`): noisy, unbiased."""
+    mitsuba_direct: dict[int, np.ndarray] = field(default_factory=dict)
+    """{M: ...} their part straight from the emitters and the sun (raw)."""
 
     @property
     def name(self) -> str:
@@ -146,10 +154,14 @@ def example_from(data, path: Path) -> Example:
     valid = {m: np.asarray(data[f"valid_{m}"], bool) for m in resolutions}
     filled = {m: (np.asarray(data[f"sh_{m}_filled"], np.float32) if f"sh_{m}_filled" in data.files
                   else fill_invalid(raw[m], valid[m])) for m in resolutions}
+    unbiased = [m for m in resolutions if f"sh_{m}_mitsuba" in data.files]
     return Example(path=path, scene=scene_from_arrays(data), lo=data["lo"], hi=data["hi"], targets=filled,
                    raw=raw, direct={m: np.asarray(data[f"sh_{m}_direct"], np.float32) for m in resolutions},
                    valid=valid, params=json.loads(str(data["params"])),
-                   generator=json.loads(str(data["generator"])))
+                   generator=json.loads(str(data["generator"])),
+                   mitsuba={m: fill_invalid(np.asarray(data[f"sh_{m}_mitsuba"], np.float32), valid[m])
+                            for m in unbiased},
+                   mitsuba_direct={m: np.asarray(data[f"sh_{m}_mitsuba_direct"], np.float32) for m in unbiased})
 
 
 def load_example(ref, room: str | None = None) -> Example:
@@ -255,6 +267,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--directions", type=int, default=256,
                    help="directions per probe (physical: the probe projection's; mitsuba: rays)")
     p.add_argument("--voxels", type=int, default=32, help="voxels per axis of the solvers (default 32)")
+    p.add_argument("--mitsuba-directions", type=int, default=0,
+                   help="also store Mitsuba's probes at this many directions at the finest --probes beside "
+                        "the physical truth (an unbiased, noisy second target; 0: none, the default)")
     p.add_argument("--splits", default=",".join(SPLITS),
                    help=f"splits to make, comma separated (default {','.join(SPLITS)}, in that order)")
     p.add_argument("--shard-size", type=int, default=200, help="rooms per shard (default 200)")
@@ -303,7 +318,7 @@ def main(argv: list[str] | None = None) -> int:
                              "--shard-size at least 1")
         if args.workers is not None and args.workers < 1:
             raise SceneError("--workers must be at least 1")
-        if args.truth == "mitsuba":
+        if args.truth == "mitsuba" or args.mitsuba_directions:
             from viewer import reference
 
             reference.variant()  # ReferenceUnavailable says what to install
@@ -314,6 +329,7 @@ def main(argv: list[str] | None = None) -> int:
 
         settings = shards.Settings(seed=args.seed, ranges=args.ranges, truth=args.truth,
                                    directions=args.directions, probes=tuple(resolutions), voxels=args.voxels,
+                                   mitsuba_directions=args.mitsuba_directions,
                                    counts={"paper": len(PAPER_SCENES), "val": args.val, "train": args.train},
                                    shard_size=args.shard_size)
         command = " ".join(["python -m viewer.training.dataset", *(argv if argv is not None else sys.argv[1:])])

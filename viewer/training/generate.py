@@ -44,13 +44,17 @@ class Result:
 
 def make_room(settings: Settings, split: str, index: int) -> tuple[str, bytes, float]:
     """(room name, the room's .npz bytes, seconds spent): deterministic for (settings, split, index)."""
-    _one_thread(settings.truth)
+    _one_thread(settings.truth == "mitsuba" or settings.mitsuba_directions > 0)
     clock = time.perf_counter()
     scene, params = dataset.make_scene(split, index, settings.seed, settings.ranges)
     lo, hi = scene.bounds
     seed = int(np.random.default_rng([settings.seed, dataset.SPLIT_IDS[split], index, 0x7E]).integers(2**31))
-    arrays = dataset.target_arrays(truths.targets(scene, lo, hi, settings.probes, settings.truth,
-                                                  settings.directions, seed, None, settings.voxels))
+    targets = truths.targets(scene, lo, hi, settings.probes, settings.truth, settings.directions, seed, None,
+                             settings.voxels)
+    if settings.mitsuba_directions:
+        targets.update(truths.unbiased_targets(scene, lo, hi, max(settings.probes), settings.mitsuba_directions,
+                                               seed))
+    arrays = dataset.target_arrays(targets)
     seconds = time.perf_counter() - clock
     arrays.update(dataset.scene_arrays(scene))
     arrays.update(lo=np.asarray(lo, np.float64), hi=np.asarray(hi, np.float64),
@@ -60,12 +64,12 @@ def make_room(settings: Settings, split: str, index: int) -> tuple[str, bytes, f
     return scene.name, dataset.room_bytes(arrays), seconds
 
 
-def _one_thread(truth: str) -> None:
+def _one_thread(mitsuba: bool) -> None:
     """A task has one CPU: numba's (and Dr.Jit's) thread pools would otherwise take every core each."""
     import numba
 
     numba.set_num_threads(1)
-    if truth == "mitsuba":
+    if mitsuba:
         import drjit
 
         drjit.set_thread_count(1)

@@ -24,7 +24,8 @@ from viewer.scene import SceneError
 from viewer.training import dataset
 from viewer.training.ranges import PRESETS
 
-FINGERPRINT = ("format", "seed", "ranges", "truth", "directions", "probes", "voxels", "shard_size")
+FINGERPRINT = ("format", "seed", "ranges", "truth", "directions", "probes", "voxels", "mitsuba_directions",
+               "shard_size")
 """The settings a resumed run must share with the dataset it continues."""
 
 
@@ -42,6 +43,9 @@ class Settings:
     """Probe resolutions M of the targets."""
     voxels: int = 32
     """Voxels per axis of the solvers (physical, solver)."""
+    mitsuba_directions: int = 0
+    """With another truth: Mitsuba's probes at this many directions too, at the finest resolution
+    (`sh_{M}_mitsuba`, `sh_{M}_mitsuba_direct`): an unbiased, noisy second target. 0: none."""
     counts: dict = field(default_factory=lambda: {"paper": len(dataset.PAPER_SCENES), "val": 300, "train": 5000})
     """Rooms per split."""
     shard_size: int = 200
@@ -172,7 +176,7 @@ class Manifest:
         self.data = {"format": dataset.FORMAT, "settings": settings.fingerprint(),
                      "ranges": PRESETS[settings.ranges].as_dict(), "counts": dict(settings.counts),
                      "command": command, "commands": old.get("commands", []) + [command],
-                     "versions": versions(settings.truth),
+                     "versions": versions(settings.truth == "mitsuba" or settings.mitsuba_directions > 0),
                      "splits": old.get("splits", {}), "failed": old.get("failed", {}),
                      "started": old.get("started") or _now()}
         self.before = old.get("timing", {"rooms_made": 0, "worker_seconds": 0.0, "wall_seconds": 0.0})
@@ -209,7 +213,7 @@ class Manifest:
         os.replace(tmp, self.path)
 
 
-def versions(truth: str) -> dict:
+def versions(mitsuba: bool) -> dict:
     out = {"python": platform.python_version(), "numpy": np.__version__}
     for package in ("gi-viewer", "numba", "ray"):
         try:
@@ -218,7 +222,7 @@ def versions(truth: str) -> dict:
             out[package] = version(package)
         except Exception:  # noqa: BLE001
             pass
-    if truth == "mitsuba":
+    if mitsuba:
         import drjit
         import mitsuba
 

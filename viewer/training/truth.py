@@ -67,6 +67,16 @@ def mitsuba_sh(scene: Scene, lo, hi, resolution: int, directions: int, seed: int
     return (reflected + direct).reshape(shape), direct.reshape(shape)
 
 
+def unbiased_targets(scene: Scene, lo, hi, resolution: int, directions: int, seed: int) -> dict[str, np.ndarray]:
+    """`sh_{M}_mitsuba` and `sh_{M}_mitsuba_direct`: Mitsuba's probes at few directions beside another
+    truth's (the physical solver's): noisy but unbiased, so that training can average the noise out
+    over the rooms where the solver's bias would stay (docs/TRAINING.md, "Targets")."""
+    total, direct = mitsuba_sh(scene, lo, hi, resolution, directions,
+                               int(np.random.default_rng([seed, resolution, 0x3C]).integers(2**31)))
+    return {f"sh_{resolution}_mitsuba": np.asarray(total, np.float32),
+            f"sh_{resolution}_mitsuba_direct": np.asarray(direct, np.float32)}
+
+
 def solver_sh(scene: Scene, resolutions, directions: int, voxels: int) -> dict[int, tuple]:
     """{M: (total, direct, valid)} from the numpy solver over scene.bounds: the steps of
     `viewer.gi.solve`, with the bounces solved once for every M. Its probes come filled already
