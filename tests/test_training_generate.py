@@ -49,7 +49,7 @@ def test_the_command_writes_shards_and_a_manifest(made):
     manifest = json.loads((root / "manifest.json").read_text())
     assert manifest["settings"] == {"format": 2, "seed": 3, "ranges": "v2", "truth": "physical", "directions": 32,
                                     "probes": [8, 4], "voxels": 16, "mitsuba_directions": 0,
-                                    "shard_size": 2}
+                                    "mitsuba_every": 1, "shard_size": 2}
     assert manifest["splits"]["train"]["count"] == manifest["splits"]["train"]["done"] == 3
     assert manifest["splits"]["val"]["done"] == 1 and manifest["splits"]["paper"]["done"] == 0
     assert manifest["ranges"]["albedo"] == [0.01, 0.95] and manifest["versions"]["ray"]
@@ -143,9 +143,11 @@ def test_a_room_can_carry_mitsubas_unbiased_probes_beside_the_solvers():
     if not truth.mitsuba_available():
         pytest.skip("Mitsuba 3 is not installed")
     settings = shards.Settings(seed=3, ranges="v2", truth="physical", directions=32, probes=(8, 4), voxels=16,
-                               mitsuba_directions=16)
-    name, payload, _ = generate.make_room(settings, "train", 1)
-    assert generate.room_ok(payload, settings.generator("train", 1), settings.probes)
+                               mitsuba_directions=16, mitsuba_every=2)
+    assert [settings.unbiased("train", i) for i in range(4)] == [True, False, True, False]
+    assert settings.unbiased("val", 1) and settings.unbiased("paper", 3)
+    name, payload, _ = generate.make_room(settings, "train", 2)
+    assert generate.room_ok(payload, settings.generator("train", 2), settings.probes)
     with np.load(io.BytesIO(payload)) as data:
         assert "sh_8_mitsuba" in data.files and "sh_4_mitsuba" not in data.files
         example = dataset.example_from(data, dataset.Path("x"))

@@ -31,8 +31,9 @@ Keys of one room's `.npz` (`FORMAT` below):
     sh_{M}_filled            format 1 only: sh_{M} with invalid probes filled (format 2 fills on loading,
                              `probes.fill_invalid`, the rule the renderer and the physical solver use)
     sh_{M}_mitsuba, sh_{M}_mitsuba_direct
-                             with --mitsuba-directions, at the finest M only: Mitsuba's probes at that
-                             many directions beside the physical solver's (noisy, unbiased; float16)
+                             with --mitsuba-directions, at the finest M only, in the rooms --mitsuba-every
+                             picks: Mitsuba's probes at that many directions beside the physical solver's
+                             (noisy, unbiased; float16)
     valid_{M} (M, M, M) bool False for probes inside solid objects
     seconds () float64       time spent making the room
 The scene is stored exactly as the truth saw it (rounded to the stored precisions first).
@@ -270,6 +271,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mitsuba-directions", type=int, default=0,
                    help="also store Mitsuba's probes at this many directions at the finest --probes beside "
                         "the physical truth (an unbiased, noisy second target; 0: none, the default)")
+    p.add_argument("--mitsuba-every", type=int, default=1,
+                   help="with --mitsuba-directions: every val and paper room, and the train rooms whose index "
+                        "is a multiple of this (default 1: all)")
     p.add_argument("--splits", default=",".join(SPLITS),
                    help=f"splits to make, comma separated (default {','.join(SPLITS)}, in that order)")
     p.add_argument("--shard-size", type=int, default=200, help="rooms per shard (default 200)")
@@ -316,8 +320,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.train < 0 or args.val < 0 or args.directions < 16 or args.shard_size < 1:
             raise SceneError("--train and --val must be at least 0, --directions at least 16, "
                              "--shard-size at least 1")
-        if args.workers is not None and args.workers < 1:
-            raise SceneError("--workers must be at least 1")
+        if (args.workers is not None and args.workers < 1) or args.mitsuba_every < 1 or args.mitsuba_directions < 0:
+            raise SceneError("--workers and --mitsuba-every must be at least 1, --mitsuba-directions at least 0")
         if args.truth == "mitsuba" or args.mitsuba_directions:
             from viewer import reference
 
@@ -329,7 +333,7 @@ def main(argv: list[str] | None = None) -> int:
 
         settings = shards.Settings(seed=args.seed, ranges=args.ranges, truth=args.truth,
                                    directions=args.directions, probes=tuple(resolutions), voxels=args.voxels,
-                                   mitsuba_directions=args.mitsuba_directions,
+                                   mitsuba_directions=args.mitsuba_directions, mitsuba_every=args.mitsuba_every,
                                    counts={"paper": len(PAPER_SCENES), "val": args.val, "train": args.train},
                                    shard_size=args.shard_size)
         command = " ".join(["python -m viewer.training.dataset", *(argv if argv is not None else sys.argv[1:])])

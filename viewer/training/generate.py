@@ -44,14 +44,14 @@ class Result:
 
 def make_room(settings: Settings, split: str, index: int) -> tuple[str, bytes, float]:
     """(room name, the room's .npz bytes, seconds spent): deterministic for (settings, split, index)."""
-    _one_thread(settings.truth == "mitsuba" or settings.mitsuba_directions > 0)
+    _one_thread(settings.truth == "mitsuba" or settings.unbiased(split, index))
     clock = time.perf_counter()
     scene, params = dataset.make_scene(split, index, settings.seed, settings.ranges)
     lo, hi = scene.bounds
     seed = int(np.random.default_rng([settings.seed, dataset.SPLIT_IDS[split], index, 0x7E]).integers(2**31))
     targets = truths.targets(scene, lo, hi, settings.probes, settings.truth, settings.directions, seed, None,
                              settings.voxels)
-    if settings.mitsuba_directions:
+    if settings.unbiased(split, index):
         targets.update(truths.unbiased_targets(scene, lo, hi, max(settings.probes), settings.mitsuba_directions,
                                                seed))
     arrays = dataset.target_arrays(targets)

@@ -25,7 +25,7 @@ from viewer.training import dataset
 from viewer.training.ranges import PRESETS
 
 FINGERPRINT = ("format", "seed", "ranges", "truth", "directions", "probes", "voxels", "mitsuba_directions",
-               "shard_size")
+               "mitsuba_every", "shard_size")
 """The settings a resumed run must share with the dataset it continues."""
 
 
@@ -46,6 +46,9 @@ class Settings:
     mitsuba_directions: int = 0
     """With another truth: Mitsuba's probes at this many directions too, at the finest resolution
     (`sh_{M}_mitsuba`, `sh_{M}_mitsuba_direct`): an unbiased, noisy second target. 0: none."""
+    mitsuba_every: int = 1
+    """Which rooms get that second target: every validation and paper room, and the training rooms whose
+    index is a multiple of this."""
     counts: dict = field(default_factory=lambda: {"paper": len(dataset.PAPER_SCENES), "val": 300, "train": 5000})
     """Rooms per split."""
     shard_size: int = 200
@@ -54,6 +57,10 @@ class Settings:
     def fingerprint(self) -> dict:
         return {"format": dataset.FORMAT, **{k: v for k, v in asdict(self).items() if k in FINGERPRINT},
                 "probes": list(self.probes)}
+
+    def unbiased(self, split: str, index: int) -> bool:
+        """Whether this room gets Mitsuba's probes beside the truth's."""
+        return self.mitsuba_directions > 0 and (split != "train" or index % self.mitsuba_every == 0)
 
     def generator(self, split: str, index: int) -> dict:
         """What one room records of how it was made."""
