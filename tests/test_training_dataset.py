@@ -4,7 +4,6 @@ ground truth sees the sun through a window."""
 from __future__ import annotations
 
 import json
-import shutil
 
 import numpy as np
 import pytest
@@ -12,6 +11,7 @@ import pytest
 from viewer import meshes, sh
 from viewer.training import dataset, generate, procedural, shards, truth
 from viewer.training.procedural import CORNELL_POWER, OBJECT_KINDS, WALL_NAMES, Ranges, random_scene
+from scenes import covered, group_faces
 from viewer.voxels import voxelize
 
 SEEDS = range(40)
@@ -20,22 +20,6 @@ needs_mitsuba = pytest.mark.skipif(not truth.mitsuba_available(), reason="Mitsub
 
 def scene_for(seed: int, ranges: Ranges = Ranges()):
     return random_scene(np.random.default_rng([7, seed]), f"test-{seed}", ranges)
-
-
-def group_faces(scene, name):
-    return scene.face_group == scene.group_index(name)
-
-
-def covered(points: np.ndarray, triangles: np.ndarray, tolerance: float = 1e-9) -> np.ndarray:
-    """Whether each point (P, 3) lies on one of the triangles (T, 3, 3) (in its plane and inside)."""
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    n = np.cross(b - a, c - a)
-    d = points[:, None] - a[None]                                              # (P, T, 3)
-    in_plane = np.abs(np.einsum("ptc,tc->pt", d, n)) <= tolerance * np.linalg.norm(n, axis=1)
-    inside = np.ones(in_plane.shape, bool)
-    for p0, p1 in ((a, b), (b, c), (c, a)):
-        inside &= np.einsum("ptc,tc->pt", np.cross(p1 - p0, points[:, None] - p0[None]), n) >= -tolerance
-    return np.any(in_plane & inside, axis=1)
 
 
 # ---- procedural scenes ---------------------------------------------------------------------------------

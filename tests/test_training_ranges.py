@@ -9,7 +9,7 @@ from collections import Counter
 
 import numpy as np
 
-from test_training_dataset import covered, group_faces
+from scenes import covered, group_faces
 from viewer import meshes
 from viewer.training import procedural
 from viewer.training.procedural import CORNELL_POWER, WALL_NAMES, random_scene
