@@ -203,7 +203,7 @@ def _schedule(todo, waiting, out: Path, settings: Settings, manifest: Manifest, 
         try:
             name, payload, seconds = ray.get(ready[0])
             write_pending(out / shard.split, name, payload)
-        except ray.exceptions.RayTaskError as exc:
+        except ray.exceptions.RayError as exc:  # the task raised, or its worker died (retried twice)
             failed[room] = str(exc).strip().splitlines()[-1][:300]
             seconds, note = 0.0, f"  FAILED {room}: {failed[room]}"
         waiting[shard].discard(room)
