@@ -32,7 +32,8 @@ fi
 extras="reference"
 .venv/bin/python -m pip install -q --upgrade pip >/dev/null
 if [ "${1:-}" = "test" ]; then
-  # The tests train and export tiny networks (torch, the `train` extra). Pin the CPU build first: on
+  # The tests train and export tiny networks (torch, the `train` extra) and make tiny datasets on Ray
+  # (`ray`, in the `train` and `test` extras: the core package, no GPU). Pin torch's CPU build first: on
   # these machines `pip install torch==2.13.0` takes a local CPU wheel, while an unpinned torch would
   # pull the registry's newest build with several GB of CUDA packages.
   .venv/bin/python -m pip install -q "torch==2.13.0"

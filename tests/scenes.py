@@ -40,3 +40,21 @@ def ceiling_lamp(half_size=0.3, height=0.95, radiance=5.0) -> Scene:
 def lit_room(*objects: Scene) -> Scene:
     """A closed white room (albedo 0.5) lit by a ceiling lamp, with objects in it."""
     return Scene.concatenate("lit-room", [box(inward=True, albedo=0.5, name="room"), ceiling_lamp(), *objects])
+
+
+# ---- procedural rooms ------------------------------------------------------------------------------
+
+def group_faces(scene, name):
+    return scene.face_group == scene.group_index(name)
+
+
+def covered(points: np.ndarray, triangles: np.ndarray, tolerance: float = 1e-9) -> np.ndarray:
+    """Whether each point (P, 3) lies on one of the triangles (T, 3, 3) (in its plane and inside)."""
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    n = np.cross(b - a, c - a)
+    d = points[:, None] - a[None]                                              # (P, T, 3)
+    in_plane = np.abs(np.einsum("ptc,tc->pt", d, n)) <= tolerance * np.linalg.norm(n, axis=1)
+    inside = np.ones(in_plane.shape, bool)
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ptc,tc->pt", np.cross(p1 - p0, points[:, None] - p0[None]), n) >= -tolerance
+    return np.any(in_plane & inside, axis=1)

@@ -10,7 +10,7 @@ import pytest
 torch = pytest.importorskip("torch", reason="the train extra (torch) is needed")
 
 from viewer import neural  # noqa: E402
-from viewer.training import dataset, truth  # noqa: E402
+from viewer.training import dataset, generate, shards, truth  # noqa: E402
 from viewer.training.models import ProbeNet, ProbeNetConfig  # noqa: E402
 from viewer.training.samples import load_split  # noqa: E402
 from viewer.training.train import History, TrainSettings, train  # noqa: E402
@@ -20,10 +20,13 @@ pytestmark = pytest.mark.skipif(not truth.mitsuba_available(), reason="the tiny 
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    """Five procedural rooms (four to train, one to validate), 8^3 probes, few directions."""
+    """Five procedural rooms (four to train, one to validate; the first dataset's ranges), 8^3 probes,
+    few directions, made on Ray by the dataset command's `run`."""
+    pytest.importorskip("ray", reason="the dataset command runs on Ray")
     root = tmp_path_factory.mktemp("tiny-dataset")
-    dataset.generate(root, count=5, seed=3, resolutions=[8], directions=32, truth="mitsuba",
-                     splits=("val", "train"), stream=io.StringIO())
+    settings = shards.Settings(seed=3, ranges="v1", truth="mitsuba", directions=32, probes=(8,),
+                               counts={"paper": 7, "val": 1, "train": 4})
+    generate.run(root, settings, ("val", "train"), workers=2, stream=io.StringIO())
     return root
 
 
@@ -58,6 +61,6 @@ def test_export_runs_in_the_neural_source(tiny, tmp_path):
     inputs = train_set.inputs[0].astype(np.float32)
     card = export.export(run, tmp_path / "m.onnx", 8, inputs, {"note": "test"}, {})
     assert card["metrics"]["onnx_max_difference"] < 1e-4 and card["inputs"]["voxels"] == ENCODING_VOXELS
-    example = dataset.load_example(next((tiny / "val").glob("*.npz")))
+    example = dataset.load_example(dataset.room_refs(tiny, "val")[0])
     grid = neural.NeuralField(tmp_path / "m.onnx").solve(example.scene)
     assert grid.coefficients.shape == (8, 8, 8, 9, 3) and np.all(np.isfinite(grid.coefficients))

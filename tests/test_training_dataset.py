@@ -4,14 +4,14 @@ ground truth sees the sun through a window."""
 from __future__ import annotations
 
 import json
-import shutil
 
 import numpy as np
 import pytest
 
 from viewer import meshes, sh
-from viewer.training import dataset, procedural, truth
+from viewer.training import dataset, generate, procedural, shards, truth
 from viewer.training.procedural import CORNELL_POWER, OBJECT_KINDS, WALL_NAMES, Ranges, random_scene
+from scenes import covered, group_faces
 from viewer.voxels import voxelize
 
 SEEDS = range(40)
@@ -20,22 +20,6 @@ needs_mitsuba = pytest.mark.skipif(not truth.mitsuba_available(), reason="Mitsub
 
 def scene_for(seed: int, ranges: Ranges = Ranges()):
     return random_scene(np.random.default_rng([7, seed]), f"test-{seed}", ranges)
-
-
-def group_faces(scene, name):
-    return scene.face_group == scene.group_index(name)
-
-
-def covered(points: np.ndarray, triangles: np.ndarray, tolerance: float = 1e-9) -> np.ndarray:
-    """Whether each point (P, 3) lies on one of the triangles (T, 3, 3) (in its plane and inside)."""
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    n = np.cross(b - a, c - a)
-    d = points[:, None] - a[None]                                              # (P, T, 3)
-    in_plane = np.abs(np.einsum("ptc,tc->pt", d, n)) <= tolerance * np.linalg.norm(n, axis=1)
-    inside = np.ones(in_plane.shape, bool)
-    for p0, p1 in ((a, b), (b, c), (c, a)):
-        inside &= np.einsum("ptc,tc->pt", np.cross(p1 - p0, points[:, None] - p0[None]), n) >= -tolerance
-    return np.any(in_plane & inside, axis=1)
 
 
 # ---- procedural scenes ---------------------------------------------------------------------------------
@@ -184,36 +168,40 @@ def test_sun_enters_only_through_the_window():
 
 # ---- the dataset ---------------------------------------------------------------------------------------
 
-def test_jobs_make_the_paper_split_first_with_fixed_names():
-    jobs = dataset.jobs(dataset.Path("/x"), 1, 800, (8, 16), "mitsuba", 256, 32)
-    splits = [j.split for j in jobs]
-    assert splits == ["paper"] * 7 + ["val"] * 80 + ["train"] * 720
-    assert [j.path.name for j in jobs[:7]] == [f"{n}.npz" for n in dataset.PAPER_SCENES]
-    assert jobs[7].path.as_posix() == "/x/val/00000.npz" and jobs[-1].path.name == "00719.npz"
+def test_shards_make_the_paper_split_first_with_fixed_names():
+    settings = shards.Settings(counts={"paper": 7, "val": 80, "train": 720}, shard_size=200)
+    plan = shards.plan(settings, dataset.SPLITS)
+    assert [(s.split, s.name, len(s.indices)) for s in plan] == [
+        ("paper", "shard-00000.zip", 7), ("val", "shard-00000.zip", 80), ("train", "shard-00000.zip", 200),
+        ("train", "shard-00001.zip", 200), ("train", "shard-00002.zip", 200), ("train", "shard-00003.zip", 120)]
+    assert plan[0].rooms() == list(dataset.PAPER_SCENES)
+    assert plan[-1].rooms()[-1] == "train-00719"
 
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
+    """Three v1 rooms with Mitsuba truth, made on Ray (two workers) in shards of two."""
     if not truth.mitsuba_available():
         pytest.skip("Mitsuba 3 is not installed")
     root = tmp_path_factory.mktemp("gi-tiny")
-    result = dataset.generate(root, count=3, seed=5, resolutions=(4,), directions=64, truth="mitsuba",
-                              splits=("val", "train"), stream=open("/dev/null", "w"))
-    return root, result
+    settings = shards.Settings(seed=5, ranges="v1", truth="mitsuba", directions=64, probes=(4,),
+                               counts={"paper": 7, "val": 1, "train": 2}, shard_size=2)
+    result = generate.run(root, settings, ("val", "train"), workers=2, stream=open("/dev/null", "w"))
+    return root, result, settings
 
 
 @needs_mitsuba
 def test_tiny_dataset_round_trips(tiny):
-    root, result = tiny
-    assert result["made"] == 3 and result["skipped"] == 0
+    root, result, _ = tiny
+    assert result.made == 3 and result.skipped == 0 and not result.failed
     manifest = json.loads((root / "manifest.json").read_text())
-    assert manifest["splits"]["train"] == {"count": 2, "done": 2}
-    assert manifest["splits"]["val"] == {"count": 1, "done": 1}
-    assert manifest["truth"] == "mitsuba" and manifest["versions"]["mitsuba"]
+    assert manifest["splits"]["train"]["count"] == 2 and manifest["splits"]["train"]["done"] == 2
+    assert manifest["splits"]["val"]["count"] == 1 and manifest["splits"]["val"]["done"] == 1
+    assert manifest["settings"]["truth"] == "mitsuba" and manifest["versions"]["mitsuba"]
     examples = list(dataset.iter_split(root, "train")) + list(dataset.iter_split(root, "val"))
-    assert [e.path.name for e in examples] == ["00000.npz", "00001.npz", "00000.npz"]
+    assert [e.name for e in examples] == ["train-00000", "train-00001", "val-00000"]
     for example, (split, index) in zip(examples, [("train", 0), ("train", 1), ("val", 0)]):
-        expected, params = dataset.make_scene(split, index, 5)
+        expected, params = dataset.make_scene(split, index, 5, "v1")
         for name in ("vertices", "faces", "albedo", "emission", "face_group"):
             assert np.array_equal(getattr(example.scene, name), getattr(expected, name)), name
         assert example.scene.groups == expected.groups and example.params == params
@@ -223,7 +211,7 @@ def test_tiny_dataset_round_trips(tiny):
         raw, filled, valid = example.raw[4], example.targets[4], example.valid[4]
         assert raw.shape == filled.shape == example.direct[4].shape == (4, 4, 4, 9, 3)
         assert valid.shape == (4, 4, 4) and valid.dtype == bool and valid.sum() > 32
-        assert np.all(np.isfinite(raw)) and np.all(np.isfinite(filled))
+        assert raw.dtype == np.float32 and np.all(np.isfinite(raw)) and np.all(np.isfinite(filled))
         np.testing.assert_array_equal(filled[valid], raw[valid])
         # a lit room: every valid probe receives light, and the light straight from the emitters is
         # part of the total (the reflected rest carries positive L00 too)
@@ -231,28 +219,19 @@ def test_tiny_dataset_round_trips(tiny):
         assert np.all(raw[valid][:, 0].mean(axis=-1) >= example.direct[4][valid][:, 0].mean(axis=-1) - 1e-3)
 
 
-@needs_mitsuba
-def test_resume_skips_finished_files_and_remakes_a_corrupt_one(tiny, tmp_path):
-    root = tmp_path / "copy"
-    shutil.copytree(tiny[0], root)
-    files = sorted(root.glob("*/*.npz"))
-    before = {p: p.stat().st_mtime_ns for p in files}
-    broken = root / "train" / "00001.npz"
-    data = broken.read_bytes()
-    broken.write_bytes(data[: len(data) // 2])
-    result = dataset.generate(root, count=3, seed=5, resolutions=(4,), directions=64, truth="mitsuba",
-                              splits=("val", "train"), stream=open("/dev/null", "w"))
-    assert result["made"] == 1 and result["skipped"] == 2
-    for p in files:
-        if p != broken:
-            assert p.stat().st_mtime_ns == before[p], f"{p.name} was made again"
-    again = dataset.load_example(broken)
-    original = dataset.load_example(tiny[0] / "train" / "00001.npz")
-    np.testing.assert_allclose(again.raw[4], original.raw[4], rtol=1e-5, atol=1e-6)  # same seeds, same file
-    # other settings in the same folder are refused instead of mixed in
-    with pytest.raises(dataset.SceneError, match="other settings"):
-        dataset.generate(root, count=3, seed=6, resolutions=(4,), directions=64, truth="mitsuba",
-                         splits=("train",), stream=open("/dev/null", "w"))
+def test_format_1_files_still_read(tmp_path):
+    """A one-room file of the first dataset (gi-v1: float32 targets with their filled copy) loads."""
+    scene, params = dataset.make_scene("train", 0, 1)
+    lo, hi = scene.bounds
+    arrays = truth.targets(scene, lo, hi, (4,), "physical", directions=32, seed=0, solver_voxels=8)
+    arrays.update(dataset.scene_arrays(scene), lo=lo, hi=hi, params=np.array(json.dumps(params)),
+                  generator=np.array(json.dumps({"format": 1})), seconds=np.array(1.0))
+    (tmp_path / "train").mkdir()
+    np.savez_compressed(tmp_path / "train" / "00000.npz", **arrays)
+    (example,) = dataset.iter_split(tmp_path, "train")
+    assert example.name == scene.name and example.generator == {"format": 1}
+    np.testing.assert_array_equal(example.targets[4], arrays["sh_4_filled"])
+    np.testing.assert_array_equal(example.raw[4], arrays["sh_4"])
 
 
 def test_the_stored_scene_is_what_the_truth_saw():

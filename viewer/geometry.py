@@ -18,7 +18,7 @@ sum to the share of rays that hit (1 in a closed room).
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import sparse
@@ -153,8 +153,27 @@ def trace(scene: Scene, voxelization: Voxelization, settings: GeometrySettings) 
         (np.full(int(seen.sum()), 1.0 / settings.gather_rays, np.float32),
          (receiver[seen], hits.reshape(-1)[seen])), shape=(k, k))
     transport.sum_duplicates()
-    # probe -> voxel: the same directions from every probe
     lo, hi = scene.bounds
+    probe_part = _probe_rays(cells, k, np.asarray(lo, np.float64), np.asarray(hi, np.float64), settings)
+    return Geometry(scene_key(scene, settings), settings, grid, cells, faces, lamp_faces(scene), transport,
+                    *probe_part)
+
+
+def with_probes(geometry: Geometry, probes: int) -> Geometry:
+    """The same geometry with another probe grid over the same box: only the probe rays are traced
+    again (the training targets at two probe resolutions share the voxels' transport)."""
+    settings = replace(geometry.settings, probes=probes)
+    key = hashlib.blake2b((geometry.key + repr(settings)).encode(), digest_size=16).hexdigest()
+    _, _, *fields = _probe_rays(geometry.cells, geometry.voxels.count, geometry.probe_lo, geometry.probe_hi,
+                                settings)
+    return replace(geometry, key=key, settings=settings, **dict(zip(_PROBE_FIELDS, fields)))
+
+
+_PROBE_FIELDS = ("probe_points", "probe_hits", "probe_basis", "probe_basis_t", "valid", "fill_waves")
+
+
+def _probe_rays(cells: dda.Cells, k: int, lo: np.ndarray, hi: np.ndarray, settings: GeometrySettings) -> tuple:
+    """probe -> voxel: the same directions from every probe. Returns (lo, hi, then the _PROBE_FIELDS)."""
     m = settings.probes
     points = ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3)
     directions, weights = sh.sphere_directions(settings.directions)
@@ -163,10 +182,7 @@ def trace(scene: Scene, voxelization: Voxelization, settings: GeometrySettings) 
     probe_hits[probe_hits < 0] = k
     basis = (weights[:, None] * sh.basis(directions)).astype(np.float32)
     valid = (backface <= settings.invalid_backface_fraction).reshape(m, m, m)
-    return Geometry(scene_key(scene, settings), settings, grid, cells, faces, lamp_faces(scene), transport,
-                    np.asarray(lo, np.float64), np.asarray(hi, np.float64), points, probe_hits, basis,
-                    np.ascontiguousarray(basis.T), valid,
-                    fill_waves(valid).reshape(-1))
+    return lo, hi, points, probe_hits, basis, np.ascontiguousarray(basis.T), valid, fill_waves(valid).reshape(-1)
 
 
 # ---- the sun ------------------------------------------------------------------------------------------------

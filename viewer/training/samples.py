@@ -89,11 +89,20 @@ def encode_scene(path: str, resolution: int) -> dict[str, np.ndarray]:
     inv = np.where(enc.scale > 0, 1.0 / np.where(enc.scale > 0, enc.scale, 1.0), 0.0)
     scaled = target.transpose(4, 3, 0, 1, 2) * inv[:, None, None, None, None]
     return {"inputs": enc.inputs.astype(np.float16), "targets": scaled.astype(np.float32),
-            "valid": example.valid[resolution], "scale": enc.scale, "names": np.array(Path(path).stem)}
+            "valid": example.valid[resolution], "scale": enc.scale, "names": np.array(room_of(path))}
 
 
-def split_files(root: Path, split: str) -> list[Path]:
-    return sorted((Path(root) / split).glob("*.npz"))
+def room_of(ref: str) -> str:
+    """The room's name from its reference: `shard.zip#room`, or a one-room file's stem (format 1)."""
+    path, _, room = str(ref).partition("#")
+    return room or Path(path).stem
+
+
+def split_files(root: Path, split: str) -> list[str]:
+    """The split's rooms as `dataset.room_refs` lists them (one-room files, or rooms in shards)."""
+    from viewer.training.dataset import room_refs
+
+    return room_refs(root, split)
 
 
 def load_split(root: Path, split: str, resolution: int, workers: int = 2, quiet: bool = False) -> Samples:
@@ -110,8 +119,10 @@ def encoded_split(root: Path, split: str, tag: str, encoder, resolution: int, wo
     files = split_files(root, split)
     if not files:
         raise FileNotFoundError(f"no scenes in {Path(root) / split}")
+    sizes = {path: Path(path).stat().st_size for path in {ref.partition("#")[0] for ref in files}}
+    rooms = [(room_of(f), sizes[f.partition("#")[0]]) for f in files]
     key = hashlib.sha1(json.dumps([CACHE_VERSION, encoding.VERSION, tag, ENCODING_VOXELS, resolution,
-                                   [(f.name, f.stat().st_size) for f in files]]).encode()).hexdigest()[:12]
+                                   rooms]).encode()).hexdigest()[:12]
     cache = Path(root) / "cache" / f"{split}-{tag}-m{resolution}-{key}.npz"
     if cache.exists():
         with np.load(cache) as z:
@@ -119,7 +130,7 @@ def encoded_split(root: Path, split: str, tag: str, encoder, resolution: int, wo
     rows = []
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        for i, row in enumerate(pool.map(encoder, [str(f) for f in files], [resolution] * len(files), chunksize=4)):
+        for i, row in enumerate(pool.map(encoder, files, [resolution] * len(files), chunksize=4)):
             rows.append(row)
             if not quiet and ((i + 1) % 20 == 0 or i + 1 == len(files)):
                 rate = (i + 1) / (time.perf_counter() - start)

@@ -249,6 +249,7 @@ def ship_run(run: Path, args, evaluation) -> dict:
     import torch
 
     from viewer.training import export as exporter
+    from viewer.training.dataset import room_refs
     from viewer.training.samples import ENCODING_VOXELS, training_split
 
     state = torch.load(run / "checkpoint.pt", weights_only=False)
@@ -264,9 +265,9 @@ def ship_run(run: Path, args, evaluation) -> dict:
                 "command": f"python -m viewer.training.train --data {args.data} --out {run} --width {config['width']} "
                            f"--hidden {config['hidden']} --epochs {len(history['epochs'])} --batch 2"}
     manifest = json.loads((args.data / "manifest.json").read_text()) if (args.data / "manifest.json").exists() else {}
-    files = {split: len(list((args.data / split).glob("*.npz"))) for split in ("train", "val", "paper")}
-    training["dataset"] = {"command": manifest.get("command"), "truth": manifest.get("truth", "mitsuba"),
-                           "files_used": files}
+    files = {split: len(room_refs(args.data, split)) for split in ("train", "val", "paper")}
+    truth = manifest.get("settings", manifest).get("truth", "mitsuba")  # format 2 keeps it in "settings"
+    training["dataset"] = {"command": manifest.get("command"), "truth": truth, "files_used": files}
     path = run / "probenet.onnx"
     card = exporter.export(run, path, m, inputs, training,
                            {"val_relative_rmse_probes": history["val_relative_rmse"][-1]})

@@ -31,7 +31,7 @@ from torch.nn import functional as F
 from viewer.bench.report import replace_block
 from viewer.training import paper_models as pm
 from viewer.training.paper_inputs import PAPER_VOXELS, adaptive_pool, voxel_list
-from viewer.training.samples import Samples, encoded_split, load_split, training_split
+from viewer.training.samples import Samples, encoded_split, load_split, room_of, training_split
 
 ROOT = Path(__file__).resolve().parents[2]
 LAMBDA = 1e-5
@@ -47,7 +47,7 @@ def paper_encode(path: str, resolution: int) -> dict[str, np.ndarray]:
     rows = voxel_list(voxelize(example.scene, PAPER_VOXELS))
     pooled = adaptive_pool(rows, pm.PaperConfig.pooled)
     return {"pooled": pooled, "rows_min": rows.min(0), "rows_max": rows.max(0),
-            "targets": example.targets[resolution].reshape(-1), "names": np.array(Path(path).stem)}
+            "targets": example.targets[resolution].reshape(-1), "names": np.array(room_of(path))}
 
 
 class Split:

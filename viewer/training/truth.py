@@ -1,8 +1,9 @@
 """Training targets for one scene: ground-truth probe SH and probe validity.
 
-Two sources of truth: Mitsuba 3 (`viewer.reference.probe_sh_parts`, the independent path tracer; the
-default) or the repository's own numpy solver (the steps of `viewer.gi.solve`, for machines without
-Mitsuba and for checks). Both give the incident light at each probe and, apart, its part straight from
+Three sources of truth: Mitsuba 3 (`viewer.reference.probe_sh_parts`, the independent path tracer;
+unbiased, noisy at low direction counts), the physical solver (`viewer.gi.PhysicalGI`: the geometry
+traced once, the bounces solved to convergence; about a second a room, 4-5% off Mitsuba, and what the
+issue-14 datasets use, docs/TRAINING.md says why) or the all-pairs numpy solver (the old `solver`). Both give the incident light at each probe and, apart, its part straight from
 the emitters and the sun: the renderer shades that part itself, so its probes hold only the rest, the
 light reflected by surfaces.
 
@@ -19,7 +20,7 @@ from viewer import sh
 from viewer.probes import ProbeGrid, ProbeSettings, fill_invalid
 from viewer.scene import Scene
 
-TRUTHS = ("mitsuba", "solver")
+TRUTHS = ("physical", "mitsuba", "solver")
 VALIDITY_VOXELS = 32
 """Voxel resolution at which probe validity is decided."""
 VALIDITY_DIRECTIONS = 128
@@ -66,6 +67,16 @@ def mitsuba_sh(scene: Scene, lo, hi, resolution: int, directions: int, seed: int
     return (reflected + direct).reshape(shape), direct.reshape(shape)
 
 
+def unbiased_targets(scene: Scene, lo, hi, resolution: int, directions: int, seed: int) -> dict[str, np.ndarray]:
+    """`sh_{M}_mitsuba` and `sh_{M}_mitsuba_direct`: Mitsuba's probes at few directions beside another
+    truth's (the physical solver's): noisy but unbiased, so that training can average the noise out
+    over the rooms where the solver's bias would stay (docs/TRAINING.md, "Targets")."""
+    total, direct = mitsuba_sh(scene, lo, hi, resolution, directions,
+                               int(np.random.default_rng([seed, resolution, 0x3C]).integers(2**31)))
+    return {f"sh_{resolution}_mitsuba": np.asarray(total, np.float32),
+            f"sh_{resolution}_mitsuba_direct": np.asarray(direct, np.float32)}
+
+
 def solver_sh(scene: Scene, resolutions, directions: int, voxels: int) -> dict[int, tuple]:
     """{M: (total, direct, valid)} from the numpy solver over scene.bounds: the steps of
     `viewer.gi.solve`, with the bounces solved once for every M. Its probes come filled already
@@ -89,12 +100,46 @@ def solver_sh(scene: Scene, resolutions, directions: int, voxels: int) -> dict[i
     return out
 
 
+def physical_sh(scene: Scene, resolutions, directions: int = 256, voxels: int = 32) -> dict[int, tuple]:
+    """{M: (total, direct, valid, filled)} from the physical solver over scene.bounds (viewer.gi's
+    `PhysicalGI` stages): the voxels are traced and lit once, and each M traces only its probe rays
+    (`geometry.with_probes`). total and direct are the probes as projected (raw), filled has the probes
+    inside solids filled from valid neighbours (the renderer's `fill_invalid`)."""
+    from viewer import geometry as geometries, lightpaths, relight
+    from viewer.gi import GISettings, geometry_settings
+    from viewer.voxels import voxelize_with_faces
+
+    resolutions = sorted(resolutions, reverse=True)
+    settings = geometry_settings(GISettings(voxels=voxels, probes=resolutions[0], directions=directions))
+    traced = geometries.trace(scene, voxelize_with_faces(scene, settings.voxels, settings.normal_mode), settings)
+    lighting = None
+    out = {}
+    for m in resolutions:
+        g = traced if m == resolutions[0] else geometries.with_probes(traced, m)
+        lights = lightpaths.build(scene, g)
+        sun = geometries.sun_paths(g, scene.sun)
+        materials = relight.materials(scene, g, lights)
+        lighting = relight.solve(g, lights, sun, materials, previous=lighting)
+        total = relight.probe_coefficients(g, lights, sun, materials, lighting, True)
+        reflected = relight.probe_coefficients(g, lights, sun, materials, lighting, False)
+        filled = relight.probe_grid(g, total).coefficients
+        shape = (m, m, m, 9, 3)
+        out[m] = (total.reshape(shape), (total - reflected).reshape(shape), g.valid, filled)
+    return out
+
+
 def targets(scene: Scene, lo, hi, resolutions, truth: str, directions: int, seed: int,
             valid: dict[int, np.ndarray] | None = None, solver_voxels: int = 32) -> dict[str, np.ndarray]:
     """The arrays `sh_{M}`, `sh_{M}_filled`, `sh_{M}_direct` and `valid_{M}` for every M; `valid` (from
     `probe_validity`; Mitsuba only) may be computed elsewhere beforehand."""
     if truth not in TRUTHS:
         raise ValueError(f"truth must be one of {TRUTHS}, not {truth!r}")
+    if truth == "physical":
+        out = {}
+        for m, (total, direct, valid_m, filled) in physical_sh(scene, resolutions, directions, solver_voxels).items():
+            out.update({f"sh_{m}": np.asarray(total, np.float32), f"sh_{m}_direct": np.asarray(direct, np.float32),
+                        f"valid_{m}": np.asarray(valid_m, bool), f"sh_{m}_filled": np.asarray(filled, np.float32)})
+        return out
     if truth == "solver":
         solved = solver_sh(scene, resolutions, directions, solver_voxels)
     elif valid is None:
