@@ -97,6 +97,8 @@ class BakedDirectLight(TriangleBuffer):
     def __init__(self, ctx: moderngl.Context, scene: Scene, texel: float):
         super().__init__(ctx)
         origin, n, self.size = lightmap_layout(scene, texel)
+        self.tile_origin, self.tile_n = origin, n
+        """Each face's tile: its lower-left atlas texel (F, 2) and its triangle's texels per side (F,)."""
         vertices = lightmap_vertices(scene, origin, n, self.size)
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(vertices.tobytes())

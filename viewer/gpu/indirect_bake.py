@@ -18,6 +18,7 @@ from __future__ import annotations
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import moderngl
+import numba
 import numpy as np
 
 from viewer import dda
@@ -31,8 +32,43 @@ VISIBILITY_VOXELS = 32
 """Cells per axis of the triangle grid that the probes' visibility is traced in."""
 
 
+SAMPLE_STRIDE = 2
+"""The probes' light is evaluated at every SAMPLE_STRIDE-th texel of a tile along each axis (4 cm at the
+default 2 cm texels, half a probe spacing of the Cornell box) and copied to the texels around it: the
+weights' visibility rays and each update cost a quarter (a ninth on the many small tiles of a detailed
+mesh, which get one sample each)."""
 KEPT_LATTICES = 2
 """Weights kept per scene: the GI sources' lattices (the network's and the solver's) when they differ."""
+
+
+def strided_samples(lightmap: BakedDirectLight, rows: np.ndarray, columns: np.ndarray):
+    """For the covered texels (rows, columns) of the atlas, in that order: whether each is a sample (the
+    texels at odd local coordinates of its tile; a tile whose triangle spans at most 2 texels has its
+    centre texel (1, 1) alone), and each texel's sample as a pixel of the (front | back) image's front
+    half (its own for a sample)."""
+    face = lightmap.texel_faces
+    x0, y0 = lightmap.tile_origin[face, 0], lightmap.tile_origin[face, 1]
+    span = lightmap.tile_n[face] + 1                       # the largest local coordinate
+    local_x, local_y = columns - x0, rows - y0
+    tiny = lightmap.tile_n[face] <= SAMPLE_STRIDE
+
+    def nearest(local):
+        odd = np.where(local % 2 == 1, local, np.maximum(local - 1, 1))
+        return np.where(tiny, 1, np.minimum(odd, np.where(span % 2 == 1, span, span - 1)))
+
+    sample_x, sample_y = nearest(local_x), nearest(local_y)
+    width = lightmap.covered.shape[1]
+    sample = (sample_x == local_x) & (sample_y == local_y)
+    return sample, (y0 + sample_y) * 2 * width + x0 + sample_x
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _gather(values, rows, pixels, image):
+    """image[pixels[i]] = values[rows[i]]: each texel shows its sample's light."""
+    for i in numba.prange(pixels.shape[0]):
+        r = rows[i]
+        p = pixels[i]
+        image[p, 0], image[p, 1], image[p, 2] = values[r, 0], values[r, 1], values[r, 2]
 
 
 def lattice_key(probes: ProbeGrid) -> tuple:
@@ -52,13 +88,21 @@ class BakedIndirectLight:
         self.lightmap = lightmap
         self.scene = scene
         height, width = lightmap.covered.shape
-        self.texture = ctx.texture((2 * width, height), 3, dtype="f2")
+        self.texture = ctx.texture((2 * width, height), 3, dtype="f4")
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
         self._image = np.zeros((height * 2 * width, 3), np.float32)
         rows, columns = np.nonzero(lightmap.covered)           # the order of lightmap.texel_points
-        self._pixels = np.concatenate([rows * 2 * width + columns, rows * 2 * width + width + columns])
-        """Each texel's pixel in the (front | back) image: the front sides', then the back sides'."""
+        sample, source = strided_samples(lightmap, rows, columns)
+        self._samples = np.flatnonzero(sample)
+        """The texels (indices into lightmap.texel_points) that the probes' light is evaluated at."""
+        pixels = rows * 2 * width + columns
+        self._pixels = np.concatenate([pixels[sample], pixels[sample] + width])
+        """Each sample's pixel in the (front | back) image: the front sides', then the back sides'."""
+        copied = ~sample
+        self._copies = (np.concatenate([pixels[copied], pixels[copied] + width]),
+                        np.concatenate([source[copied], source[copied] + width]))
+        """(pixels, their samples' pixels) of the texels between the samples."""
         self._cells: dda.Cells | None = None
         self._bake: SurfaceBake | None = None
         self.weights_key = None
@@ -107,9 +151,10 @@ class BakedIndirectLight:
         face_normal[faces] = lightmap.texel_normals
         normals, ids = np.unique(np.round(np.concatenate([face_normal, -face_normal]), 6), axis=0,
                                  return_inverse=True)
+        faces = faces[self._samples]
         normal_id = np.concatenate([ids[faces], ids[len(face_normal) + faces]])
-        weights = SurfaceWeights.of(np.concatenate([lightmap.texel_points] * 2), normals[normal_id], probes,
-                                    self._cells)
+        weights = SurfaceWeights.of(np.concatenate([lightmap.texel_points[self._samples]] * 2), normals[normal_id],
+                                    probes, self._cells)
         return SurfaceBake.of(weights, normal_id, normals)
 
     def _install(self, key: tuple, bake: SurfaceBake) -> None:
@@ -118,21 +163,32 @@ class BakedIndirectLight:
         self._kept[key] = bake
         while len(self._kept) > KEPT_LATTICES:
             del self._kept[next(iter(self._kept))]
-        self._fill = self._dark_fill(bake)
+        self._texel_pixels, self._texel_rows = self._sources(bake)
+
+    def _sources(self, bake: SurfaceBake) -> tuple[np.ndarray, np.ndarray]:
+        """(pixels, rows): every covered pixel of the (front | back) image and the row of
+        `bake.irradiance` it shows: its own sample's, or, where that sample sees no probe (a face's strip
+        under the floor, the ceiling above a lamp), a neighbouring sample's of the same tile that does,
+        so that the bilinear fetch of a visible pixel near the edge never mixes in their darkness."""
+        pixels, sources = self._dark_fill(bake)
+        row_of = np.full(len(self._image), -1, np.int64)
+        row_of[self._pixels] = np.arange(len(self._pixels))
+        row_of[pixels] = row_of[sources]                      # dark samples show a lit neighbour's light
+        all_pixels = np.concatenate([self._pixels, self._copies[0]])
+        rows = np.concatenate([row_of[self._pixels], row_of[self._copies[1]]])
+        return all_pixels, rows
 
     def _dark_fill(self, bake: SurfaceBake) -> tuple[np.ndarray, np.ndarray]:
-        """(pixels, sources): the texels that see no probe (a face's strip under the floor, the ceiling
-        above a lamp) next to one of their tile's texels that does take that texel's light, so that the
-        bilinear fetch of a visible pixel near the edge never mixes in their darkness."""
+        """(pixels, sources): the samples that see no probe next to a lit sample of their tile."""
         height, width = self.lightmap.covered.shape
         dark = bake.weights.sum(axis=1) == 0.0
         tile = np.full(height * 2 * width, -1, np.int64)
-        faces = self.lightmap.texel_faces
+        faces = self.lightmap.texel_faces[self._samples]
         tile[self._pixels] = np.concatenate([2 * faces, 2 * faces + 1])
         lit = np.zeros(height * 2 * width, bool)
         lit[self._pixels[~dark]] = True
         pixels, sources = [], []
-        for step in (1, -1, 2 * width, -2 * width):
+        for step in (SAMPLE_STRIDE, -SAMPLE_STRIDE, 2 * width * SAMPLE_STRIDE, -2 * width * SAMPLE_STRIDE):
             candidate = self._pixels[dark] + step
             inside = (candidate >= 0) & (candidate < len(tile))
             candidate = np.where(inside, candidate, 0)
@@ -145,10 +201,8 @@ class BakedIndirectLight:
 
     def update(self, probes: ProbeGrid) -> None:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
-        self._bake.irradiance(probes.coefficients, self._image, self._pixels)
-        pixels, sources = self._fill
-        self._image[pixels] = self._image[sources]
-        self.texture.write(self._image.astype(np.float16).tobytes())
+        _gather(self._bake.irradiance(probes.coefficients), self._texel_rows, self._texel_pixels, self._image)
+        self.texture.write(self._image)
 
     def use(self, unit: int) -> dict:
         """Bind the indirect lightmap; returns the surface shader's uniforms."""
