@@ -145,3 +145,14 @@ def test_toggling_between_two_lattices_keeps_both_weights(gl_context, cornell, c
         np.testing.assert_array_equal(images[1], images[3])
     finally:
         offscreen.release()
+
+
+def test_a_scene_too_detailed_to_bake_keeps_the_probes_per_fragment(gl_context, cornell, cornell_probes, monkeypatch):
+    """Over indirect_bake.MAX_SAMPLES texel samples the weights are never made: the indirect light is
+    the probes read per fragment, the exact path's."""
+    from viewer.gpu import indirect_bake
+
+    monkeypatch.setattr(indirect_bake, "MAX_SAMPLES", 10)
+    baked = render(gl_context, cornell, cornell_probes, (64, 64), ("indirect",))["indirect"]
+    exact = render(gl_context, cornell, cornell_probes, (64, 64), ("indirect",), RenderSettings(baked=False))["indirect"]
+    np.testing.assert_allclose(baked, exact, rtol=1e-5, atol=1e-6)

@@ -37,6 +37,9 @@ SAMPLE_STRIDE = 2
 default 2 cm texels, half a probe spacing of the Cornell box) and copied to the texels around it: the
 weights' visibility rays and each update cost a quarter (a ninth on the many small tiles of a detailed
 mesh, which get one sample each)."""
+MAX_SAMPLES = 3_000_000
+"""Above this many samples (both sides) the probes stay per fragment: their weights would take minutes
+and gigabytes (a detailed mesh of 82k triangles has 0.3 M)."""
 KEPT_LATTICES = 2
 """Weights kept per scene: the GI sources' lattices (the network's and the solver's) when they differ."""
 
@@ -114,7 +117,9 @@ class BakedIndirectLight:
 
     def ready_for(self, probes: ProbeGrid) -> bool:
         """Whether the weights of the probes' lattice are installed; starts computing them if not (at
-        once, or on the worker with `background`)."""
+        once, or on the worker with `background`). Never, for a scene over MAX_SAMPLES."""
+        if len(self._pixels) > MAX_SAMPLES:
+            return False
         key = lattice_key(probes)
         if self.weights_key == key:
             return True
