@@ -73,7 +73,7 @@ def test_no_dark_streaks_on_the_boxes_against_mitsuba(gl_context, cornell, corne
     """The final view at 256x256 against Mitsuba (128 spp), in 16-pixel blocks lying on one face: the
     probe grid interpolated per fragment darkened the small box's face camera-side in vertical streaks
     (its worst blocks at 0.80 of Mitsuba, RMS 3.6% off over all blocks). With the per-texel weights:
-    worst box block 0.92-0.94, RMS 1.8% (the worst blocks left are near the box's top edge and its
+    worst box block 0.94, RMS 1.8% (the worst blocks left are near the box's top edge and its
     contact with the floor, where the lattice's spacing is too coarse)."""
     reference = pytest.importorskip("viewer.reference")
     pytest.importorskip("mitsuba")
