@@ -58,3 +58,12 @@ def covered(points: np.ndarray, triangles: np.ndarray, tolerance: float = 1e-9) 
     for p0, p1 in ((a, b), (b, c), (c, a)):
         inside &= np.einsum("ptc,tc->pt", np.cross(p1 - p0, points[:, None] - p0[None]), n) >= -tolerance
     return np.any(in_plane & inside, axis=1)
+
+
+def assert_same_room(a: Scene, params_a: dict, b: Scene, params_b: dict) -> None:
+    """Two drawn rooms are bit-identical: geometry, materials, groups and the drawn parameters."""
+    import json
+
+    for name in ("vertices", "faces", "albedo", "emission", "face_group"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.groups == b.groups and json.dumps(params_a) == json.dumps(params_b)
