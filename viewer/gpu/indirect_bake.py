@@ -32,9 +32,9 @@ VISIBILITY_VOXELS = 32
 """Cells per axis of the triangle grid that the probes' visibility is traced in."""
 
 
-SAMPLE_STRIDE = 2
+SAMPLE_STRIDE = 2   # the texels at odd local coordinates: strided_samples is written for 2
 """The probes' light is evaluated at every SAMPLE_STRIDE-th texel of a tile along each axis (4 cm at the
-default 2 cm texels, half a probe spacing of the Cornell box) and copied to the texels around it: the
+default 2 cm texels, half a probe spacing of the Cornell box) and interpolated between: the
 weights' visibility rays and each update cost a quarter (a ninth on the many small tiles of a detailed
 mesh, which get one sample each)."""
 MAX_SAMPLES = 3_000_000
@@ -47,31 +47,46 @@ KEPT_LATTICES = 2
 def strided_samples(lightmap: BakedDirectLight, rows: np.ndarray, columns: np.ndarray):
     """For the covered texels (rows, columns) of the atlas, in that order: whether each is a sample (the
     texels at odd local coordinates of its tile; a tile whose triangle spans at most 2 texels has its
-    centre texel (1, 1) alone), and each texel's sample as a pixel of the (front | back) image's front
-    half (its own for a sample)."""
+    centre texel (1, 1) alone), and the samples it interpolates, bilinearly within its tile: (T, 4)
+    pixels of the (front | back) image's front half and (T, 4) weights (a sample: itself, weight 1)."""
     face = lightmap.texel_faces
     x0, y0 = lightmap.tile_origin[face, 0], lightmap.tile_origin[face, 1]
     span = lightmap.tile_n[face] + 1                       # the largest local coordinate
-    local_x, local_y = columns - x0, rows - y0
+    last = np.where(span % 2 == 1, span, span - 1)         # the last odd one
     tiny = lightmap.tile_n[face] <= SAMPLE_STRIDE
+    local_x, local_y = columns - x0, rows - y0
 
-    def nearest(local):
-        odd = np.where(local % 2 == 1, local, np.maximum(local - 1, 1))
-        return np.where(tiny, 1, np.minimum(odd, np.where(span % 2 == 1, span, span - 1)))
+    def between(local):
+        """The samples on either side along one axis, and the weight of the first."""
+        odd = local % 2 == 1
+        low = np.where(tiny, 1, np.where(odd, local, np.clip(local - 1, 1, last)))
+        high = np.where(tiny, 1, np.where(odd, local, np.clip(local + 1, 1, last)))
+        return low, high, np.where(low == high, 1.0, 0.5)
 
-    sample_x, sample_y = nearest(local_x), nearest(local_y)
+    lx, hx, wx = between(local_x)
+    ly, hy, wy = between(local_y)
     width = lightmap.covered.shape[1]
-    sample = (sample_x == local_x) & (sample_y == local_y)
-    return sample, (y0 + sample_y) * 2 * width + x0 + sample_x
+    pixel = lambda sx, sy: (y0 + sy) * 2 * width + x0 + sx                      # noqa: E731
+    sources = np.stack([pixel(lx, ly), pixel(hx, ly), pixel(lx, hy), pixel(hx, hy)], axis=1)
+    weights = np.stack([wx * wy, (1 - wx) * wy, wx * (1 - wy), (1 - wx) * (1 - wy)], axis=1)
+    sample = (lx == local_x) & (hx == local_x) & (ly == local_y) & (hy == local_y)
+    return sample, sources, weights.astype(np.float32)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _gather(values, rows, pixels, image):
-    """image[pixels[i]] = values[rows[i]]: each texel shows its sample's light."""
+def _gather(values, rows, weights, pixels, image):
+    """image[pixels[i]] = sum_k weights[i, k] values[rows[i, k]]: each texel shows its samples' light."""
     for i in numba.prange(pixels.shape[0]):
-        r = rows[i]
         p = pixels[i]
-        image[p, 0], image[p, 1], image[p, 2] = values[r, 0], values[r, 1], values[r, 2]
+        r = g = b = np.float32(0.0)
+        for k in range(rows.shape[1]):
+            w = weights[i, k]
+            if w != 0.0:
+                q = rows[i, k]
+                r += w * values[q, 0]
+                g += w * values[q, 1]
+                b += w * values[q, 2]
+        image[p, 0], image[p, 1], image[p, 2] = r, g, b
 
 
 def lattice_key(probes: ProbeGrid) -> tuple:
@@ -96,16 +111,15 @@ class BakedIndirectLight:
         self.texture.repeat_x = self.texture.repeat_y = False
         self._image = np.zeros((height * 2 * width, 3), np.float32)
         rows, columns = np.nonzero(lightmap.covered)           # the order of lightmap.texel_points
-        sample, source = strided_samples(lightmap, rows, columns)
+        sample, sources, weights = strided_samples(lightmap, rows, columns)
         self._samples = np.flatnonzero(sample)
         """The texels (indices into lightmap.texel_points) that the probes' light is evaluated at."""
         pixels = rows * 2 * width + columns
         self._pixels = np.concatenate([pixels[sample], pixels[sample] + width])
         """Each sample's pixel in the (front | back) image: the front sides', then the back sides'."""
-        copied = ~sample
-        self._copies = (np.concatenate([pixels[copied], pixels[copied] + width]),
-                        np.concatenate([source[copied], source[copied] + width]))
-        """(pixels, their samples' pixels) of the texels between the samples."""
+        self._between = (np.concatenate([pixels, pixels + width]), np.concatenate([sources, sources + width]),
+                         np.concatenate([weights, weights]))
+        """(pixels, their samples' pixels, weights) of every texel, both sides."""
         self._cells: dda.Cells | None = None
         self._bake: SurfaceBake | None = None
         self.weights_key = None
@@ -171,17 +185,16 @@ class BakedIndirectLight:
         self._texel_pixels, self._texel_rows = self._sources(bake)
 
     def _sources(self, bake: SurfaceBake) -> tuple[np.ndarray, np.ndarray]:
-        """(pixels, rows): every covered pixel of the (front | back) image and the row of
-        `bake.irradiance` it shows: its own sample's, or, where that sample sees no probe (a face's strip
-        under the floor, the ceiling above a lamp), a neighbouring sample's of the same tile that does,
-        so that the bilinear fetch of a visible pixel near the edge never mixes in their darkness."""
+        """(pixels, (rows, weights)): every covered pixel of the (front | back) image and the rows of
+        `bake.irradiance` it interpolates (its samples'); a sample that sees no probe (a face's strip under
+        the floor, the ceiling above a lamp) next to one of its tile that does shows that one's light, so
+        that the bilinear fetch of a visible pixel near the edge never mixes in their darkness."""
         pixels, sources = self._dark_fill(bake)
         row_of = np.full(len(self._image), -1, np.int64)
         row_of[self._pixels] = np.arange(len(self._pixels))
         row_of[pixels] = row_of[sources]                      # dark samples show a lit neighbour's light
-        all_pixels = np.concatenate([self._pixels, self._copies[0]])
-        rows = np.concatenate([row_of[self._pixels], row_of[self._copies[1]]])
-        return all_pixels, rows
+        all_pixels, their_samples, weights = self._between
+        return all_pixels, (row_of[their_samples], weights)
 
     def _dark_fill(self, bake: SurfaceBake) -> tuple[np.ndarray, np.ndarray]:
         """(pixels, sources): the samples that see no probe next to a lit sample of their tile."""
@@ -206,7 +219,8 @@ class BakedIndirectLight:
 
     def update(self, probes: ProbeGrid) -> None:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
-        _gather(self._bake.irradiance(probes.coefficients), self._texel_rows, self._texel_pixels, self._image)
+        rows, weights = self._texel_rows
+        _gather(self._bake.irradiance(probes.coefficients), rows, weights, self._texel_pixels, self._image)
         self.texture.write(self._image)
 
     def use(self, unit: int) -> dict:
