@@ -67,3 +67,20 @@ def assert_same_room(a: Scene, params_a: dict, b: Scene, params_b: dict) -> None
     for name in ("vertices", "faces", "albedo", "emission", "face_group"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     assert a.groups == b.groups and json.dumps(params_a) == json.dumps(params_b)
+
+
+def wall_samples(params: dict, name: str, count: int):
+    """A count x count grid of points over one wall of a drawn room (viewer.training.procedural), and
+    which of them lie in the window's hole: (the wall's frame, points (count^2, 3), hole (count^2,))."""
+    from viewer.training import procedural
+
+    u = (np.arange(count) + 0.5) / count * 2 - 1
+    grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)
+    f = procedural.room_frames(np.array(params["room_half"]))[name]
+    points = f.centre + grid[:, :1] * f.half_u * f.u + grid[:, 1:] * f.half_v * f.v
+    hole = np.zeros(len(points), bool)
+    window = params["window"]
+    if window is not None and window["wall"] == name:
+        (a, b), (ha, hb) = window["uv"], window["half"]
+        hole = (np.abs(grid[:, 0] * f.half_u - a) < ha) & (np.abs(grid[:, 1] * f.half_v - b) < hb)
+    return f, points, hole

@@ -11,7 +11,7 @@ import pytest
 from viewer import meshes, sh
 from viewer.training import dataset, generate, procedural, shards, truth
 from viewer.training.procedural import CORNELL_POWER, OBJECT_KINDS, WALL_NAMES, Ranges, random_scene
-from scenes import assert_same_room, covered, group_faces
+from scenes import assert_same_room, covered, group_faces, wall_samples
 from viewer.voxels import voxelize
 
 SEEDS = range(40)
@@ -27,21 +27,13 @@ def scene_for(seed: int, ranges: Ranges = Ranges()):
 def test_rooms_are_closed_except_the_front_and_the_window():
     """Points spread over the five walls of the box lie on the wall meshes, unless they are in the
     window's hole; walls face into the room."""
-    u = (np.arange(24) + 0.5) / 24 * 2 - 1
-    grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)
     for seed in SEEDS:
         scene, params = scene_for(seed)
-        frames = procedural.room_frames(np.array(params["room_half"]))
-        window = params["window"]
         for name in WALL_NAMES:
-            f = frames[name]
-            points = f.centre + grid[:, :1] * f.half_u * f.u + grid[:, 1:] * f.half_v * f.v
+            f, points, hole = wall_samples(params, name, 24)
             mask = group_faces(scene, name)
             on_wall = covered(points, scene.triangles[mask])
-            hole = np.zeros(len(points), bool)
-            if window is not None and window["wall"] == name:
-                (a, b), (ha, hb) = window["uv"], window["half"]
-                hole = (np.abs(grid[:, 0] * f.half_u - a) < ha) & (np.abs(grid[:, 1] * f.half_v - b) < hb)
+            if params["window"] is not None and params["window"]["wall"] == name:
                 assert hole.any(), f"seed {seed}: the window on the {name} is smaller than the test grid"
             np.testing.assert_array_equal(on_wall, ~hole, err_msg=f"seed {seed} {name}")
             inward = scene.face_normals[mask] @ f.normal

@@ -8,7 +8,7 @@ from collections import Counter
 
 import numpy as np
 
-from scenes import assert_same_room, covered, group_faces
+from scenes import assert_same_room, covered, group_faces, wall_samples
 from viewer import meshes
 from viewer.training import procedural
 from viewer.training.procedural import CORNELL_POWER, WALL_NAMES, random_scene
@@ -33,19 +33,10 @@ def test_presets_keep_v1_as_the_default():
 
 
 def test_walls_are_closed_except_the_front_and_the_window():
-    u = (np.arange(16) + 0.5) / 16 * 2 - 1
-    grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)
     for seed in range(20):
         scene, params = wide(seed)
-        frames = procedural.room_frames(np.array(params["room_half"]))
-        window = params["window"]
         for name in WALL_NAMES:
-            f = frames[name]
-            points = f.centre + grid[:, :1] * f.half_u * f.u + grid[:, 1:] * f.half_v * f.v
-            hole = np.zeros(len(points), bool)
-            if window is not None and window["wall"] == name:
-                (a, b), (ha, hb) = window["uv"], window["half"]
-                hole = (np.abs(grid[:, 0] * f.half_u - a) < ha) & (np.abs(grid[:, 1] * f.half_v - b) < hb)
+            _, points, hole = wall_samples(params, name, 16)
             on_wall = covered(points, scene.triangles[group_faces(scene, name)])
             np.testing.assert_array_equal(on_wall, ~hole, err_msg=f"seed {seed} {name}")
 

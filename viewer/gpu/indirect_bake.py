@@ -126,6 +126,7 @@ class BakedIndirectLight:
         """lattice_key of the probe grid whose weights are installed (None: none yet)."""
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="indirect-weights") if background else None
         self._job: tuple[tuple, Future] | None = None
+        self._last_key: tuple[ProbeGrid, tuple] | None = None
         self._kept: dict[tuple, SurfaceBake] = {}
         """The weights of the last KEPT_LATTICES lattices, newest last."""
 
@@ -134,7 +135,9 @@ class BakedIndirectLight:
         once, or on the worker with `background`). Never, for a scene over MAX_SAMPLES."""
         if len(self._pixels) > MAX_SAMPLES:
             return False
-        key = lattice_key(probes)
+        if self._last_key is None or self._last_key[0] is not probes:   # asked twice a frame: hash once
+            self._last_key = (probes, lattice_key(probes))
+        key = self._last_key[1]
         if self.weights_key == key:
             return True
         if key in self._kept:   # a lattice met before (the viewer toggling between GI sources)
