@@ -64,3 +64,53 @@ def test_export_runs_in_the_neural_source(tiny, tmp_path):
     example = dataset.load_example(dataset.room_refs(tiny, "val")[0])
     grid = neural.NeuralField(tmp_path / "m.onnx").solve(example.scene)
     assert grid.coefficients.shape == (8, 8, 8, 9, 3) and np.all(np.isfinite(grid.coefficients))
+
+
+def test_the_split_streams_from_memory_mapped_shard_caches(tiny):
+    from viewer.training.samples import Stacked, concat
+
+    first = load_split(tiny, "train", 8, quiet=True)
+    assert isinstance(first.inputs, Stacked) and all(isinstance(p, np.memmap) for p in first.inputs.parts)
+    caches = sorted((tiny / "cache" / "train").glob("*/done"))
+    stamps = [p.stat().st_mtime_ns for p in caches]
+    again = load_split(tiny, "train", 8, quiet=True)  # read back, not encoded again
+    assert [p.stat().st_mtime_ns for p in sorted((tiny / "cache" / "train").glob("*/done"))] == stamps
+    np.testing.assert_array_equal(again.inputs[np.arange(len(again))], first.inputs[np.arange(len(first))])
+    # selecting and joining rows reads the same rows as the arrays they came from
+    rows = first.subset([3, 1])
+    np.testing.assert_array_equal(rows.targets[np.arange(2)], first.targets[np.array([3, 1])])
+    assert rows.names == [first.names[3], first.names[1]]
+    joined = concat(first, first, keep=[first.names[2]])
+    assert joined.names == first.names + [first.names[2]]
+    np.testing.assert_array_equal(joined.valid[np.array([len(first), 2])], first.valid[np.array([2, 2])])
+    # a dataset still being made: only the encoded shards, or a clear error when there are none
+    with pytest.raises(FileNotFoundError, match="no encoded rooms"):
+        load_split(tiny, "val", 16, quiet=True, encode=False)
+
+
+def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
+    from viewer.training.train import Batch, TrainSettings, loss_terms, reflected_target
+
+    m = 8
+    y = torch.ones(6, 18, m, m, m)  # the solver's: no direct light, all of it reflected
+    unbiased = torch.full((6, 9, m, m, m), 2.0)
+    has = torch.tensor([1.0, 1, 1, 0, 0, 0])  # the first room has Mitsuba's probes, the second not
+    batch = Batch(np.arange(2), torch.zeros(6, 21, m, m, m), y, torch.ones(6, m, m, m), unbiased, has)
+    target = reflected_target(batch)
+    assert torch.all(target[:3] == 2.0) and torch.all(target[3:] == 1.0)
+
+    class Constant(torch.nn.Module):
+        def __init__(self, value):
+            super().__init__()
+            self.value = value
+
+        def forward(self, x):
+            out = torch.zeros(len(x), 19, m, m, m)
+            out[:, 9:18] = self.value
+            out[:, :9] = self.value  # no direct light: all = reflected
+            return out
+
+    settings = TrainSettings(reflected_weight=1.0, solver_weight=0.0)
+    # with the solver's rooms weighted 0, matching Mitsuba's probes costs nothing, the solver's a lot
+    assert float(loss_terms(Constant(2.0), batch, settings)[0]) == pytest.approx(0.0, abs=1e-9)
+    assert float(loss_terms(Constant(1.0), batch, settings)[0]) == pytest.approx(0.5)  # 1^2 / (1 + 1)

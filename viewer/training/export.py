@@ -101,7 +101,7 @@ def main(argv=None) -> int:
     parser.add_argument("run", type=Path)
     parser.add_argument("--name", default="probenet")
     parser.add_argument("--out", type=Path, default=ROOT / "models")
-    parser.add_argument("--probes", type=int, default=16)
+    parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--metrics", type=Path, help="JSON of measured metrics to put on the card")
     args = parser.parse_args(argv)
     scene = load("paper-test")
@@ -109,8 +109,10 @@ def main(argv=None) -> int:
     inputs = encoding.encode(voxelize(scene, ENCODING_VOXELS), scene.sun, lo, hi, args.probes).inputs
     history = json.loads((args.run / "history.json").read_text())
     metrics = json.loads(args.metrics.read_text()) if args.metrics else {}
+    data = json.loads((args.run / "data.json").read_text()) if (args.run / "data.json").exists() else {}
     training = {"run": str(args.run), "epochs": len(history["epochs"]),
-                "final_val_relative_rmse": history["val_relative_rmse"][-1]}
+                "final_val_relative_rmse": history["val_relative_rmse"][-1],
+                **({"final_val": history["val_metrics"][-1]} if history.get("val_metrics") else {}), **data}
     card = export(args.run, args.out / f"{args.name}.onnx", args.probes, inputs, training, metrics)
     print(f"wrote {args.out / args.name}.onnx ({card['parameters']} parameters, "
           f"onnx vs torch {card['metrics']['onnx_max_difference']:.1e})", file=sys.stderr)

@@ -13,8 +13,9 @@ Why this shape:
 - Shadows and contact are local: the finest level keeps each probe's own cell and its neighbours.
 - The head is per probe (1x1x1 convolutions): cheap at 16^3 = 4096 probes, and the same weights work
   for any lattice size divisible by 2^levels.
-- The unshadowed direct light is an input and the head's output is added to it, so the network only
-  learns what is missing: occlusion and the bounced light.
+- The unshadowed direct light is an input and the head's outputs are added to it, so the network only
+  learns what is missing: the occlusion of the direct light (9 SH) and the reflected light (9 SH); all
+  the light is their sum, so the two outputs the renderer and `sample` read never disagree.
 
 The paper's five families, for its Table 1, are in `viewer.training.paper_models`.
 """
@@ -88,7 +89,7 @@ class ProbeNet(nn.Module):
             hidden = self.project[i](levels[i]) + self._up(hidden)
         hidden = F.relu(self.local(x) + self._up(hidden))
         out = self.head(hidden)
-        total = out[:, TOTAL] + x[:, encoding.DIRECT]
+        total = x[:, encoding.DIRECT] + out[:, TOTAL] + out[:, REFLECTED]  # direct - occlusion + reflected
         return torch.cat([total, out[:, 9:]], dim=1)
 
     def _up(self, x: torch.Tensor) -> torch.Tensor:

@@ -159,13 +159,12 @@ def probenet_row(root: Path, data: dict, std: Standardized, epochs: int) -> tupl
     """ProbeNet on the 8^3 lattice, scored in the paper's standardized units too."""
     from viewer.training.models import ProbeNet, ProbeNetConfig
     from viewer.training.train import TrainSettings, train
-    from viewer.training.train import subset as subset_samples
 
     m = pm.PAPER_PROBES
     train_set = training_split(root, m)
     val_set = load_split(root, "val", m)
     paper = load_split(root, "paper", m)
-    test_set = subset_samples(paper, np.array([paper.names.index("paper-test")]))
+    test_set = paper.subset([paper.names.index("paper-test")])
     model = ProbeNet(ProbeNetConfig(width=8, hidden=16, levels=3))
     history = train(model, train_set, val_set, TrainSettings(epochs=epochs), quiet=True)
     scores = {}
@@ -188,8 +187,8 @@ def predict_physical(model, samples: Samples) -> np.ndarray:
     model.eval()
     outs = []
     with torch.no_grad():
-        for pick, x, y, v in batches(samples, np.arange(len(samples)), 8):
-            outs.append(model(x)[:, :9].numpy().reshape(len(pick), 3, 9, *x.shape[-3:]))  # all the light
+        for b in batches(samples, np.arange(len(samples)), 8):
+            outs.append(model(b.x)[:, :9].numpy().reshape(len(b.pick), 3, 9, *b.x.shape[-3:]))  # all the light
     normalized = np.concatenate(outs)
     return samples.physical(normalized)
 

@@ -1,12 +1,15 @@
 """Train ProbeNet on the dataset: one command, a progress line per epoch, checkpoints and a loss curve.
 
-    python -m viewer.training.train --data data/gi-v1 --out runs/probenet [--width 8 --hidden 16]
-                                    [--epochs 60] [--probes 16]
+    python -m viewer.training.train --data data/gi-v2 --out runs/probenet [--width 8 --hidden 16]
+                                    [--epochs 60] [--steps 500] [--probes 24]
 
-Loss: mean squared error of the SH in units of the encoding's scale (every probe, the filled targets)
-plus a small binary cross-entropy for the validity logit. Augmentation: mirror images in x and in z
-(a mirrored room is a room; the odd SH coefficients change sign). The run directory keeps
-`checkpoint.pt` (resumed when the command is run again), `history.json` and `loss.png`.
+The rooms stream from the memory-mapped shard caches (`viewer.training.samples`): thousands of rooms at
+24^3 fit in a few gigabytes of memory. Loss (`loss_terms`): the light straight from the emitters against
+the truth, plus the reflected light (what the renderer shades) against Mitsuba's unbiased probes where a
+room has them and the solver's elsewhere, weighted up; and a small binary cross-entropy for the
+validity logit. Augmentation: mirror images in x and in z (a mirrored room is a room; the odd SH
+coefficients change sign). The run directory keeps `checkpoint.pt` (resumed when the command is run
+again), `history.json`, `data.json` (what it trained on) and `loss.png`.
 """
 
 from __future__ import annotations
@@ -50,6 +53,20 @@ class TrainSettings:
     """Random mirror images in x and z."""
     seed: int = 0
     threads: int = 2
+    reflected_weight: float = 4.0
+    """Weight of the reflected light's loss against the direct light's. The direct part's squared values
+    are ~20x the reflected part's (the peaks under the lamps), so at 1 the network would fit the lamps'
+    neighbourhoods and leave the light the renderer shades; at 4 a relative error of the reflected part
+    costs about a fifth of the same relative error of the direct part."""
+    solver_weight: float = 0.25
+    """Weight of a room without Mitsuba's probes in the reflected loss: its physical-solver target is
+    deterministic but biased (16% on v2 rooms, docs/TRAINING.md); Mitsuba's are unbiased but noisy."""
+    steps: int = 0
+    """Stop an epoch after this many steps (0: the whole split): a pass over thousands of rooms."""
+    direct_input: str = "unshadowed"
+    """What the direct-light features hold: `unshadowed` (the encoding's, `viewer.encoding`) or `traced`
+    (the truth's own direct light, shadows included: the experiment of a network that only adds the
+    bounces to an exactly traced direct term)."""
 
 
 @dataclass
@@ -58,7 +75,10 @@ class History:
     train: list[float] = field(default_factory=list)
     val: list[float] = field(default_factory=list)
     val_relative_rmse: list[float] = field(default_factory=list)
+    """All the light against the truth (the solver's, for format-2 datasets)."""
     seconds: list[float] = field(default_factory=list)
+    val_metrics: list[dict] = field(default_factory=list)
+    """Every epoch's `evaluate` on the validation split."""
 
 
 def mirror(inputs: torch.Tensor, targets: torch.Tensor, valid: torch.Tensor, axis: int):
@@ -76,39 +96,131 @@ def mirror(inputs: torch.Tensor, targets: torch.Tensor, valid: torch.Tensor, axi
     return inputs * sign_in[:, None, None, None], targets * sign_out[:, None, None, None], valid
 
 
+@dataclass
+class Batch:
+    pick: np.ndarray
+    """The rooms, in the samples' order."""
+    x: torch.Tensor
+    """(B, CHANNELS, M, M, M) B = 3 x rooms: one colour channel a row."""
+    y: torch.Tensor
+    """(B, 18, M, M, M) the truth: all the light (9), the reflected light (9)."""
+    valid: torch.Tensor
+    """(B, M, M, M) 1.0 outside solids."""
+    unbiased: torch.Tensor
+    """(B, 9, M, M, M) Mitsuba's reflected light where `has_unbiased`, else zeros."""
+    has_unbiased: torch.Tensor
+    """(B,) 1.0 for the rows of rooms with Mitsuba's probes."""
+
+    def mirrored(self, axis: int) -> "Batch":
+        x, y, valid = mirror(self.x, self.y, self.valid, axis)
+        unbiased = mirror_sh(self.unbiased, axis)
+        return Batch(self.pick, x, y, valid, unbiased, self.has_unbiased)
+
+
+def mirror_sh(sh: torch.Tensor, axis: int) -> torch.Tensor:
+    """(B, 9, X, Y, Z) SH mirrored in world axis `axis`."""
+    sign = torch.ones(9)
+    sign[ODD_IN[axis]] = -1
+    return sh.flip(2 + axis) * sign[:, None, None, None]
+
+
 def batches(samples: Samples, indices: np.ndarray, size: int):
     for start in range(0, len(indices), size):
         pick = np.sort(indices[start:start + size])
         m = samples.inputs.shape[-1]
         x = torch.from_numpy(samples.inputs[pick].astype(np.float32)).reshape(-1, encoding.CHANNELS, m, m, m)
-        y = torch.from_numpy(samples.targets[pick]).reshape(-1, 18, m, m, m)
+        y = torch.from_numpy(samples.targets[pick].astype(np.float32)).reshape(-1, 18, m, m, m)
         v = torch.from_numpy(np.repeat(samples.valid[pick], 3, axis=0).astype(np.float32))
-        yield pick, x, y, v
+        if samples.unbiased is not None:
+            u = torch.from_numpy(samples.unbiased[pick].astype(np.float32)).reshape(-1, 9, m, m, m)
+            has = torch.from_numpy(np.repeat(samples.has_unbiased[pick], 3).astype(np.float32))
+        else:
+            u, has = torch.zeros_like(y[:, 9:]), torch.zeros(len(y))
+        yield Batch(pick, x, y, v, u, has)
 
 
-def loss_terms(model, x, y, v):
-    """(MSE of all 18 SH outputs, BCE of the validity logit, the outputs)."""
-    out = model(x)
-    sh_loss = F.mse_loss(out[:, :18], y)
-    valid_loss = F.binary_cross_entropy_with_logits(out[:, VALIDITY], v)
-    return sh_loss, valid_loss, out
+def traced_direct(batch: Batch) -> Batch:
+    """The batch with the truth's direct light (shadows traced) in place of the unshadowed features."""
+    x = batch.x.clone()
+    x[:, encoding.DIRECT] = batch.y[:, TOTAL] - batch.y[:, REFLECTED]
+    return Batch(batch.pick, x, batch.y, batch.valid, batch.unbiased, batch.has_unbiased)
 
 
-def evaluate(model, samples: Samples, batch: int = 8, part: slice = TOTAL) -> tuple[float, float]:
-    """(MSE in scaled units, relative RMSE of every probe's SH in radiance units) over a split, for one
-    part of the output (all the light by default, or REFLECTED)."""
+def reflected_target(batch: Batch) -> torch.Tensor:
+    """Mitsuba's reflected light where the room has it, else the truth's."""
+    has = batch.has_unbiased[:, None, None, None, None]
+    return has * batch.unbiased + (1 - has) * batch.y[:, REFLECTED]
+
+
+def probe_weights(batch: Batch) -> torch.Tensor:
+    """(B, 1, M, M, M) each probe's weight in the SH loss: 1 / (|all the light's DC| + the row's mean |DC|).
+
+    The light next to a lamp is hundreds of times the room's mean (up to ~300x in the v2 rooms, in the
+    encoding's units), so a plain squared error is the error of a few probes at the lamps: the network
+    fits them and never learns the reflected light of the rest of the room. Dividing by the local
+    magnitude (with the room's mean as a floor) makes the loss a relative error near the lamps and an
+    absolute one in the dim corners."""
+    dc = batch.y[:, 0:1].abs()
+    return 1.0 / (dc + dc.mean(dim=(2, 3, 4), keepdim=True).clamp_min(1e-6))
+
+
+def loss_terms(model, batch: Batch, settings: "TrainSettings"):
+    """(the SH loss, BCE of the validity logit, the outputs).
+
+    The SH loss splits the light in two parts the renderer treats apart, each probe weighted by
+    `probe_weights`:
+    - the light straight from the emitters and the sun (all minus reflected), against the truth's (the
+      physical solver traces it exactly), every room;
+    - the reflected light, what the renderer shades from the probes, weighted by `reflected_weight`:
+      against Mitsuba's unbiased probes where the room has them, else against the truth's (biased), the
+      latter rooms weighted by `solver_weight`."""
+    out = model(batch.x)
+    w = probe_weights(batch)
+    direct = out[:, TOTAL] - out[:, REFLECTED]
+    direct_loss = (w * (direct - (batch.y[:, TOTAL] - batch.y[:, REFLECTED])) ** 2).mean()
+    room = batch.has_unbiased + (1 - batch.has_unbiased) * settings.solver_weight
+    per_row = (w * (out[:, REFLECTED] - reflected_target(batch)) ** 2).mean(dim=(1, 2, 3, 4))
+    reflected_loss = (room * per_row).sum() / room.sum().clamp_min(1e-6) * (room.mean() > 0)
+    valid_loss = F.binary_cross_entropy_with_logits(out[:, VALIDITY], batch.valid)
+    return direct_loss + settings.reflected_weight * reflected_loss, valid_loss, out
+
+
+def evaluate(model, samples: Samples, settings: "TrainSettings", batch: int = 8) -> dict:
+    """Over a split: the loss (scaled units), and the mean over rooms of each room's relative RMSE of its
+    probes' SH (in radiance units; rooms differ in brightness by 1000x, so a pooled RMSE would be one
+    room's), for all the light and the reflected light, against the truth (`*_truth`) and, on the rooms
+    that have them, against Mitsuba's probes (`*_mitsuba`: noisy, so an upper bound)."""
     model.eval()
-    total, count, err, ref = 0.0, 0, 0.0, 0.0
+    errors: dict[str, list[float]] = {}
+
+    def add(key, estimate, reference, rows=None):
+        if rows is not None:
+            if not rows.any():
+                return
+            estimate, reference = estimate[rows], reference[rows]
+        err = ((estimate - reference) ** 2).reshape(-1, 3, *estimate.shape[1:]).sum(dim=(1, 2, 3, 4, 5))
+        ref = (reference ** 2).reshape(-1, 3, *reference.shape[1:]).sum(dim=(1, 2, 3, 4, 5))
+        errors.setdefault(key, []).extend((err / ref.clamp_min(1e-30)).sqrt().tolist())
+
+    total, count = 0.0, 0
     with torch.no_grad():
-        for pick, x, y, v in batches(samples, np.arange(len(samples)), batch):
-            sh_loss, _, out = loss_terms(model, x, y, v)
-            total += float(sh_loss) * len(pick)
-            count += len(pick)
-            scale = torch.from_numpy(samples.scale[pick]).reshape(-1, 1, 1, 1, 1)
-            err += float((((out[:, part] - y[:, part]) * scale) ** 2).sum())
-            ref += float(((y[:, part] * scale) ** 2).sum())
+        for b in batches(samples, np.arange(len(samples)), batch):
+            if settings.direct_input == "traced":
+                b = traced_direct(b)
+            sh_loss, _, out = loss_terms(model, b, settings)
+            total += float(sh_loss) * len(b.pick)
+            count += len(b.pick)
+            scale = torch.from_numpy(samples.scale[b.pick]).reshape(-1, 1, 1, 1, 1)
+            out = out[:, :18] * scale
+            y = b.y * scale
+            add("all_truth", out[:, TOTAL], y[:, TOTAL])
+            add("reflected_truth", out[:, REFLECTED], y[:, REFLECTED])
+            rows = b.has_unbiased > 0
+            u = b.unbiased * scale
+            add("all_mitsuba", out[:, TOTAL], y[:, TOTAL] - y[:, REFLECTED] + u, rows)
+            add("reflected_mitsuba", out[:, REFLECTED], u, rows)
     model.train()
-    return total / max(count, 1), math.sqrt(err / max(ref, 1e-30))
+    return {"loss": total / max(count, 1), **{k: float(np.mean(v)) for k, v in errors.items()}}
 
 
 def train(model: ProbeNet, train_set: Samples, val_set: Samples, settings: TrainSettings,
@@ -118,6 +230,8 @@ def train(model: ProbeNet, train_set: Samples, val_set: Samples, settings: Train
     rng = np.random.default_rng(settings.seed)
     optimizer = torch.optim.Adam(model.parameters(), lr=settings.learning_rate)
     steps_per_epoch = math.ceil(len(train_set) / settings.batch)
+    if settings.steps:
+        steps_per_epoch = min(steps_per_epoch, settings.steps)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(
         optimizer, settings.epochs * steps_per_epoch, eta_min=settings.learning_rate / 30)
     history, first = History(), 0
@@ -133,12 +247,15 @@ def train(model: ProbeNet, train_set: Samples, val_set: Samples, settings: Train
     for epoch in range(first, settings.epochs):
         start = time.perf_counter()
         running, seen = 0.0, 0
-        for pick, x, y, v in batches(train_set, rng.permutation(len(train_set)), settings.batch):
+        order = rng.permutation(len(train_set))[:steps_per_epoch * settings.batch]
+        for batch in batches(train_set, order, settings.batch):
+            if settings.direct_input == "traced":
+                batch = traced_direct(batch)
             if settings.augment:
                 for axis in (0, 2):
                     if rng.random() < 0.5:
-                        x, y, v = mirror(x, y, v, axis)
-            sh_loss, valid_loss, _ = loss_terms(model, x, y, v)
+                        batch = batch.mirrored(axis)
+            sh_loss, valid_loss, _ = loss_terms(model, batch, settings)
             loss = sh_loss + VALIDITY_WEIGHT * valid_loss
             if settings.weight_decay > 0:
                 loss = loss + settings.weight_decay * sum((p ** 2).sum() for p in model.parameters() if p.dim() > 1)
@@ -146,17 +263,19 @@ def train(model: ProbeNet, train_set: Samples, val_set: Samples, settings: Train
             loss.backward()
             optimizer.step()
             schedule.step()
-            running += float(sh_loss.detach()) * len(pick)
-            seen += len(pick)
-        val_mse, val_rel = evaluate(model, val_set)
+            running += float(sh_loss.detach()) * len(batch.pick)
+            seen += len(batch.pick)
+        metrics = evaluate(model, val_set, settings)
         history.epochs.append(epoch)
         history.train.append(running / seen)
-        history.val.append(val_mse)
-        history.val_relative_rmse.append(val_rel)
+        history.val.append(metrics["loss"])
+        history.val_relative_rmse.append(metrics["all_truth"])
+        history.val_metrics.append(metrics)
         history.seconds.append(time.perf_counter() - start)
         if not quiet:
-            print(f"epoch {epoch + 1}/{settings.epochs}  train {running / seen:.5f}  val {val_mse:.5f}  "
-                  f"val rel. RMSE {100 * val_rel:.2f}%  ({history.seconds[-1]:.1f} s)", file=sys.stderr)
+            against = "  ".join(f"{k} {100 * v:.1f}%" for k, v in metrics.items() if k != "loss")
+            print(f"epoch {epoch + 1}/{settings.epochs}  train {running / seen:.5f}  val {metrics['loss']:.5f}  "
+                  f"{against}  ({history.seconds[-1]:.1f} s)", file=sys.stderr)
         if run:
             run.mkdir(parents=True, exist_ok=True)
             torch.save({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
@@ -196,9 +315,9 @@ def plot_history(history: History, path: Path, title: str = "") -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m viewer.training.train", description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/gi-v1"))
+    parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
     parser.add_argument("--out", type=Path, required=True, help="run directory (resumed if it exists)")
-    parser.add_argument("--probes", type=int, default=16)
+    parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--width", type=int, default=ProbeNetConfig.width)
     parser.add_argument("--hidden", type=int, default=ProbeNetConfig.hidden)
     parser.add_argument("--head-layers", type=int, default=ProbeNetConfig.head_layers)
@@ -208,24 +327,46 @@ def main(argv=None) -> int:
     parser.add_argument("--lr", type=float, default=TrainSettings.learning_rate)
     parser.add_argument("--weight-decay", type=float, default=0.0)
     parser.add_argument("--limit", type=int, default=0, help="use only the first N training scenes")
+    parser.add_argument("--steps", type=int, default=0, help="steps per epoch (0: the whole split)")
+    parser.add_argument("--reflected-weight", type=float, default=TrainSettings.reflected_weight)
+    parser.add_argument("--solver-weight", type=float, default=TrainSettings.solver_weight)
+    parser.add_argument("--threads", type=int, default=TrainSettings.threads)
+    parser.add_argument("--direct-input", choices=("unshadowed", "traced"), default="unshadowed")
+    parser.add_argument("--encoded-only", action="store_true",
+                        help="train on the shards encoded so far (a dataset still being made)")
+    parser.add_argument("--val-rooms", type=int, default=100, help="validation rooms scored every epoch")
     args = parser.parse_args(argv)
-    train_set = training_split(args.data, args.probes)
+    train_set = training_split(args.data, args.probes, encode=not args.encoded_only)
     val_set = load_split(args.data, "val", args.probes)
+    val_set = val_set.subset(np.arange(min(args.val_rooms, len(val_set))))
     if args.limit:
-        train_set = subset(train_set, np.arange(min(args.limit, len(train_set))))
+        train_set = train_set.subset(np.arange(min(args.limit, len(train_set))))
+    record_data(args.out, args.data, train_set, val_set, args.probes)
     config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels)
     model = ProbeNet(config)
     print(f"ProbeNet {config}: {parameter_count(model)} parameters, {len(train_set)} training scenes",
           file=sys.stderr)
     settings = TrainSettings(epochs=args.epochs, batch=args.batch, learning_rate=args.lr,
-                             weight_decay=args.weight_decay)
+                             weight_decay=args.weight_decay, steps=args.steps, threads=args.threads,
+                             reflected_weight=args.reflected_weight, solver_weight=args.solver_weight,
+                             direct_input=args.direct_input)
     train(model, train_set, val_set, settings, run=args.out)
     return 0
 
 
-def subset(samples: Samples, indices: np.ndarray) -> Samples:
-    return Samples(samples.inputs[indices], samples.targets[indices], samples.valid[indices],
-                   samples.scale[indices], [samples.names[i] for i in indices])
+def record_data(run: Path, data: Path, train_set: Samples, val_set: Samples, probes: int) -> None:
+    """`run/data.json`: what the run trains on (the export copies it onto the model card). A resumed run
+    with more rooms (the dataset grew) records the latest count."""
+    from viewer.training.samples import ENCODING_VOXELS
+
+    manifest = Path(data) / "manifest.json"
+    settings = json.loads(manifest.read_text()).get("settings", {}) if manifest.exists() else {}
+    record = {"data": str(data), "training_rooms": len(train_set), "validation_rooms": len(val_set),
+              "rooms_with_mitsuba_probes": int(np.sum(train_set.has_unbiased)) if train_set.has_unbiased is not None else 0,
+              "ranges": settings.get("ranges", "v1"), "truth": settings.get("truth"), "seed": settings.get("seed"),
+              "probes": probes, "voxels": ENCODING_VOXELS}
+    run.mkdir(parents=True, exist_ok=True)
+    (run / "data.json").write_text(json.dumps(record, indent=1) + "\n")
 
 
 if __name__ == "__main__":
