@@ -12,16 +12,18 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from viewer import encoding
+from viewer.encoder import Encoder
 from viewer.probes import ProbeGrid
 from viewer.resources import DEFAULT_MODEL
 from viewer.scene import Scene
-from viewer.voxels import VoxelGrid, voxelize
+from viewer.voxels import VoxelGrid, voxelize, voxelize_with_faces
 
 OUTPUTS = 19
 """Per probe and colour pass: 9 SH of all the light, 9 of the reflected light, 1 validity logit."""
@@ -121,31 +123,64 @@ class NeuralField:
         if len(outputs) != 1 or outputs[0].shape[1] != OUTPUTS:
             raise ModelError(f"{self.card.path.name}: gives outputs {outputs[0].shape}, expected (3, {OUTPUTS}, M, M, M)")
         self.input_name = inputs[0].name
+        self._encoder: Encoder | None = None
+        self._output: np.ndarray | None = None       # the network's last output, and per colour pass
+        self._output_keys: list = [None] * 3         # the (encoder, revision) of the inputs it ran on
+        self.passes_run = 0
+        """Colour passes the network ran for in the last `predict` (0 to 3)."""
 
     @property
     def resolution(self) -> int:
         return self.card.probes
 
     def predict(self, voxels: VoxelGrid, sun, lo, hi, include_emitted: bool = True,
-                timings: dict | None = None, resolution: int | None = None) -> ProbeGrid:
+                timings: dict | None = None, resolution: int | None = None, reuse: bool = True) -> ProbeGrid:
         """Probes over [lo, hi]: all the incident light (`include_emitted`, as `sample` and Mitsuba see
         it) or the light reflected by surfaces alone (what the renderer samples). `resolution` other
         than the card's runs the same convolutional network on another lattice (for timing; its
-        accuracy there is not what the card measured)."""
+        accuracy there is not what the card measured).
+
+        The encoder of the lattice is kept (viewer.encoder), so a call after an edit recomputes only
+        what the edit changed, and the network runs only for the colour passes whose inputs changed
+        (none after a lamp's colour or intensity edit: the scale-out makes those exactly linear).
+        `reuse=False` encodes and runs everything afresh: what a new scene costs."""
+        m = resolution or self.resolution
         clock = time.perf_counter()
         with _one_blas_thread():
-            enc = encoding.encode(voxels, sun, lo, hi, resolution or self.resolution)
+            encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m)
+            enc = encoder.encode(voxels, sun)
         encoded = time.perf_counter()
-        out = self.session.run(None, {self.input_name: enc.inputs})[0]  # (3, 19, M, M, M)
+        out = self._network(encoder, enc.inputs) if reuse else self._run(enc.inputs)  # (3, 19, M, M, M)
         ran = time.perf_counter()
-        part = out[:, 0:9] if include_emitted else out[:, 9:18]
-        coefficients = (part * enc.scale[:, None, None, None, None]).transpose(2, 3, 4, 1, 0)
-        valid = out[:, 18].mean(axis=0) > 0.0
-        grid = ProbeGrid(lo=enc.lo, hi=enc.hi, coefficients=np.ascontiguousarray(coefficients, np.float32),
-                         valid=valid)
+        grid = unpack(out, enc.scale, enc.lo, enc.hi, include_emitted)
         if timings is not None:
             timings.update(encode=encoded - clock, network=ran - encoded, unpack=time.perf_counter() - ran)
         return grid
+
+    def encoder(self, lo, hi, resolution: int) -> Encoder:
+        """The encoder of this lattice, kept from the last call when the lattice is the same."""
+        if self._encoder is None or not self._encoder.fits(lo, hi, resolution):
+            self._encoder = Encoder(lo, hi, resolution)
+        return self._encoder
+
+    def _network(self, encoder: Encoder, inputs: np.ndarray) -> np.ndarray:
+        """The network's (3, 19, M, M, M) output, run for the colour passes whose inputs differ from the
+        ones it last ran on (`Encoder.revisions`); the others keep their output."""
+        keys = [(encoder.serial, int(r)) for r in encoder.revisions]
+        stale = [c for c in range(3) if self._output is None or self._output_keys[c] != keys[c]
+                 or self._output.shape[2:] != inputs.shape[2:]]
+        if len(stale) == 3:
+            self._output = self._run(inputs)
+        elif stale:
+            fresh = self._run(np.ascontiguousarray(inputs[stale]))
+            self._output[stale] = fresh   # private: the grids unpacked from it hold copies
+        self.passes_run = len(stale)
+        self._output_keys = keys
+        return self._output
+
+    def _run(self, inputs: np.ndarray) -> np.ndarray:
+        self.passes_run = len(inputs)
+        return self.session.run(None, {self.input_name: inputs})[0]
 
     def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:
         """Voxelize the scene at the card's resolution and predict over its bounds."""
@@ -155,3 +190,106 @@ class NeuralField:
             timings["voxelize"] = time.perf_counter() - clock
         lo, hi = scene.bounds
         return self.predict(voxels, scene.sun, lo, hi, include_emitted, timings)
+
+
+class SceneVoxels:
+    """A scene's geometry voxelized for the network, with each voxel's share of each face
+    (viewer.voxels.Voxelization): the voxels of any scene with the same triangles, whatever its colours,
+    are one sparse product away (`voxels_of`)."""
+
+    def __init__(self, scene: Scene, resolution: int):
+        clock = time.perf_counter()
+        self.vertices, self.faces = scene.vertices, scene.faces
+        self.bounds = scene.bounds
+        self.voxelization = voxelize_with_faces(scene, resolution)
+        self._colours = (scene.albedo, scene.emission)
+        self._grid = self.voxelization.grid
+        self.seconds = time.perf_counter() - clock
+        """How long voxelizing took."""
+
+    def fits(self, scene: Scene) -> bool:
+        """Whether `scene` has the triangles these voxels were made from (a colour edit keeps them)."""
+        return _same(self.vertices, scene.vertices) and _same(self.faces, scene.faces)
+
+    def voxels_of(self, scene: Scene) -> VoxelGrid:
+        """The voxels with `scene`'s albedo and emission (area-weighted per voxel, as `voxelize` gives
+        them, to round-off); the same object while the colours stay the same."""
+        if not (_same(self._colours[0], scene.albedo) and _same(self._colours[1], scene.emission)):
+            grid, faces = self.voxelization.grid, self.voxelization.faces
+            lights = grid.lights
+            if lights.face is not None and lights.count:
+                lights = replace(lights, radiance=scene.emission[lights.face])
+            self._grid = replace(grid, albedo=faces @ scene.albedo, emission=faces @ scene.emission, lights=lights)
+            self._colours = (scene.albedo, scene.emission)
+        return self._grid
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a is b or (a.shape == b.shape and np.array_equal(a, b))
+
+
+class NeuralGI:
+    """The neural field on a scene and its edits, as `viewer.gi.PhysicalGI` is for the solver: the
+    voxels of the scene's geometry are kept (`SceneVoxels`), so a colour edit (an albedo, a lamp's
+    colour or intensity) recolours them instead of voxelizing, and the field's encoder recomputes only
+    what the edit changed (viewer.encoder). A moved lamp or a new scene is voxelized again: `prepare`
+    (which can run on a worker thread) and `install`, or `update` for both."""
+
+    def __init__(self, field: NeuralField):
+        self.field = field
+        self.voxels: SceneVoxels | None = None
+
+    def needs_voxelizing(self, scene: Scene) -> bool:
+        return self.voxels is None or not self.voxels.fits(scene)
+
+    def prepare(self, scene: Scene) -> SceneVoxels:
+        """Voxelize `scene` at the card's resolution (changes nothing here: safe on a worker thread)."""
+        return SceneVoxels(scene, self.field.card.voxels)
+
+    def install(self, voxels: SceneVoxels) -> None:
+        self.voxels = voxels
+
+    def predict(self, scene: Scene, include_emitted: bool = False, timings: dict | None = None) -> ProbeGrid:
+        """The probes of `scene`, whose geometry is the installed one. `timings` gets `recolour` (the
+        voxels' colours) and the network's stages (`NeuralField.predict`)."""
+        clock = time.perf_counter()
+        grid = self.voxels.voxels_of(scene)
+        if timings is not None:
+            timings["recolour"] = time.perf_counter() - clock
+        lo, hi = self.voxels.bounds
+        return self.field.predict(grid, scene.sun, lo, hi, include_emitted, timings)
+
+    def update(self, scene: Scene, include_emitted: bool = False, timings: dict | None = None) -> ProbeGrid:
+        """Voxelize when the geometry changed, then predict."""
+        if self.needs_voxelizing(scene):
+            self.install(self.prepare(scene))
+            if timings is not None:
+                timings["voxelize"] = self.voxels.seconds
+        return self.predict(scene, include_emitted, timings)
+
+
+def unpack(out: np.ndarray, scale: np.ndarray, lo, hi, include_emitted: bool) -> ProbeGrid:
+    """The network's (3, 19, M, M, M) output in units of each pass's scale -> a ProbeGrid: SH (M, M, M,
+    9, 3) in radiance units (all the light, or the reflected light alone) and the validity vote of the
+    three passes; one compiled pass over the output."""
+    m = out.shape[-1]
+    coefficients = np.empty((m ** 3, 9, 3), np.float32)
+    valid = np.empty(m ** 3, np.bool_)
+    _unpack(out.reshape(3, OUTPUTS, -1), 0 if include_emitted else 9, np.asarray(scale, np.float32),
+            coefficients, valid)
+    return ProbeGrid(lo=lo, hi=hi, coefficients=coefficients.reshape(m, m, m, 9, 3), valid=valid.reshape(m, m, m))
+
+
+@numba.njit(cache=True, nogil=True)
+def _unpack(out, first, scale, coefficients, valid):
+    """coefficients[p, k, c] = out[c, first + k, p] x scale[c]; valid[p]: the mean logit of the passes
+    is positive. Blocks of 64 probes: the reads run along the output's rows, the writes stay in cache."""
+    count = out.shape[2]
+    for start in range(0, count, 64):
+        end = min(start + 64, count)
+        for c in range(3):
+            for k in range(9):
+                for p in range(start, end):
+                    coefficients[p, k, c] = out[c, first + k, p] * scale[c]
+        for p in range(start, end):
+            valid[p] = out[0, 18, p] + out[1, 18, p] + out[2, 18, p] > 0.0
