@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from viewer import encoding
+from viewer.domain import Domain
 from viewer.encoder import Encoder
 from viewer.probes import ProbeGrid
 from viewer.resources import DEFAULT_MODEL
@@ -69,6 +70,15 @@ class ModelCard:
     def sha256(self) -> str:
         return str(self.data["sha256"])
 
+    @property
+    def domain(self) -> Domain:
+        """What the model was trained on (viewer.domain): the card's `domain`, or for a card written
+        before cards had one, the domain of the ranges its dataset names (`training.ranges`; `v1`, the
+        first dataset's, when it names none)."""
+        if "domain" in self.data:
+            return Domain.from_dict(self.data["domain"])
+        return Domain.from_preset(str(self.data.get("training", {}).get("ranges", "v1")))
+
     @staticmethod
     def read(model: Path) -> "ModelCard":
         card_path = model.with_suffix(".json")
@@ -79,7 +89,7 @@ class ModelCard:
         try:
             data = json.loads(card_path.read_text())
             card = ModelCard(model, data)
-            _ = (card.probes, card.voxels, card.sha256, data["inputs"]["encoding_version"])
+            _ = (card.probes, card.voxels, card.sha256, data["inputs"]["encoding_version"], card.domain)
         except (ValueError, KeyError, TypeError) as exc:
             raise ModelError(f"{card_path.name}: not a valid model card ({exc})") from None
         return card
@@ -156,6 +166,10 @@ class NeuralField:
         if timings is not None:
             timings.update(encode=encoded - clock, network=ran - encoded, unpack=time.perf_counter() - ran)
         return grid
+
+    def forget(self) -> None:
+        """Drop the kept encoder and network outputs: the next prediction costs what a new scene does."""
+        self._encoder, self._output, self._output_keys = None, None, [None] * 3
 
     def encoder(self, lo, hi, resolution: int) -> Encoder:
         """The encoder of this lattice, kept from the last call when the lattice is the same."""
@@ -235,16 +249,20 @@ class NeuralGI:
     what the edit changed (viewer.encoder). A moved lamp or a new scene is voxelized again: `prepare`
     (which can run on a worker thread) and `install`, or `update` for both."""
 
-    def __init__(self, field: NeuralField):
+    def __init__(self, field: NeuralField, resolution: int | None = None, voxels: int | None = None):
         self.field = field
+        self.resolution = resolution or field.resolution
+        """Probes per axis: the card's, or another lattice divisible by 2^levels (for timing)."""
+        self.voxel_resolution = voxels or field.card.voxels
+        """Voxels per axis the encoding reads: the card's, or another (for timing)."""
         self.voxels: SceneVoxels | None = None
 
     def needs_voxelizing(self, scene: Scene) -> bool:
         return self.voxels is None or not self.voxels.fits(scene)
 
     def prepare(self, scene: Scene) -> SceneVoxels:
-        """Voxelize `scene` at the card's resolution (changes nothing here: safe on a worker thread)."""
-        return SceneVoxels(scene, self.field.card.voxels)
+        """Voxelize `scene` (changes nothing here: safe on a worker thread)."""
+        return SceneVoxels(scene, self.voxel_resolution)
 
     def install(self, voxels: SceneVoxels) -> None:
         self.voxels = voxels
@@ -257,7 +275,7 @@ class NeuralGI:
         if timings is not None:
             timings["recolour"] = time.perf_counter() - clock
         lo, hi = self.voxels.bounds
-        return self.field.predict(grid, scene.sun, lo, hi, include_emitted, timings)
+        return self.field.predict(grid, scene.sun, lo, hi, include_emitted, timings, self.resolution)
 
     def update(self, scene: Scene, include_emitted: bool = False, timings: dict | None = None) -> ProbeGrid:
         """Voxelize when the geometry changed, then predict."""
