@@ -17,6 +17,7 @@ the surface they cover, how their powers compare, and whether there is a sun.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import asdict, dataclass, fields
 
 import numpy as np
@@ -139,29 +140,54 @@ class Quantities:
     open_sides: int
 
 
-def measure(scene: Scene) -> Quantities:
-    lo, hi = scene.bounds
-    extent = hi - lo
-    areas = scene.face_areas
+@dataclass(frozen=True)
+class Shape:
+    """What `measure` takes from the triangles alone (kept while only colours change)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    areas: np.ndarray
+    normals: np.ndarray
+    """(F, 3) unit normals (zero for degenerate faces)."""
+    aspect: float
+    open_sides: int
+
+    @staticmethod
+    def of(scene: Scene) -> "Shape":
+        lo, hi = scene.bounds
+        triangles = scene.triangles
+        cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+        doubled = np.linalg.norm(cross, axis=1)
+        normals = np.divide(cross, doubled[:, None], out=np.zeros_like(cross), where=doubled[:, None] > 0)
+        areas = 0.5 * doubled
+        extent = hi - lo
+        return Shape(lo, hi, areas, normals, float(extent.max() / extent.min()),
+                     _open_sides(triangles, areas, normals, lo, hi))
+
+
+def measure(scene: Scene, shape: Shape | None = None) -> Quantities:
+    """The scene's quantities; `shape`: its triangles' (`Shape.of(scene)`), when already known."""
+    shape = shape or Shape.of(scene)
+    areas = shape.areas
     emitting = np.any(scene.emission > 0, axis=1) & (areas > 0)
-    group_area = np.bincount(scene.face_group, areas * ~emitting, minlength=len(scene.groups))
-    albedo = {}
-    for g, name in enumerate(scene.groups):
-        if group_area[g] > MIN_SURFACE_SHARE * group_area.sum():
-            mask = (scene.face_group == g) & ~emitting
-            albedo[name] = np.average(scene.albedo[mask], axis=0, weights=areas[mask])
-    return Quantities(albedo=albedo, aspect=float(extent.max() / extent.min()), lights=_lights(scene, emitting),
+    surface = areas * ~emitting
+    count = len(scene.groups)
+    group_area = np.bincount(scene.face_group, surface, minlength=count)
+    weighted = np.stack([np.bincount(scene.face_group, surface * scene.albedo[:, c], minlength=count)
+                         for c in range(3)], axis=1)
+    albedo = {name: weighted[g] / group_area[g] for g, name in enumerate(scene.groups)
+              if group_area[g] > MIN_SURFACE_SHARE * group_area.sum()}
+    return Quantities(albedo=albedo, aspect=shape.aspect, lights=_lights(scene, emitting, shape),
                       sun=scene.sun is not None and bool(np.any(scene.sun.irradiance > 0)),
-                      open_sides=_open_sides(scene, lo, hi))
+                      open_sides=shape.open_sides)
 
 
-def _lights(scene: Scene, emitting: np.ndarray) -> list[Light]:
+def _lights(scene: Scene, emitting: np.ndarray, shape: Shape) -> list[Light]:
     """The emitting triangles in connected pieces (sharing a corner), each a Light."""
     faces = np.flatnonzero(emitting)
     if len(faces) == 0:
         return []
-    lo, hi = scene.bounds
-    extent = hi - lo
+    lo, extent = shape.lo, shape.hi - shape.lo
     corners = scene.vertices[scene.faces[faces]].reshape(-1, 3)
     _, vertex = np.unique(np.round((corners - lo) / (1e-6 * extent.max())).astype(np.int64), axis=0,
                           return_inverse=True)
@@ -170,7 +196,7 @@ def _lights(scene: Scene, emitting: np.ndarray) -> list[Light]:
     graph = sparse.coo_matrix((np.ones(len(vertex)), (np.repeat(np.arange(count), 3), count + vertex)),
                               shape=(count + vertex.max() + 1,) * 2)
     _, label = csgraph.connected_components(graph, directed=False)
-    areas, normals = scene.face_areas[faces], scene.face_normals[faces]
+    areas, normals = shape.areas[faces], shape.normals[faces]
     radiance = scene.emission[faces].mean(axis=1)
     side_area = np.array([extent[1] * extent[2], extent[0] * extent[2], extent[0] * extent[1]])
     out = []
@@ -189,17 +215,18 @@ def _lights(scene: Scene, emitting: np.ndarray) -> list[Light]:
     return out
 
 
-def _open_sides(scene: Scene, lo: np.ndarray, hi: np.ndarray) -> int:
+def _open_sides(triangles: np.ndarray, areas: np.ndarray, normals: np.ndarray, lo: np.ndarray,
+                hi: np.ndarray) -> int:
     """How many of the six sides of the scene's box surfaces do not cover (`COVERED`)."""
-    triangles = scene.triangles
-    areas, normals = scene.face_areas, scene.face_normals
     tolerance = SIDE_TOLERANCE * float((hi - lo).max())
+    low, high = triangles.min(axis=1), triangles.max(axis=1)   # (F, 3) each triangle's box
     open_sides = 0
     for axis in range(3):
         others = [a for a in range(3) if a != axis]
         side = float(np.prod((hi - lo)[others]))
+        facing = np.abs(normals[:, axis]) > 0.7
         for plane in (lo[axis], hi[axis]):
-            on = np.all(np.abs(triangles[:, :, axis] - plane) <= tolerance, axis=1) & (np.abs(normals[:, axis]) > 0.7)
+            on = facing & (low[:, axis] >= plane - tolerance) & (high[:, axis] <= plane + tolerance)
             open_sides += bool(areas[on].sum() < COVERED * side)
     return open_sides
 
@@ -261,3 +288,11 @@ def warning(reasons: list[str]) -> str | None:
     return ("This scene lies outside what the neural model was trained on (" + "; ".join(reasons)
             + "): its light is a guess here. The physical solver (compute or CPU source, `--method solver`) "
               "computes it.")
+
+
+def print_warning(scene: Scene, domain: Domain) -> None:
+    """The command line's notice: `warning` as one line on stderr when there are reasons (not an error:
+    the exit status stays 0)."""
+    line = warning(outside(scene, domain))
+    if line:
+        print(f"warning: {line}", file=sys.stderr)

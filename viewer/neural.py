@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from viewer import encoding
-from viewer.domain import Domain
+from viewer.domain import Domain, Shape, measure, outside
 from viewer.encoder import Encoder
 from viewer.probes import ProbeGrid
 from viewer.resources import DEFAULT_MODEL
@@ -209,13 +209,14 @@ class NeuralField:
 class SceneVoxels:
     """A scene's geometry voxelized for the network, with each voxel's share of each face
     (viewer.voxels.Voxelization): the voxels of any scene with the same triangles, whatever its colours,
-    are one sparse product away (`voxels_of`)."""
+    are one sparse product away (`voxels_of`). With the triangles' shape for the domain check."""
 
     def __init__(self, scene: Scene, resolution: int):
         clock = time.perf_counter()
         self.vertices, self.faces = scene.vertices, scene.faces
         self.bounds = scene.bounds
         self.voxelization = voxelize_with_faces(scene, resolution)
+        self.shape = Shape.of(scene)
         self._colours = (scene.albedo, scene.emission)
         self._grid = self.voxelization.grid
         self.seconds = time.perf_counter() - clock
@@ -276,6 +277,11 @@ class NeuralGI:
             timings["recolour"] = time.perf_counter() - clock
         lo, hi = self.voxels.bounds
         return self.field.predict(grid, scene.sun, lo, hi, include_emitted, timings, self.resolution)
+
+    def outside(self, scene: Scene) -> list[str]:
+        """Why `scene` (with the installed geometry) lies outside the model's training domain
+        (viewer.domain; empty when it does not)."""
+        return outside(scene, self.field.card.domain, measure(scene, self.voxels.shape))
 
     def update(self, scene: Scene, include_emitted: bool = False, timings: dict | None = None) -> ProbeGrid:
         """Voxelize when the geometry changed, then predict."""

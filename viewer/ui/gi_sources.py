@@ -14,6 +14,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from viewer.domain import warning
 from viewer.gi import GISettings
 from viewer.probes import ProbeGrid
 from viewer.resources import MODELS
@@ -152,6 +153,8 @@ class NeuralSource:
         """Stage -> milliseconds of the last update (voxelize or recolour, encode, network, unpack)."""
         self.edit_to_probes: float | None = None
         """Seconds from the last request to its probes."""
+        self.outside: list[str] = []
+        """Why the scene of the last probes lies outside the model's training domain (viewer.domain)."""
         self._request = None              # (scene, asked at): the latest request not started yet
         self._voxelizing_request = None
 
@@ -193,6 +196,7 @@ class NeuralSource:
         grid = self.gi.predict(scene, include_emitted=False, timings=timings)
         self.milliseconds.update({k: 1000 * v for k, v in timings.items()})
         self.edit_to_probes = time.perf_counter() - asked
+        self.outside = self.gi.outside(scene)
         return grid
 
     def status(self) -> str:
@@ -333,6 +337,14 @@ class GIController:
             self._outgoing.clear()
             return True, grid
         return False, None
+
+    @property
+    def domain_warning(self) -> str | None:
+        """While the neural source shows a scene outside its model's training domain: one line that says
+        so, why, and that the physical solver computes it (viewer.domain.warning); else None."""
+        if self.source != "neural" or self._neural is None:
+            return None
+        return warning(self._neural.outside)
 
     @property
     def busy(self) -> bool:
