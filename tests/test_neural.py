@@ -124,11 +124,15 @@ def test_neural_gi_recolours_the_voxels_of_a_colour_edit(exported):
     scene = load("cornell")
     matrix = np.eye(4)
     matrix[2, 3] = 0.15
-    for what, edited in (("new", scene), ("albedo", scene.with_albedo("green-wall", (0.8, 0.8, 0.1))),
+    lamp = scene.emission[scene.face_group == scene.group_index("light")][0]
+    recoloured = scene.with_albedo("green-wall", (0.8, 0.8, 0.1))
+    for what, edited in (("new", scene), ("albedo", recoloured),
+                         ("lamp colour", recoloured.with_emission("light", lamp * (1.2, 0.6, 0.3))),
                          ("lamp moved", scene.transformed_group("light", matrix))):
         timings: dict = {}
         grid = gi.update(edited, include_emitted=True, timings=timings)
-        assert ("voxelize" in timings) == (what != "albedo"), what
+        assert ("voxelize" in timings) == (what in ("new", "lamp moved")), what
+        assert gi.field.passes_run == (0 if what == "lamp colour" else 3), what
         fresh = neural.NeuralField(path).solve(edited, include_emitted=True)
         np.testing.assert_allclose(grid.coefficients, fresh.coefficients, rtol=1e-4,
                                    atol=1e-5 * np.abs(fresh.coefficients).max(), err_msg=what)

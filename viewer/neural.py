@@ -30,6 +30,17 @@ OUTPUTS = 19
 """Per probe and colour pass: 9 SH of all the light, 9 of the reflected light, 1 validity logit."""
 
 
+def clock_now() -> float:
+    """Seconds on `CLOCK`, for the stages' timings."""
+    return CLOCK()
+
+
+CLOCK = time.perf_counter
+"""What the stages are timed with; `python -m viewer.bench.neural` swaps in time.thread_time to count the
+CPU time of each stage alone (everything here runs on the calling thread) on a machine shared with
+other work."""
+
+
 class ModelError(ValueError):
     """The model file or its card is missing, corrupt or made for other inputs."""
 
@@ -155,16 +166,16 @@ class NeuralField:
         (none after a lamp's colour or intensity edit: the scale-out makes those exactly linear).
         `reuse=False` encodes and runs everything afresh: what a new scene costs."""
         m = resolution or self.resolution
-        clock = time.perf_counter()
+        clock = clock_now()
         with _one_blas_thread():
             encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m)
             enc = encoder.encode(voxels, sun)
-        encoded = time.perf_counter()
+        encoded = clock_now()
         out = self._network(encoder, enc.inputs) if reuse else self._run(enc.inputs)  # (3, 19, M, M, M)
-        ran = time.perf_counter()
+        ran = clock_now()
         grid = unpack(out, enc.scale, enc.lo, enc.hi, include_emitted)
         if timings is not None:
-            timings.update(encode=encoded - clock, network=ran - encoded, unpack=time.perf_counter() - ran)
+            timings.update(encode=encoded - clock, network=ran - encoded, unpack=clock_now() - ran)
         return grid
 
     def forget(self) -> None:
@@ -198,10 +209,10 @@ class NeuralField:
 
     def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:
         """Voxelize the scene at the card's resolution and predict over its bounds."""
-        clock = time.perf_counter()
+        clock = clock_now()
         voxels = voxelize(scene, self.card.voxels)
         if timings is not None:
-            timings["voxelize"] = time.perf_counter() - clock
+            timings["voxelize"] = clock_now() - clock
         lo, hi = scene.bounds
         return self.predict(voxels, scene.sun, lo, hi, include_emitted, timings)
 
@@ -212,14 +223,15 @@ class SceneVoxels:
     are one sparse product away (`voxels_of`). With the triangles' shape for the domain check."""
 
     def __init__(self, scene: Scene, resolution: int):
-        clock = time.perf_counter()
+        clock = clock_now()
         self.vertices, self.faces = scene.vertices, scene.faces
         self.bounds = scene.bounds
         self.voxelization = voxelize_with_faces(scene, resolution)
         self.shape = Shape.of(scene)
-        self._colours = (scene.albedo, scene.emission)
+        self._colours = None
         self._grid = self.voxelization.grid
-        self.seconds = time.perf_counter() - clock
+        self.voxels_of(scene)   # colours by the faces' shares from the start: every edit's come the same way
+        self.seconds = clock_now() - clock
         """How long voxelizing took."""
 
     def fits(self, scene: Scene) -> bool:
@@ -229,7 +241,8 @@ class SceneVoxels:
     def voxels_of(self, scene: Scene) -> VoxelGrid:
         """The voxels with `scene`'s albedo and emission (area-weighted per voxel, as `voxelize` gives
         them, to round-off); the same object while the colours stay the same."""
-        if not (_same(self._colours[0], scene.albedo) and _same(self._colours[1], scene.emission)):
+        if self._colours is None or not (_same(self._colours[0], scene.albedo)
+                                         and _same(self._colours[1], scene.emission)):
             grid, faces = self.voxelization.grid, self.voxelization.faces
             lights = grid.lights
             if lights.face is not None and lights.count:
@@ -271,10 +284,10 @@ class NeuralGI:
     def predict(self, scene: Scene, include_emitted: bool = False, timings: dict | None = None) -> ProbeGrid:
         """The probes of `scene`, whose geometry is the installed one. `timings` gets `recolour` (the
         voxels' colours) and the network's stages (`NeuralField.predict`)."""
-        clock = time.perf_counter()
+        clock = clock_now()
         grid = self.voxels.voxels_of(scene)
         if timings is not None:
-            timings["recolour"] = time.perf_counter() - clock
+            timings["recolour"] = clock_now() - clock
         lo, hi = self.voxels.bounds
         return self.field.predict(grid, scene.sun, lo, hi, include_emitted, timings, self.resolution)
 
