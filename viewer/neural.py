@@ -24,7 +24,8 @@ from viewer.encoder import Encoder
 from viewer.probes import ProbeGrid
 from viewer.resources import DEFAULT_MODEL
 from viewer.scene import Scene
-from viewer.voxels import VoxelGrid, voxelize, voxelize_with_faces
+from viewer.voxel_faces import FaceVoxels
+from viewer.voxels import VoxelGrid, voxelize
 
 OUTPUTS = 19
 """Per probe and colour pass: 9 SH of all the light, 9 of the reflected light, 1 validity logit."""
@@ -220,19 +221,29 @@ class NeuralField:
 class SceneVoxels:
     """A scene's geometry voxelized for the network, with each voxel's share of each face
     (viewer.voxels.Voxelization): the voxels of any scene with the same triangles, whatever its colours,
-    are one sparse product away (`voxels_of`). With the triangles' shape for the domain check."""
+    are one sparse product away (`voxels_of`). Kept per (voxel, face) (viewer.voxel_faces), so that the
+    voxels of a scene where some faces moved (a dragged lamp) are made from the `previous` ones and the
+    moved faces alone. With the triangles' shape for the domain check."""
 
-    def __init__(self, scene: Scene, resolution: int):
+    def __init__(self, scene: Scene, resolution: int, previous: "SceneVoxels | None" = None):
         clock = clock_now()
         self.vertices, self.faces = scene.vertices, scene.faces
         self.bounds = scene.bounds
-        self.voxelization = voxelize_with_faces(scene, resolution)
+        self.pairs = previous.pairs.moved(scene) if previous is not None and previous.resolution == resolution else None
+        self.voxelized_afresh = self.pairs is None
+        """Whether all the faces were voxelized (else only those that moved)."""
+        self.pairs = self.pairs or FaceVoxels.of(scene, resolution)
+        self.voxelization = self.pairs.voxelization(scene)
         self.shape = Shape.of(scene)
         self._colours = None
         self._grid = self.voxelization.grid
         self.voxels_of(scene)   # colours by the faces' shares from the start: every edit's come the same way
         self.seconds = clock_now() - clock
         """How long voxelizing took."""
+
+    @property
+    def resolution(self) -> int:
+        return self.pairs.resolution
 
     def fits(self, scene: Scene) -> bool:
         """Whether `scene` has the triangles these voxels were made from (a colour edit keeps them)."""
@@ -275,8 +286,9 @@ class NeuralGI:
         return self.voxels is None or not self.voxels.fits(scene)
 
     def prepare(self, scene: Scene) -> SceneVoxels:
-        """Voxelize `scene` (changes nothing here: safe on a worker thread)."""
-        return SceneVoxels(scene, self.voxel_resolution)
+        """Voxelize `scene`, from the installed voxels when only some faces moved (changes nothing here:
+        safe on a worker thread)."""
+        return SceneVoxels(scene, self.voxel_resolution, self.voxels)
 
     def install(self, voxels: SceneVoxels) -> None:
         self.voxels = voxels
