@@ -1,6 +1,7 @@
 """The neural source from an edit to its probes, stage by stage: what the neural GI is judged by.
 
-    python -m viewer.bench.neural [SCENE ...] [--probes 16 24] [--voxels N] [--repeats 9] [--configs] [--write]
+    python -m viewer.bench.neural [SCENE ...] [--probes 16 24] [--voxels N] [--repeats 9]
+                                  [--configs | --configs-only] [--write]
 
 For each scene and probe lattice, with models/probenet.onnx (a convolutional network: it runs on any
 lattice divisible by 2^levels) and the viewer's path (`viewer.neural.NeuralGI`): a lamp's colour and
@@ -9,9 +10,9 @@ tenth of the scene, and a new scene; and `before`, what any edit cost before the
 (voxelize, `encoding.encode`, the network on all three colour passes, a multiply and a transpose).
 Medians of `repeats` runs; each stage in CPU milliseconds of the one thread everything runs on
 (onnxruntime, BLAS and numba on one thread: `time.thread_time`, so that other work on the machine does
-not count), the whole update also in wall-clock milliseconds, with the machine's load. `--configs` adds the network alone at 24^3 for ProbeNet sizes exported with random
-weights (needs torch): what a retrained model would cost. `--write` puts the tables into
-docs/PERFORMANCE.md.
+not count), the whole update also in wall-clock milliseconds, with the machine's load. `--configs`
+adds the network alone at 24^3 for ProbeNet sizes exported with random weights (needs torch): what a
+retrained model would cost. `--write` puts the tables into docs/PERFORMANCE.md.
 """
 
 from __future__ import annotations
@@ -35,8 +36,10 @@ ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- bench-neural -->"
 STAGES = ("voxels", "encode", "network", "unpack")
 """`voxels`: voxelizing (a new geometry) or recolouring the kept voxels (a colour edit)."""
-CONFIGS = ("w8-h16", "w12-h24", "w16-h32", "w8-h16-nearest", "w12-h24-nearest", "w16-h32-nearest")
-"""ProbeNet sizes for `--configs`: width, hidden, and `nearest` upsampling instead of trilinear."""
+CONFIGS = ("w8-h16", "w12-h24", "w16-h32", "w8-h8", "w12-h8", "w16-h8", "w4-h8", "w8-h8-hl1", "w8-h16-nearest",
+           "w8-h8-nearest")
+"""ProbeNet sizes for `--configs`: width, hidden; `hl1`: a one-layer head (two by default); `nearest`:
+nearest upsampling instead of trilinear."""
 
 
 def edits(scene: Scene) -> dict[str, Scene]:
@@ -145,6 +148,7 @@ def network_configs(configs, probes: int, repeats: int) -> list[tuple[str, int, 
         for name in configs:
             parts = name.split("-")
             config = ProbeNetConfig(width=int(parts[0][1:]), hidden=int(parts[1][1:]),
+                                    head_layers=1 if "hl1" in parts else 2,
                                     upsample="nearest" if "nearest" in parts else "trilinear")
             model = ProbeNet(config).eval()
             with torch.no_grad():
@@ -188,12 +192,13 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--model", type=Path, default=DEFAULT_MODEL)
     parser.add_argument("--configs", action="store_true", help="also time ProbeNet sizes at 24^3 (needs torch)")
+    parser.add_argument("--configs-only", action="store_true", help="only time the ProbeNet sizes")
     parser.add_argument("--write", action="store_true", help="write the tables into docs/PERFORMANCE.md")
     args = parser.parse_args(argv)
     neural.CLOCK = time.thread_time   # the stages' CPU time: the machine may be busy with other work
     field = NeuralField(args.model)
     results = {}
-    for name in args.scenes:
+    for name in [] if args.configs_only else args.scenes:
         scene = scenes.load(name)
         for probes in args.probes:
             for voxels in args.voxels or sorted({field.card.voxels, probes}):
@@ -201,8 +206,8 @@ def main(argv=None) -> int:
                 results[(scene.name, probes, voxels)] = measure(scene, field, probes, voxels, args.repeats)
                 print("\n".join(table({(scene.name, probes, voxels): results[(scene.name, probes, voxels)]},
                                       args.model.name)[4:]), flush=True)
-    lines = table(results, args.model.name)
-    if args.configs:
+    lines = table(results, args.model.name) if results else []
+    if args.configs or args.configs_only:
         lines += ["", "The network alone at 24^3 (onnxruntime, one thread, random weights, the Cornell box's "
                   "inputs), ProbeNet with 3 levels and a 2-layer head:", "",
                   "| config | parameters | network CPU ms (median) |", "|---|---|---|"]
