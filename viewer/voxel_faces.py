@@ -20,8 +20,8 @@ import numpy as np
 from scipy import sparse
 
 from viewer.scene import Scene
-from viewer.voxels import (FACINGS, VoxelGrid, Voxelization, _light_samples, _sorted_unique, _subdivide,
-                           face_facing, grid_frame)
+from viewer.voxels import (FACINGS, VoxelGrid, Voxelization, _light_samples, _subdivide, face_facing,
+                           grid_frame)
 
 MOVED_SHARE = 0.5
 """Past this share of the surface moved (its pieces are the work), voxelizing afresh is as quick."""
@@ -118,7 +118,8 @@ def _pairs(triangles: np.ndarray, faces: np.ndarray, normals: np.ndarray, lo: np
     coords = np.clip(np.floor((centroid - lo) / size).astype(np.int64), 0, resolution - 1)
     cell = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2
     key = cell * 6 + face_facing(normals[faces])[source]
-    pair, inverse = _sorted_unique(key * len(normals) + piece_face, resolution ** 3 * 6 * len(normals))
+    pair, inverse = np.unique(key * len(normals) + piece_face, return_inverse=True)
+    inverse = inverse.ravel()
     area = np.bincount(inverse, piece_area, minlength=len(pair))
     moment = np.stack([np.bincount(inverse, centroid[:, c] * piece_area, minlength=len(pair)) for c in range(3)],
                       axis=1)
