@@ -237,7 +237,7 @@ def write_shipped_tables(final: dict) -> None:
                   "Mitsuba at 500 free-space points per scene (`python -m viewer.training.sweep`).\n", "# Accuracy")
     field = NeuralField(ROOT / "models" / "probenet.onnx")
     rows = ["| probes | encode (ms) | onnxruntime (ms) | unpack (ms) | total (ms) |", "|---|---|---|---|---|"]
-    for m in (16, 32):
+    for m in (16, 24):
         t = time_inference(field, resolution=m)
         rows.append(f"| {m}^3 | {t['ms']['encode']:.2f} | {t['ms']['network']:.2f} | {t['ms']['unpack']:.2f} | "
                     f"{t['ms_total']:.2f} |")
