@@ -382,3 +382,46 @@ def test_recolouring_a_wall_updates_the_indirect_light_in_the_background(ctx, co
     finally:
         session.close()
         renderer.release()
+
+
+def test_the_neural_source_warns_on_a_scene_outside_its_training_domain(ctx, imgui_frame):
+    """A nearly white wall (albedo 0.99, the shipped model trained up to 0.90) shown by the neural source:
+    a warning names the albedo and points to the physical solver, stays on screen (drawn in the messages
+    window), and goes when an edit brings the scene back inside."""
+    from viewer.gpu.renderer import RenderSettings, Renderer
+    from viewer.ui.gi_sources import GIController
+    from viewer.ui.panels import WARNING_COLOUR, messages_window
+    from viewer.ui.session import Session
+
+    gi = GIController(ctx, source="neural", settings=GISettings(voxels=16, probes=16))
+    if gi.source != "neural":
+        pytest.skip(gi.unavailable["neural"])
+    renderer = Renderer(ctx, RenderSettings(light_samples=4))
+    white = load("cornell").with_albedo("back", (0.99, 0.99, 0.99))
+    session = Session(renderer, gi, white, "white", log=lambda line: None, edit_interval=0.0)
+
+    def settle():
+        deadline = time.monotonic() + 120.0
+        session.update("final")
+        while gi.busy and time.monotonic() < deadline:
+            time.sleep(0.01)
+            session.update("final")
+        assert not gi.busy and gi.status()[2] is None
+
+    try:
+        settle()
+        [message] = [m for m in session.messages if m.warning]
+        assert "outside what the neural model was trained on" in message.text
+        assert "'back' albedo 0.99 is above the trained 0.90" in message.text and "physical solver" in message.text
+        assert gi.domain_warning == message.text
+        frame, _ = imgui_frame
+        for _ in range(2):   # an auto-sized window is measured in its first frame, drawn from the second
+            image = frame(lambda: messages_window(session.messages, None, info_seconds=0.0))
+        amber = np.array([WARNING_COLOUR.x, WARNING_COLOUR.y, WARNING_COLOUR.z]) * 255
+        assert (np.abs(image[..., :3].astype(float) - amber).max(axis=2) < 40).sum() > 50, "warning not drawn"
+        session.edits.set_albedo("back", (0.8, 0.8, 0.8))
+        settle()
+        assert not any(m.warning for m in session.messages) and gi.domain_warning is None
+    finally:
+        session.close()
+        renderer.release()

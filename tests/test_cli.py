@@ -58,6 +58,27 @@ def test_a_flat_scene_samples_with_only_the_timing_line_on_stderr(tmp_path, poin
     assert np.all(np.isfinite(sh)) and np.all(sh[:, 0, :] > 0)  # every point is below the lamp
 
 
+def test_neural_sample_warns_on_a_scene_outside_the_models_training_domain(tmp_path, points):
+    """The Cornell box with a near-white back wall (0.99; the shipped model trained up to 0.90): a warning
+    line on stderr that names the albedo and the physical solver, the probes all the same, exit 0."""
+    if not (ROOT / "models" / "probenet.onnx").is_file():
+        pytest.skip("no shipped model")
+    source = ROOT / "assets" / "scenes"
+    obj = (source / "cornell.obj").read_text()
+    write(tmp_path / "white.obj", obj.replace("mtllib cornell.mtl", "mtllib white.mtl"))
+    materials = (source / "cornell.mtl").read_text().split("newmtl back\nKd 0.885809 0.698859 0.666422")
+    write(tmp_path / "white.mtl", "newmtl back\nKd 0.99 0.99 0.99".join(materials))
+    out = tmp_path / "sh.npy"
+    result = run("sample", tmp_path / "white.obj", "--points", points, "--method", "neural", "--out", out)
+    assert result.returncode == 0, result.stderr
+    warning, timing = result.stderr.strip().splitlines()
+    assert warning.startswith("warning: ") and "'back' albedo 0.99 is above the trained 0.90" in warning
+    assert "physical solver" in warning and timing.startswith("sample neural:")
+    assert np.load(out).shape == (3, 9, 3)
+    inside = run("sample", "cornell", "--points", points, "--method", "neural", "--out", out)
+    assert inside.returncode == 0 and "warning" not in inside.stderr, inside.stderr
+
+
 def write(path: Path, content) -> Path:
     if isinstance(content, bytes):
         path.write_bytes(content)

@@ -92,6 +92,52 @@ def test_dark_scene_gives_zero_probes(exported):
     assert np.all(grid.coefficients == 0)
 
 
+def test_predictions_after_edits_equal_fresh_ones(exported):
+    """The kept encoder and the reused network passes change no number: after each edit the probes
+    are those of a prediction from scratch; a lamp's colour edit runs no pass of the network."""
+    _, path = exported
+    field = neural.NeuralField(path)
+    scene = load("cornell")
+    lo, hi = scene.bounds
+    lamp = scene.emission[scene.face_group == scene.group_index("light")][0]
+    matrix = np.eye(4)
+    matrix[0, 3] = 0.2
+    steps = [("new", scene), ("lamp colour", scene.with_emission("light", lamp * (0.5, 1.0, 1.5))),
+             ("albedo", scene.with_albedo("red-wall", (0.2, 0.7, 0.2))),
+             ("lamp moved", scene.transformed_group("light", matrix))]
+    for what, edited in steps:
+        voxels = voxelize(edited, 16)
+        kept = field.predict(voxels, edited.sun, lo, hi, include_emitted=False)
+        passes = field.passes_run
+        fresh = field.predict(voxels, edited.sun, lo, hi, include_emitted=False, reuse=False)
+        np.testing.assert_allclose(kept.coefficients, fresh.coefficients, rtol=1e-4,
+                                   atol=1e-5 * np.abs(fresh.coefficients).max(), err_msg=what)
+        assert np.array_equal(kept.valid, fresh.valid)
+        assert passes == {"new": 3, "lamp colour": 0, "albedo": 3, "lamp moved": 3}[what], what
+
+
+def test_neural_gi_recolours_the_voxels_of_a_colour_edit(exported):
+    """The viewer's path: a colour edit keeps the voxels (recoloured by the faces' shares), a moved lamp
+    voxelizes again; either way the probes are those of the edited scene from scratch."""
+    _, path = exported
+    gi = neural.NeuralGI(neural.NeuralField(path))
+    scene = load("cornell")
+    matrix = np.eye(4)
+    matrix[2, 3] = 0.15
+    lamp = scene.emission[scene.face_group == scene.group_index("light")][0]
+    recoloured = scene.with_albedo("green-wall", (0.8, 0.8, 0.1))
+    for what, edited in (("new", scene), ("albedo", recoloured),
+                         ("lamp colour", recoloured.with_emission("light", lamp * (1.2, 0.6, 0.3))),
+                         ("lamp moved", scene.transformed_group("light", matrix))):
+        timings: dict = {}
+        grid = gi.update(edited, include_emitted=True, timings=timings)
+        assert ("voxelize" in timings) == (what in ("new", "lamp moved")), what
+        assert gi.field.passes_run == (0 if what == "lamp colour" else 3), what
+        fresh = neural.NeuralField(path).solve(edited, include_emitted=True)
+        np.testing.assert_allclose(grid.coefficients, fresh.coefficients, rtol=1e-4,
+                                   atol=1e-5 * np.abs(fresh.coefficients).max(), err_msg=what)
+
+
 @pytest.mark.parametrize("damage", ["garbage", "truncated", "no-card", "bad-card", "sha", "version"])
 def test_bad_model_is_refused_with_a_clear_message(exported, tmp_path, damage):
     _, path = exported

@@ -95,12 +95,13 @@ def test_light_leaking_through_a_wall_thinner_than_a_voxel_stays_small():
 
 def test_distance_from_the_training_set_is_zero_inside_the_ranges_and_grows_outside():
     """The out-of-distribution study's x axis (docs/STABILITY.md, out of distribution). Per axis: a room
-    drawn with the trained ranges lies inside them (0), a room 2.0 x 0.8 x 0.8 lies (2.0 - 1.3) / 0.55
-    = 1.3 range widths outside on the room axis and nowhere else. Through the network input: a reference
-    room's own encoding is at distance 0, and the elongated room lies farther from six reference rooms
-    than a seventh room drawn like them."""
+    drawn with the first dataset's ranges lies inside the shipped model's (0), a room 2.0 x 0.8 x 0.8
+    lies (2.0 - top) / width range widths outside on the room axis and nowhere else ((2.0 - 1.3) / 0.55
+    = 1.3 for the first dataset's 0.75-1.3). Through the network input: a reference room's own encoding
+    is at distance 0, and the elongated room lies farther from six reference rooms than a seventh room
+    drawn like them."""
     from viewer.bench.stability.distance import VIEWS, EncodingDistance, scene_encoding
-    from viewer.bench.stability.ood import range_distance
+    from viewer.bench.stability.ood import TRAINED, range_distance
     from viewer.training.procedural import Ranges, random_scene
 
     rooms = [random_scene(np.random.default_rng([7, k]), f"room-{k}") for k in range(7)]
@@ -108,7 +109,8 @@ def test_distance_from_the_training_set_is_zero_inside_the_ranges_and_grows_outs
                                           Ranges(room_scale=((2.0, 0.8, 0.8), (2.0, 0.8, 0.8))))
     assert all(range_distance(axis, params) == 0.0 for _, params in rooms
                for axis in ("room", "colour", "light", "shape"))
-    assert range_distance("room", long_params) == pytest.approx(0.7 / 0.55)
+    low, high = TRAINED.room_scale
+    assert range_distance("room", long_params) == pytest.approx((2.0 - high) / (high - low))
     assert range_distance("colour", long_params) == 0.0 and range_distance("light", long_params) == 0.0
     inputs = [scene_encoding(scene, 8, 8) for scene, _ in rooms]
     long_inputs = scene_encoding(long_room, 8, 8)
@@ -116,3 +118,23 @@ def test_distance_from_the_training_set_is_zero_inside_the_ranges_and_grows_outs
         measure = EncodingDistance(inputs[:6], view)
         assert measure(inputs[0]) == pytest.approx(0.0, abs=1e-9)
         assert measure(long_inputs) > measure(inputs[6])
+
+
+def test_the_ood_study_moves_past_the_shipped_models_own_ranges():
+    """The study reads what the network was trained on from its card (viewer.domain) and steps past those
+    ranges on each axis, whichever preset they are: every room of a step lies outside on its axis."""
+    from viewer.bench.stability import ood
+    from viewer.neural import DEFAULT_MODEL, ModelCard, ModelError
+    from viewer.training.procedural import PRESETS, random_scene
+
+    try:
+        assert ood.DOMAIN == ModelCard.read(DEFAULT_MODEL).domain
+    except ModelError:
+        assert ood.DOMAIN.ranges == "v1"
+    assert ood.TRAINED == PRESETS[ood.DOMAIN.ranges]
+    for preset, ranges in PRESETS.items():
+        for number, step in enumerate(ood.steps(ranges)):
+            if step.new or step.label == "on the walls only":   # new shapes and placements have no range
+                continue
+            _, params = random_scene(np.random.default_rng([ood.SEED, number]), "step", step.ranges)
+            assert ood.range_distance(step.axis, params, ranges) > 0, (preset, step.label)

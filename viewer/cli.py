@@ -134,6 +134,7 @@ def _load_scene(args):
 
 def run_sample(args) -> int:
     from viewer import gi
+    from viewer.domain import print_warning
 
     settings = gi_settings(args)
     points = load_points(args.points)
@@ -155,7 +156,9 @@ def run_sample(args) -> int:
         finally:
             ctx.release()
     else:
-        grid = neural_field(args).solve(scene, include_emitted=True, timings=timings.stages)
+        field = neural_field(args)
+        grid = field.solve(scene, include_emitted=True, timings=timings.stages)
+        print_warning(scene, field.card.domain)
     clock = time.perf_counter()
     sh = grid.interpolate(points).astype(np.float32)
     timings.stages["interpolate"] = time.perf_counter() - clock

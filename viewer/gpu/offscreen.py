@@ -186,6 +186,9 @@ def solver_probes(args) -> ProbeSource:
                 field = NeuralField(getattr(args, "model", None) or DEFAULT_MODEL)
             except ModelError as exc:
                 raise CaptureError(f"--gi neural: {exc}") from None
+            from viewer.domain import print_warning
+
+            print_warning(scene, field.card.domain)
             return field.solve(scene, include_emitted=False)
         raise CaptureError(f"--gi {gi}: unknown GI source")
     return source

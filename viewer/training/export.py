@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from viewer import encoding
+from viewer.domain import Domain
 from viewer.neural import OUTPUTS, file_sha256
 from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
 from viewer.training.samples import ENCODING_VOXELS
@@ -57,7 +58,12 @@ def max_difference(model: ProbeNet, path: Path, inputs: np.ndarray) -> float:
     return float(np.abs(ours - theirs).max())
 
 
-def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, metrics: dict) -> dict:
+def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, metrics: dict,
+               ranges: str | None = None) -> dict:
+    """The card beside the .onnx file. `ranges`: the viewer.training.ranges preset the dataset was drawn
+    from (else the one `training` names), whose training domain (viewer.domain) the card carries: the
+    viewer warns on scenes outside it."""
+    ranges = ranges or training.get("ranges")
     card = {
         "name": path.stem,
         "file": path.name,
@@ -77,6 +83,7 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
         "probes": {"resolution": resolution, "runs_at": "any M divisible by 2^levels (trained at resolution)", "box": "scene bounds", "centres": "lo + (i + 0.5) (hi - lo) / M",
                    "sh_order": "00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22 (DESIGN.md)", "index": "[x, y, z]"},
         "training": training,
+        **({"domain": Domain.from_preset(ranges).to_dict()} if ranges else {}),
         "metrics": metrics,
         "exported_with": {"torch": torch.__version__, "python": platform.python_version()},
     }
@@ -84,13 +91,14 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
     return card
 
 
-def export(run: Path, out: Path, resolution: int, inputs: np.ndarray, training: dict, metrics: dict) -> dict:
+def export(run: Path, out: Path, resolution: int, inputs: np.ndarray, training: dict, metrics: dict,
+           ranges: str | None = None) -> dict:
     model = load_run(run)
     export_onnx(model, out, resolution)
     difference = max_difference(model, out, inputs)
     if difference > TOLERANCE:
         raise RuntimeError(f"onnxruntime differs from torch by {difference:.2e} (> {TOLERANCE})")
-    return write_card(out, model, resolution, training, {**metrics, "onnx_max_difference": difference})
+    return write_card(out, model, resolution, training, {**metrics, "onnx_max_difference": difference}, ranges)
 
 
 def main(argv=None) -> int:

@@ -76,14 +76,16 @@ def measure(model_path: Path, evaluation) -> dict:
 
 
 def time_inference(field: NeuralField, repeats: int = 20, resolution: int | None = None) -> dict:
-    """Median milliseconds of the neural update on the Cornell box: encode, onnxruntime, unpack."""
+    """Median milliseconds of the neural update on the Cornell box: encode, onnxruntime, unpack, each
+    from scratch (a new scene: an edit reuses most of the encoding, `python -m viewer.bench.neural`)."""
     scene = scenes.load("cornell")
     voxels = voxelize(scene, field.card.voxels)
     lo, hi = scene.bounds
     parts: dict[str, list[float]] = {"encode": [], "network": [], "unpack": []}
     for i in range(repeats + 3):
         timings: dict[str, float] = {}
-        field.predict(voxels, scene.sun, lo, hi, include_emitted=False, timings=timings, resolution=resolution)
+        field.predict(voxels, scene.sun, lo, hi, include_emitted=False, timings=timings, resolution=resolution,
+                      reuse=False)
         if i >= 3:
             for k in parts:
                 parts[k].append(1000 * timings[k])
@@ -235,7 +237,7 @@ def write_shipped_tables(final: dict) -> None:
                   "Mitsuba at 500 free-space points per scene (`python -m viewer.training.sweep`).\n", "# Accuracy")
     field = NeuralField(ROOT / "models" / "probenet.onnx")
     rows = ["| probes | encode (ms) | onnxruntime (ms) | unpack (ms) | total (ms) |", "|---|---|---|---|---|"]
-    for m in (16, 32):
+    for m in (16, 24):
         t = time_inference(field, resolution=m)
         rows.append(f"| {m}^3 | {t['ms']['encode']:.2f} | {t['ms']['network']:.2f} | {t['ms']['unpack']:.2f} | "
                     f"{t['ms_total']:.2f} |")

@@ -20,6 +20,7 @@ from viewer.ui.scene_edits import SceneEdits
 PANEL_WIDTH = 360
 ERROR_COLOUR = imgui.ImVec4(1.0, 0.45, 0.4, 1.0)
 NOTE_COLOUR = imgui.ImVec4(0.75, 0.75, 0.75, 1.0)
+WARNING_COLOUR = imgui.ImVec4(1.0, 0.78, 0.3, 1.0)
 KERNELS = ("physical", "paper")
 LIGHT_SAMPLES = (4, 8, 16, 32, 64)
 HELP = """\
@@ -46,6 +47,8 @@ Files
 class Message:
     text: str
     error: bool = False
+    warning: bool = False
+    """A warning stays until dismissed, as an error does (a note fades)."""
     at: float = field(default_factory=time.perf_counter)
 
 
@@ -127,6 +130,11 @@ def gi_section(gi: GIController) -> None:
     if error:
         imgui.push_text_wrap_pos(0.0)
         imgui.text_colored(ERROR_COLOUR, error)
+        imgui.pop_text_wrap_pos()
+    warning = gi.domain_warning
+    if warning:
+        imgui.push_text_wrap_pos(0.0)
+        imgui.text_colored(WARNING_COLOUR, warning)
         imgui.pop_text_wrap_pos()
 
 
@@ -247,9 +255,9 @@ def help_window(options: ViewOptions) -> None:
 
 
 def messages_window(messages: list[Message], shader_error: str | None, info_seconds: float = 5.0) -> None:
-    """Errors stay until dismissed; notes fade after `info_seconds`."""
+    """Errors and warnings stay until dismissed; notes fade after `info_seconds`."""
     now = time.perf_counter()
-    messages[:] = [m for m in messages if m.error or now - m.at < info_seconds]
+    messages[:] = [m for m in messages if m.error or m.warning or now - m.at < info_seconds]
     if not messages and not shader_error:
         return
     width, height = imgui.get_io().display_size
@@ -265,8 +273,8 @@ def messages_window(messages: list[Message], shader_error: str | None, info_seco
         imgui.text_colored(ERROR_COLOUR, "Shader error (the previous shaders keep running; fix and press R):")
         imgui.text(shader_error)
     for index, message in enumerate(list(messages)):
-        if message.error:
-            imgui.text_colored(ERROR_COLOUR, message.text)
+        if message.error or message.warning:
+            imgui.text_colored(ERROR_COLOUR if message.error else WARNING_COLOUR, message.text)
             imgui.same_line()
             if imgui.small_button(f"dismiss##{index}"):
                 messages.remove(message)

@@ -57,6 +57,7 @@ class Session:
         self._voxels_wanted = None   # (scene version, voxels per axis) being voxelized
         self._voxels_key = None      # ... and of the voxels the renderer has
         self._gi_was_busy = False
+        self._domain_message: Message | None = None   # the neural source's warning shown now
         self.loads = 0       # scenes loaded since start (for tests)
         self.load_errors = 0
         self._open(scene, source)
@@ -124,8 +125,23 @@ class Session:
             if self.on_gi_ready is not None:
                 self.on_gi_ready()
         self._gi_was_busy = busy
+        self._show_domain_warning()
         if view == "voxels":
             self._update_voxels()
+
+    def _show_domain_warning(self) -> None:
+        """A message while the neural source shows a scene outside its training domain (replaced when
+        the reasons change, withdrawn when there are none)."""
+        text = self.gi.domain_warning
+        shown = self._domain_message
+        if (shown.text if shown else None) == text:
+            return
+        if shown in self.messages:
+            self.messages.remove(shown)
+        self._domain_message = Message(text, warning=True) if text else None
+        if text:
+            self.messages.append(self._domain_message)
+            self.log(text)
 
     def _finish_loading(self) -> None:
         task = self.loading

@@ -85,7 +85,7 @@ class UnattendedRun:
             "camera": {"origin": list(camera.origin), "target": list(camera.target), "fov": camera.fov},
             "frames": frames, "frame_times_redraws": redraws, "frame_times_all": every,
             "window": list(window_size), "gl": gl_description,
-            "messages": [{"text": m.text, "error": m.error} for m in s.messages],
+            "messages": [{"text": m.text, "error": m.error, "warning": m.warning} for m in s.messages],
             "shader_error": shader_error, "help_shown": self.view.show_help,
         }
         Path(self.options.stats).write_text(json.dumps(stats, indent=2))

@@ -1,8 +1,8 @@
 """How far a scene lies from the neural model's training set, two ways (the out-of-distribution study's
 x axis).
 
-- `outside(values, bounds)`: per drawn parameter, how far it lies outside the range that
-  `viewer.training.procedural.Ranges()` trains on, in units of that range's width (0 inside). Exact,
+- `outside(values, bounds)`: per drawn parameter, how far it lies outside the range that the shipped
+  model was trained on (its card's domain names the ranges), in units of that range's width (0 inside). Exact,
   but only for numbers: a shape or a light placement the generator never makes has no range to be
   outside of, and a colour 0.99 is only 0.1 widths past 0.9 whatever it does to the light.
 - `EncodingDistance`: one number for any scene, comparable across axes. The network sees a scene only
@@ -29,6 +29,8 @@ from viewer.voxels import voxelize
 
 ROOT = Path(__file__).resolve().parents[3]
 DATA = ROOT / "data" / "gi-v1"
+"""The first dataset: the default reference set (the out-of-distribution study reads the shipped model's
+from its card)."""
 PERCENTILE = 99.0
 OCCUPIED = 0.05
 """Surface density (area / cell face) above which a lattice cell counts as holding a surface for the
@@ -94,6 +96,8 @@ class EncodingDistance:
         self.spread = flat.std(axis=0) + 1e-3
         self.reference = (flat - self.mean) / self.spread
         self.owner = np.repeat(np.arange(len(passes)), 3)
+        self.count = len(passes)
+        """Reference scenes."""
         self.typical = 1.0
         if len(passes) > 1:
             nearest = [self._nearest(self.reference[self.owner == s], exclude=s) for s in range(len(passes))]
@@ -113,7 +117,7 @@ class EncodingDistance:
 
 def training_distances(resolution: int, data: Path = DATA) -> dict[str, EncodingDistance]:
     """Every view against the network's training split (`viewer.training.samples.training_split`,
-    encoded at the network's lattice `resolution` and cached under data/gi-v1/cache by training).
+    encoded at the network's lattice `resolution` and cached under <data>/cache by training).
     Raises FileNotFoundError without the dataset."""
     from viewer.training.samples import training_split
 

@@ -1,12 +1,13 @@
 """Out of distribution: the neural field's error against a scene's distance from its training set.
 
-Rooms are drawn with `viewer.training.procedural.random_scene` and `Ranges` moved one axis at a time,
-from inside the trained ranges to well outside them (`STEPS`): room proportions, colours, lights
+Rooms are drawn with `viewer.training.procedural.random_scene` and the ranges the shipped model was
+trained on (its card's domain, viewer.domain) moved one axis at a time, from inside them to well
+outside (`steps`): room proportions, colours, lights
 (size and placement) and shapes; plus rooms drawn with the training ranges themselves (`in
 distribution`: the same generator, seeds the training set never used) as the baseline. Per room:
 relative RMSE against Mitsuba at free-space points (as the other studies) for `neural` and, as the
-yardstick whose error does not depend on any training set, `physical` at the network's 16^3 voxels
-and probes. The distance of each room from the training set, two ways (`distance`): how far its drawn
+yardstick whose error does not depend on any training set, `physical` at the network's voxels and
+probes. The distance of each room from the training set, two ways (`distance`): how far its drawn
 parameters lie outside the trained ranges on the varied axis, in range widths, and how far its network
 input lies from the nearest training scene's, in units of the training set's own neighbour distance.
 """
@@ -14,7 +15,8 @@ input lies from the nearest training scene's, in units of the training set's own
 from __future__ import annotations
 
 import colorsys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -22,11 +24,29 @@ from viewer import gi
 from viewer.bench.accuracy import relative_rmse
 from viewer.bench.points import free_space_points
 from viewer.bench.stability.common import RunConfig, StudyResult, try_method
-from viewer.bench.stability.distance import outside, scene_encoding, training_distances
+from viewer.bench.stability.distance import ROOT, outside, scene_encoding, training_distances
 from viewer.bench.stability.methods import MethodSettings, truth_sh
-from viewer.training.procedural import Ranges, random_scene
+from viewer.domain import Domain
+from viewer.domain import outside as guard
+from viewer.training.procedural import PRESETS, Ranges, random_scene
 
-TRAINED = Ranges()
+def shipped_card():
+    """The shipped model's card (viewer.neural.ModelCard), or None without a model."""
+    from viewer.neural import DEFAULT_MODEL, ModelCard, ModelError
+
+    try:
+        return ModelCard.read(DEFAULT_MODEL)
+    except ModelError:
+        return None
+
+
+CARD = shipped_card()
+DOMAIN = CARD.domain if CARD is not None else Domain.from_preset("v1")
+"""What the shipped network was trained on (its card's domain, viewer.domain; v1 without a model)."""
+TRAINED = PRESETS[DOMAIN.ranges]
+"""The ranges its rooms were drawn from: the steps below move one axis of them at a time."""
+VOXELS, PROBES = (CARD.voxels, CARD.probes) if CARD is not None else (16, 16)
+"""The network's voxel and probe resolutions (the yardstick runs at them too)."""
 METHODS_HERE = ("neural", "physical", "compute")
 """The methods this study runs when asked for (the others are either no yardstick or, like
 `mitsuba-probes`, thousands of Mitsuba probes per room)."""
@@ -42,27 +62,71 @@ class Step:
     ranges: Ranges
     new: str = ""
     """What the training set never has (a shape, a light placement): no range to be outside of."""
+    quick: bool = False
+    """One of the `--quick` run's steps."""
 
 
-STEPS = (
-    Step("room", "half extents 0.45-0.55", Ranges(room_scale=(0.45, 0.55))),
-    Step("room", "half extents 1.45-1.6", Ranges(room_scale=(1.45, 1.6))),
-    Step("room", "half extents 1.9-2.1", Ranges(room_scale=(1.9, 2.1))),
-    Step("room", "elongated 2.0 x 0.8 x 0.8", Ranges(room_scale=((1.9, 0.75, 0.75), (2.1, 0.85, 0.85)))),
-    Step("colour", "near-white 0.95-0.99", Ranges(albedo=(0.05, 0.99), grey_level=(0.95, 0.99),
-                                                   saturated_wall_probability=0.0, saturated_object_probability=0.0)),
-    Step("colour", "dark 0.01-0.04", Ranges(albedo=(0.01, 0.04), grey_level=(0.01, 0.04), value=(0.01, 0.04))),
-    Step("colour", "all fully saturated", Ranges(albedo=(0.0, 0.9), saturation=(1.0, 1.0), saturated_wall_probability=1.0,
-                                                 saturated_object_probability=1.0)),
-    Step("light", "tiny: half 0.005-0.015", Ranges(light_half_extent=(0.005, 0.015))),
-    Step("light", "huge: one, half 0.9-1.3", Ranges(light_half_extent=(0.9, 1.3), lights=(1, 1))),
-    Step("light", "on the walls only", Ranges(wall_light_probability=1.0)),
-    Step("light", "on the floor, facing up", Ranges(floor_light_probability=1.0, objects=(0, 0)), new="floor light"),
-    Step("shape", "10-14 small objects", Ranges(objects=(10, 14), object_half_width=(0.08, 0.2))),
-    Step("shape", "thin upright slabs", Ranges(object_kinds=("slab",), objects=(2, 4)), new="slab"),
-    Step("shape", "floating under the ceiling", Ranges(hang_probability=1.0, objects=(2, 4)), new="floating"),
-)
-QUICK_STEPS = tuple(STEPS[i] for i in (3, 5, 8, 11))
+def _round(x: float) -> float:
+    """To what the labels print (so that the first dataset's steps are exactly the published ones)."""
+    return round(x, 2 if x >= 0.1 else 3)
+
+
+def steps(trained: Ranges) -> tuple[Step, ...]:
+    """The study's rooms, one axis of `trained` moved past its bounds at a time (for the first dataset's
+    ranges: half extents 0.45-0.55, 1.45-1.6, 1.9-2.1 and 2.0 x 0.8 x 0.8; albedo 0.95-0.99 and
+    0.01-0.04; lights of half extent 0.005-0.015 and 0.9-1.3; 10-14 objects). Placements the trained
+    ranges already hold (lights on the walls or the floor, for v2) are left out."""
+    low, high = trained.room_scale
+    dark, white = trained.albedo
+    small, large = trained.light_half_extent
+    most = trained.objects[1]
+    below = (_round(0.6 * low), _round(0.73 * low))
+    above = (_round(1.115 * high), _round(1.23 * high))
+    far = (_round(1.46 * high), _round(1.615 * high))
+    narrow = (low, _round(1.133 * low))
+    whiter = _round(min(white + 0.05, 0.97))
+    darker = (_round(0.2 * dark), _round(0.8 * dark))
+    tiny = (_round(0.1 * small), _round(0.3 * small))
+    huge = (_round(1.5 * large), _round(2.17 * large))
+    many = (round(2.5 * most), round(3.5 * most))
+    rectangles = tuple(s for s in trained.light_surfaces if s != "object")   # lights with a size to vary
+
+    def room(bounds):
+        return replace(trained, room_scale=bounds)
+
+    out = [Step("room", f"half extents {below[0]:g}-{below[1]:g}", room(below)),
+           Step("room", f"half extents {above[0]:g}-{above[1]:g}", room(above)),
+           Step("room", f"half extents {far[0]:g}-{far[1]:g}", room(far)),
+           Step("room", f"elongated {sum(far) / 2:.1f} x {sum(narrow) / 2:.1f} x {sum(narrow) / 2:.1f}",
+                room(((far[0], narrow[0], narrow[0]), (far[1], narrow[1], narrow[1]))), quick=True),
+           Step("colour", f"near-white {whiter:g}-0.99",
+                replace(trained, albedo=(dark, 0.99), grey_level=(whiter, 0.99), saturated_wall_probability=0.0,
+                        saturated_object_probability=0.0)),
+           Step("colour", f"dark {darker[0]:.3g}-{darker[1]:.3g}",
+                replace(trained, albedo=darker, grey_level=darker, value=darker), quick=True),
+           Step("colour", "all fully saturated",
+                replace(trained, albedo=(0.0, white), saturation=(1.0, 1.0), saturated_wall_probability=1.0,
+                        saturated_object_probability=1.0)),
+           Step("light", f"tiny: half {tiny[0]:.3g}-{tiny[1]:.3g}",
+                replace(trained, light_half_extent=tiny, light_surfaces=rectangles)),
+           Step("light", f"huge: one, half {huge[0]:.2g}-{huge[1]:.2g}",
+                replace(trained, light_half_extent=huge, lights=(1, 1), light_surfaces=rectangles), quick=True)]
+    if not trained.light_surfaces:   # the first dataset's rule: a light on a wall one time in five
+        out.append(Step("light", "on the walls only", replace(trained, wall_light_probability=1.0)))
+    if "floor" not in Domain.from_ranges(trained, "").light_surfaces:
+        out.append(Step("light", "on the floor, facing up",
+                        replace(trained, floor_light_probability=1.0, objects=(0, 0), light_surfaces=()),
+                        new="floor light"))
+    return tuple(out) + (
+        Step("shape", f"{many[0]}-{many[1]} small objects",
+             replace(trained, objects=many, object_half_width=(0.08, 0.2)), quick=True),
+        Step("shape", "thin upright slabs", replace(trained, object_kinds=("slab",), objects=(2, 4)), new="slab"),
+        Step("shape", "floating under the ceiling", replace(trained, hang_probability=1.0, objects=(2, 4)),
+             new="floating"))
+
+
+STEPS = steps(TRAINED)
+QUICK_STEPS = tuple(step for step in STEPS if step.quick)
 IN_DISTRIBUTION = Step("in distribution", "training ranges", TRAINED)
 
 
@@ -71,19 +135,19 @@ def colours(params: dict) -> np.ndarray:
     return np.array(list(params["walls"].values()) + [o["albedo"] for o in params["objects"]])
 
 
-def range_distance(axis: str, params: dict) -> float:
+def range_distance(axis: str, params: dict, trained: Ranges = TRAINED) -> float:
     """How far the room's drawn parameters on `axis` lie outside the trained ranges, in range widths."""
     if axis == "room":
-        return outside(params["room_half"], TRAINED.room_scale)
+        return outside(params["room_half"], trained.room_scale)
     if axis == "colour":
         albedo = colours(params)
         saturation = [colorsys.rgb_to_hsv(*c)[1] for c in albedo]
-        return max(outside(albedo, TRAINED.albedo), outside(saturation, (0.0, TRAINED.saturation[1])))
+        return max(outside(albedo, trained.albedo), outside(saturation, (0.0, trained.saturation[1])))
     if axis == "light":
-        return outside([light["half"] for light in params["lights"]], TRAINED.light_half_extent)
+        return outside([light["half"] for light in params["lights"] if "half" in light], trained.light_half_extent)
     if axis == "shape":
-        return outside(len(params["objects"]), TRAINED.objects)
-    return max(range_distance(a, params) for a in ("room", "colour", "light", "shape"))
+        return outside(len(params["objects"]), trained.objects)
+    return max(range_distance(a, params, trained) for a in ("room", "colour", "light", "shape"))
 
 
 LIGHTS = (("all", "all light", True), ("indirect", "indirect", False))
@@ -100,7 +164,17 @@ def columns(methods) -> list[tuple[str, str, str]]:
              ("outside", "outside the ranges (widths)", "{:.2f}"), ("new", "never trained", "{}"),
              ("statistics", "distance: statistics", "{:.2f}"), ("layout", "distance: layout", "{:.2f}"),
              ("distance", "distance", "{:.2f}")]
-            + [(error_key(m, light), f"{m}, {header}", "{:.3f}") for m in methods for light, header, _ in LIGHTS])
+            + [(error_key(m, light), f"{m}, {header}", "{:.3f}") for m in methods for light, header, _ in LIGHTS]
+            + [("guard", "the viewer's domain guard (viewer.domain)", "{}")])
+
+
+ERRORS = slice(8, -1)
+"""Where the methods' error columns are among `columns`."""
+
+
+def training_data(card) -> Path:
+    """The dataset the shipped model trained on (its card's `training.data`; data/gi-v1 without one)."""
+    return ROOT / str((card.data.get("training", {}) if card is not None else {}).get("data", "data/gi-v1"))
 
 
 def plan(quick: bool) -> list[Step]:
@@ -114,14 +188,16 @@ def measure_room(number: int, step: Step, distances: dict, methods, points_count
     """Draw room `number` of the plan, place it against the training set and measure every method."""
     name = f"ood-{step.axis.split()[0]}-{number}"
     scene, params = random_scene(np.random.default_rng([SEED, number]), name, step.ranges)
-    inputs = scene_encoding(scene, 16, 16)
+    inputs = scene_encoding(scene, VOXELS, PROBES)
     row = dict(axis=step.axis, step=step.label, scene=name, outside=range_distance(step.axis, params),
                new=step.new or "-", **{view: measure(inputs) for view, measure in distances.items()})
+    row["guard"] = "; ".join(guard(scene, DOMAIN)) or "-"
     row["distance"] = max(row[view] for view in distances)
     points = free_space_points(scene, points_count, margin=0.06, seed=number)
     for light, _, include_emitted in LIGHTS:
         truth = truth_sh(scene, points, directions, include_emitted=include_emitted)
-        settings = MethodSettings(gi.GISettings(voxels=16, probes=16, directions=256), include_emitted=include_emitted)
+        settings = MethodSettings(gi.GISettings(voxels=VOXELS, probes=PROBES, directions=256),
+                                  include_emitted=include_emitted)
         for method in methods:
             grid = try_method(method, scene, settings, result)
             row[error_key(method, light)] = np.nan if grid is None else relative_rmse(grid.interpolate(points), truth)
@@ -135,7 +211,7 @@ def run(config: RunConfig) -> StudyResult:
         result.notes.append("Not run: the study measures `neural`, which was not asked for.")
         return result
     try:
-        distances = training_distances(resolution=16)
+        distances = training_distances(resolution=PROBES, data=training_data(CARD))
     except FileNotFoundError as exc:
         result.notes.append(f"Not run: no training set to measure distances from ({exc}).")
         return result
@@ -146,16 +222,19 @@ def run(config: RunConfig) -> StudyResult:
         row = measure_room(number, step, distances, methods, points_count, directions, result)
         result.rows.append(row)
         print(f"ood {step.axis} / {step.label}: distance {row['distance']:.2f}, "
-              + ", ".join(f"{key} {row[key]:.3f}" for key, _, _ in result.columns[8:]), flush=True)
+              + ", ".join(f"{key} {row[key]:.3f}" for key, _, _ in result.columns[ERRORS]), flush=True)
     baseline = sum(step is IN_DISTRIBUTION for step in rooms)
     result.notes.append(
         f"{len(rooms)} rooms ({baseline} in distribution, {(len(rooms) - baseline) // len(set(rooms[baseline:]))} "
         f"per step), seeded; {points_count} free-space points each, Mitsuba {directions} directions per point; "
-        "`physical` at 16^3 voxels and 16^3 probes, the network's. Errors: relative RMSE of the SH at the points, "
-        "of all the incident light (as the other studies) and of its indirect part (what the renderer shades "
-        "from the probes). Outside the ranges: the varied axis's drawn values (room half extents; albedos and "
-        "HSV saturations; light half extents; object count) past `Ranges()`, in widths of the range. "
-        "Distance: the network input's nearest-neighbour distance to the 112 training scenes in two views, "
+        f"`physical` at {VOXELS}^3 voxels and {PROBES}^3 probes, the network's. Errors: relative RMSE of the SH at "
+        "the points, of all the incident light (as the other studies) and of its indirect part (what the renderer "
+        "shades from the probes). Outside the ranges: the varied axis's drawn values (room half extents; albedos "
+        f"and HSV saturations; light half extents; object count) past the ranges `{DOMAIN.ranges}` the shipped "
+        "model's card names (its domain), in widths of the range. The guard: the reasons the viewer gives for "
+        "the room (viewer.domain, from the card's domain). "
+        f"Distance: the network input's nearest-neighbour distance to the {distances['statistics'].count} "
+        "training scenes in two views, "
         "`statistics` (per-feature mean, spread and 99th percentile over the lattice, albedo percentiles) and "
         "`layout` (features averaged over 4^3 blocks), each in units of the training set's median "
         "neighbour distance (`viewer/bench/stability/distance.py`); `distance` is the larger.")
@@ -177,7 +256,7 @@ def percent(rows, method: str, light: str) -> str:
 
 def ratio(rows, yardstick: str, light: str = "indirect") -> float:
     """Median over rooms of `neural`'s error over the yardstick's: what the network adds to how hard the
-    room is for any method at 16^3 (a lamp next to the points, a sunlit patch)."""
+    room is for any method at the network's resolution (a lamp next to the points, a sunlit patch)."""
     return float(np.median([r[error_key("neural", light)] / r[error_key(yardstick, light)] for r in rows]))
 
 
@@ -212,6 +291,11 @@ def summarize(result: StudyResult, methods) -> None:
         + (f"{len(broken)} of {len(away)} rooms outside the ranges; the nearest to the training set {broken[0]['axis']} "
            f"({broken[0]['step']}, distance {broken[0]['distance']:.1f}, {100 * broken[0][key]:.0f}%)."
            if broken else f"none of the {len(away)} rooms outside the ranges."))
+    guarded = [r for r in away if r.get("guard", "-") != "-"]
+    result.summary.append(
+        f"The viewer's domain guard names a reason for {len(guarded)} of the {len(away)} rooms outside the ranges, "
+        f"{sum(r.get('guard', '-') != '-' for r in base)} of the {len(base)} in distribution, and "
+        f"{sum(r.get('guard', '-') != '-' for r in broken)} of the {len(broken)} past the worst in-distribution error.")
     distance = [r["distance"] for r in result.rows]
     correlations = [f"`{m}` {rank_correlation(distance, [r[error_key(m, 'indirect')] for r in result.rows]):+.2f}"
                     for m in methods]
@@ -230,7 +314,7 @@ def chart(result: StudyResult, path) -> None:
     from matplotlib.lines import Line2D
     from matplotlib.ticker import ScalarFormatter
 
-    methods = list(dict.fromkeys(key.split(" ")[0] for key, _, _ in result.columns[8:]))
+    methods = list(dict.fromkeys(key.split(" ")[0] for key, _, _ in result.columns[ERRORS]))
     yardstick = next((m for m in methods if m != "neural"), None)
     fig, axes = plt.subplots(2, 2, figsize=(12, 8), sharey="row", sharex="col", gridspec_kw=dict(width_ratios=[3, 2]))
     for row_axes, (light, header, _) in zip(axes, LIGHTS):
