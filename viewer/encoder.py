@@ -35,6 +35,7 @@ from scipy import ndimage, sparse
 
 from viewer import encoding, sh
 from viewer.encoding import CHANNELS, DIRECT, NEAR_FIELD, Encoding
+from viewer.probes import ProbeGrid
 from viewer.voxels import VoxelGrid
 
 SAME_COLOUR = 1e-9
@@ -95,12 +96,6 @@ class _Geometry:
         return self._sun[1]
 
 
-def encoding_points(lo: np.ndarray, hi: np.ndarray, m: int) -> np.ndarray:
-    """(P, 3) the lattice's cell centres in `encode`'s order (x slowest)."""
-    spacing = (hi - lo) / m
-    return lo + (np.stack(np.meshgrid(*[np.arange(m)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) * spacing
-
-
 @dataclass
 class Emitter:
     """Emitting patches that share one colour and touch each other: a lamp, or one glowing object."""
@@ -122,7 +117,7 @@ class Encoder:
     def __init__(self, lo, hi, resolution: int):
         self.lo, self.hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         self.resolution = int(resolution)
-        self.points = encoding_points(self.lo, self.hi, self.resolution)
+        self.points = ProbeGrid.positions_for(self.lo, self.hi, self.resolution).reshape(-1, 3)  # x slowest, as encode
         self._points32 = [np.ascontiguousarray(self.points[:, a], np.float32) for a in range(3)]
         self.serial = next(_serials)
         """Tells encoders apart (a cache of the network's outputs keys on it and on `revisions`)."""

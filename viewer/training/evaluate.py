@@ -79,11 +79,13 @@ def measure_scene(scene: scenes.Scene, methods: dict, points_count: int, directi
 
 def neural_method(model: Path):
     from viewer.neural import NeuralField
+    from viewer.voxels import voxelize
 
     field = NeuralField(model)
 
-    def solve(scene):
-        return field.solve(scene, include_emitted=True), field.solve(scene, include_emitted=False)
+    def solve(scene):  # one voxelization and one network run: the second ask reuses the output
+        voxels, (lo, hi) = voxelize(scene, field.card.voxels), scene.bounds
+        return tuple(field.predict(voxels, scene.sun, lo, hi, include_emitted=part) for part in (True, False))
 
     return field, solve
 

@@ -88,11 +88,8 @@ def mirror(inputs: torch.Tensor, targets: torch.Tensor, valid: torch.Tensor, axi
     sign_in = torch.ones(encoding.CHANNELS)
     sign_in[NORMAL_CHANNEL[axis]] = -1
     sign_in[COORD_CHANNEL[axis]] = -1
-    for k in ODD_IN[axis]:
-        sign_in[encoding.DIRECT.start + k] = -1
-    sign_out = torch.ones(18)
-    sign_out[ODD_IN[axis]] = -1
-    sign_out[[9 + k for k in ODD_IN[axis]]] = -1
+    sign_in[encoding.DIRECT] = sh_signs(axis)
+    sign_out = torch.cat([sh_signs(axis), sh_signs(axis)])
     return inputs * sign_in[:, None, None, None], targets * sign_out[:, None, None, None], valid
 
 
@@ -117,11 +114,16 @@ class Batch:
         return Batch(self.pick, x, y, valid, unbiased, self.has_unbiased)
 
 
-def mirror_sh(sh: torch.Tensor, axis: int) -> torch.Tensor:
-    """(B, 9, X, Y, Z) SH mirrored in world axis `axis`."""
+def sh_signs(axis: int) -> torch.Tensor:
+    """(9,) how each SH coefficient changes when world axis `axis` is mirrored."""
     sign = torch.ones(9)
     sign[ODD_IN[axis]] = -1
-    return sh.flip(2 + axis) * sign[:, None, None, None]
+    return sign
+
+
+def mirror_sh(sh: torch.Tensor, axis: int) -> torch.Tensor:
+    """(B, 9, X, Y, Z) SH mirrored in world axis `axis`."""
+    return sh.flip(2 + axis) * sh_signs(axis)[:, None, None, None]
 
 
 def batches(samples: Samples, indices: np.ndarray, size: int):
