@@ -11,8 +11,7 @@ from viewer.voxels import voxelize
 
 
 def encode(scene: Scene, m: int = 8, n: int = 16) -> encoding.Encoding:
-    lo, hi = scene.bounds
-    return encoding.encode(voxelize(scene, n), scene.sun, lo, hi, m)
+    return encoding.encode_scene(scene, m, n)
 
 
 def test_shape_and_finite():

@@ -37,6 +37,30 @@ def _voxel_of(keys: np.ndarray, key: np.ndarray) -> np.ndarray:
     return np.where(keys[where] == key, where, -1)
 
 
+def _listing(scene, lo: np.ndarray, h: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """((E, 3) cell, (E,) triangle) sorted by flat cell: every usable triangle of `scene` in each cell of
+    its bounding box that its plane passes through."""
+    tri = scene.triangles
+    areas = scene.face_areas
+    usable = np.nonzero(areas > 1e-12 * max(float(areas.max()), 1e-30))[0]
+    low = np.clip(np.floor((tri[usable].min(axis=1) - lo) / h).astype(np.int64), 0, n - 1)
+    extent = np.clip(np.floor((tri[usable].max(axis=1) - lo) / h).astype(np.int64), 0, n - 1) - low + 1
+    sizes = extent.prod(axis=1)
+    owner = np.repeat(np.arange(len(usable)), sizes)
+    local = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    ext = extent[owner]
+    xyz = low[owner] + np.stack([local % ext[:, 0], local // ext[:, 0] % ext[:, 1],
+                                 local // (ext[:, 0] * ext[:, 1])], axis=1)
+    triangle = usable[owner]
+    normal = scene.face_normals[triangle]
+    centre = lo + (xyz + 0.5) * h
+    distance = np.abs(np.einsum("ij,ij->i", centre - tri[triangle, 0], normal))
+    near = distance <= 0.5 * h * np.abs(normal).sum(axis=1) * (1 + 1e-9) + 1e-12 * h
+    xyz, triangle = xyz[near], triangle[near]
+    order = np.argsort(xyz[:, 0] + n * (xyz[:, 1] + n * xyz[:, 2]), kind="stable")
+    return xyz[order], triangle[order]
+
+
 @dataclass(frozen=True)
 class Cells:
     """The grid as the tracer reads it: per cell, the triangles that reach into it."""
@@ -69,26 +93,8 @@ class Cells:
 
         grid = voxelization.grid
         n, h, lo = grid.resolution, grid.voxel_size, grid.lo
-        tri = scene.triangles
-        areas = scene.face_areas
-        usable = np.nonzero(areas > 1e-12 * max(float(areas.max()), 1e-30))[0]
-        low = np.clip(np.floor((tri[usable].min(axis=1) - lo) / h).astype(np.int64), 0, n - 1)
-        extent = np.clip(np.floor((tri[usable].max(axis=1) - lo) / h).astype(np.int64), 0, n - 1) - low + 1
-        sizes = extent.prod(axis=1)
-        owner = np.repeat(np.arange(len(usable)), sizes)
-        local = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-        ext = extent[owner]
-        xyz = low[owner] + np.stack([local % ext[:, 0], local // ext[:, 0] % ext[:, 1],
-                                     local // (ext[:, 0] * ext[:, 1])], axis=1)
-        triangle = usable[owner]
-        normal = scene.face_normals[triangle]
-        centre = lo + (xyz + 0.5) * h
-        distance = np.abs(np.einsum("ij,ij->i", centre - tri[triangle, 0], normal))
-        near = distance <= 0.5 * h * np.abs(normal).sum(axis=1) * (1 + 1e-9) + 1e-12 * h
-        xyz, triangle = xyz[near], triangle[near]
+        xyz, triangle = _listing(scene, lo, h, n)
         cell = xyz[:, 0] + n * (xyz[:, 1] + n * xyz[:, 2])
-        order = np.argsort(cell, kind="stable")
-        cell, triangle, xyz = cell[order], triangle[order], xyz[order]
         # each entry's voxel: (cell, the triangle's facing); a triangle that only grazes a cell where
         # none of its pieces landed belongs to the same-facing voxel of a neighbouring cell
         facing = face_facing(scene.face_normals)[triangle]
@@ -103,6 +109,20 @@ class Cells:
                                                + facing[stray]), -1)
             voxel[stray] = found
         voxel[voxel < 0] = BACKFACE   # no voxel of that facing nearby: the surface is opaque and dark
+        return Cells._make(scene, lo, h, n, cell, triangle, voxel)
+
+    @staticmethod
+    def blocking(scene, lo, h: float, n: int) -> "Cells":
+        """Every triangle of `scene` on a grid of n^3 cubic cells of edge h from `lo`, for visibility
+        alone: a front hit reports voxel 0 (there are no voxels), so only MISS means unblocked."""
+        lo = np.asarray(lo, np.float64)
+        xyz, triangle = _listing(scene, lo, h, n)
+        cell = xyz[:, 0] + n * (xyz[:, 1] + n * xyz[:, 2])
+        return Cells._make(scene, lo, h, n, cell, triangle, np.zeros(len(triangle), np.int64))
+
+    @staticmethod
+    def _make(scene, lo, h, n, cell, triangle, voxel) -> "Cells":
+        tri = scene.triangles
         first = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=n ** 3))]).astype(np.int64)
         return Cells(np.asarray(lo, np.float64), float(h), int(n), first, triangle.astype(np.int64),
                      voxel.astype(np.int64), np.ascontiguousarray(tri[:, 0]),
@@ -234,6 +254,23 @@ _NO_CELLS = np.zeros(0, np.int64)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
+def _pairs_clear(a, b, cells):
+    out = np.zeros((a.shape[0], b.shape[0]), np.float32)
+    none = np.zeros(0, np.int64)
+    for i in numba.prange(a.shape[0]):
+        for j in range(b.shape[0]):
+            dx, dy, dz = b[j, 0] - a[i, 0], b[j, 1] - a[i, 1], b[j, 2] - a[i, 2]
+            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            if length <= 0:
+                out[i, j] = 1.0
+                continue
+            hit, _ = _march(a[i, 0], a[i, 1], a[i, 2], dx / length, dy / length, dz / length, length, cells, none)
+            if hit == MISS:
+                out[i, j] = 1.0
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _trace_many(origins, directions, t_end, cells):
     count = origins.shape[0]
     hits = np.empty(count, np.int64)
@@ -313,6 +350,13 @@ def segments_clear(cells: Cells, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     length = np.linalg.norm(d, axis=1)
     d = np.ascontiguousarray(d / np.maximum(length, 1e-300)[:, None])
     return _trace_many(a, d, length, cells.args()) == MISS
+
+
+def pairs_clear(cells: Cells, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(A, B) float32: 1 where the segment from a[i] to b[j] crosses no surface, from either side, else 0."""
+    a = np.ascontiguousarray(a, np.float64).reshape(-1, 3)
+    b = np.ascontiguousarray(b, np.float64).reshape(-1, 3)
+    return _pairs_clear(a, b, cells.args())
 
 
 def escapes(cells: Cells, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:

@@ -119,7 +119,7 @@ def _before(scene: Scene, field: NeuralField, probes: int, voxels: int) -> dict[
     lo, hi = scene.bounds
     voxelized = clock_now()
     with _one_blas_thread():
-        enc = encoding.encode(grid, scene.sun, lo, hi, probes)
+        enc = encoding.encode(grid, scene.sun, lo, hi, probes, encoding.occluders(scene, grid))
     encoded = clock_now()
     out = field.session.run(None, {field.input_name: enc.inputs})[0]
     ran = clock_now()

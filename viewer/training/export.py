@@ -103,7 +103,6 @@ def export(run: Path, out: Path, resolution: int, inputs: np.ndarray, training: 
 
 def main(argv=None) -> int:
     from viewer.scene import load
-    from viewer.voxels import voxelize
 
     parser = argparse.ArgumentParser(prog="python -m viewer.training.export", description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path)
@@ -113,8 +112,7 @@ def main(argv=None) -> int:
     parser.add_argument("--metrics", type=Path, help="JSON of measured metrics to put on the card")
     args = parser.parse_args(argv)
     scene = load("paper-test")
-    lo, hi = scene.bounds
-    inputs = encoding.encode(voxelize(scene, ENCODING_VOXELS), scene.sun, lo, hi, args.probes).inputs
+    inputs = encoding.encode_scene(scene, args.probes, ENCODING_VOXELS).inputs
     history = json.loads((args.run / "history.json").read_text())
     metrics = json.loads(args.metrics.read_text()) if args.metrics else {}
     data = json.loads((args.run / "data.json").read_text()) if (args.run / "data.json").exists() else {}

@@ -155,7 +155,8 @@ def encode_scene(path: str, resolution: int, voxels: int = ENCODING_VOXELS) -> d
 
     example = load_example(path)
     grid = voxelize(example.scene, voxels)
-    enc = encoding.encode(grid, example.scene.sun, example.lo, example.hi, resolution)
+    enc = encoding.encode(grid, example.scene.sun, example.lo, example.hi, resolution,
+                          encoding.occluders(example.scene, grid))
     valid = example.valid[resolution]
     # the light reflected by surfaces: all of it minus the part straight from emitters and the sun,
     # filled inside solid objects like the total

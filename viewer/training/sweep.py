@@ -111,8 +111,7 @@ def run_candidate(candidate: Candidate, data: Path, epochs: int, runs: Path, eva
     history = train(model, train_set, val_set, TrainSettings(epochs=epochs), run=run)
     seconds = time.perf_counter() - start
     scene = scenes.load("paper-test")
-    lo, hi = scene.bounds
-    inputs = encoding.encode(voxelize(scene, ENCODING_VOXELS), scene.sun, lo, hi, m).inputs
+    inputs = encoding.encode_scene(scene, m, ENCODING_VOXELS).inputs
     training = {"data": str(data), "scenes": len(train_set), "epochs": epochs, "seconds": seconds,
                 "command": f"python -m viewer.training.sweep --data {data}"}
     path = run / f"{candidate.name}.onnx"
@@ -259,8 +258,7 @@ def ship_run(run: Path, args, evaluation) -> dict:
     config = state["config"]
     m = args.probes
     scene = scenes.load("paper-test")
-    lo, hi = scene.bounds
-    inputs = encoding.encode(voxelize(scene, ENCODING_VOXELS), scene.sun, lo, hi, m).inputs
+    inputs = encoding.encode_scene(scene, m, ENCODING_VOXELS).inputs
     train_scenes = len(training_split(args.data, m, quiet=True))
     training = {"data": str(args.data), "scenes": train_scenes, "epochs": len(history["epochs"]),
                 "seconds": float(sum(history["seconds"])),

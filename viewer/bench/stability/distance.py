@@ -25,7 +25,6 @@ import numpy as np
 
 from viewer import encoding
 from viewer.scene import Scene
-from viewer.voxels import voxelize
 
 ROOT = Path(__file__).resolve().parents[3]
 DATA = ROOT / "data" / "gi-v1"
@@ -79,8 +78,7 @@ VIEWS = {"statistics": statistics, "layout": layout}
 
 def scene_encoding(scene: Scene, voxels: int, resolution: int) -> np.ndarray:
     """The network's input for a scene, as `viewer.neural` makes it (over the scene's bounds)."""
-    lo, hi = scene.bounds
-    return encoding.encode(voxelize(scene, voxels), scene.sun, lo, hi, resolution).inputs
+    return encoding.encode_scene(scene, resolution, voxels).inputs
 
 
 class EncodingDistance:
