@@ -30,14 +30,20 @@ def test_brighter_light_only_changes_the_scale():
 
 
 def test_colour_channels_are_independent():
-    """Recolouring a wall in green only changes the green pass's albedo."""
+    """Recolouring a wall in green only changes the green pass: its albedo, and the light it reflects."""
     scene = load("cornell")
     red = scene.group_albedo("red-wall")
     a, b = encode(scene), encode(scene.with_albedo("red-wall", [red[0], 0.6, red[2]]))
     changed = np.abs(b.inputs - a.inputs).reshape(3, encoding.CHANNELS, -1).max(axis=2) > 1e-6
-    assert changed[1, encoding.FEATURES.index("albedo")]
     assert not changed[0].any() and not changed[2].any()
-    assert changed[1].sum() == 1
+    expected = np.zeros(encoding.CHANNELS, bool)
+    expected[encoding.FEATURES.index("albedo")] = True
+    expected[encoding.BOUNCE] = True
+    np.testing.assert_array_equal(changed[1], expected)
+    # the green wall reflects more green: the bounce's DC grows, most beside the wall
+    more = (b.inputs[1, encoding.BOUNCE][0] - a.inputs[1, encoding.BOUNCE][0])
+    assert more.min() >= -1e-6 and more.max() > 0
+    assert more[0].mean() > more[-1].mean()  # red wall at -x
 
 
 def test_no_light_gives_zero_scale_and_zero_inputs_of_light():

@@ -27,6 +27,7 @@ import os
 import shutil
 import sys
 import time
+import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from functools import partial
@@ -248,7 +249,8 @@ def _encode_to(folder: Path, split: str, container: str, refs: list[str], encode
     tmp.mkdir(parents=True)
     arrays: dict[str, np.ndarray] = {}
     start = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    # spawned, not forked: the encoder's compiled loops may have started OpenMP threads in this process
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
         for i, row in enumerate(pool.map(encoder, refs, [resolution] * len(refs), chunksize=2)):
             if not arrays:  # one memory-mapped file per array, filled row by row
                 arrays = {name: np.lib.format.open_memmap(tmp / f"{name}.npy", "w+", _stored(value),
