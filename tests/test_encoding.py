@@ -81,3 +81,45 @@ def test_sun_reaches_only_the_cells_under_the_window():
     visible = enc.inputs[0, encoding.DIRECT.start] > 0  # DC of the direct light: the sun is all there is
     assert visible[3:5, :7, 3:5].all()  # under the hole, all the way down
     assert not visible[0:2, :7, 0:2].any() and not visible[6:8, :7, 6:8].any()  # under the solid ceiling
+
+
+def test_a_wall_between_the_lamp_and_a_probe_casts_its_shadow():
+    """A partition hanging from the ceiling beside the lamp: probes behind it, below the lamp's height,
+    get no direct light; the same probes without the partition get it; probes in front keep theirs."""
+    lamp = ceiling_lamp(half_size=0.15, height=0.95, radiance=10.0)
+    room = box(inward=True, albedo=0.5, name="room")
+    v = np.array([[0.4, 1.0, -1.0], [0.4, 1.0, 1.0], [0.4, -0.2, 1.0], [0.4, -0.2, -1.0]])  # x = 0.4, y >= -0.2
+    partition = Scene("partition", v, np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]]), 0.5, 0.0, 0,
+                      ("partition",))
+    shadowed = encode(Scene.concatenate("shadowed", [room, lamp, partition]), m=8, n=16)
+    open_ = encode(Scene.concatenate("open", [room, lamp]), m=8, n=16)
+
+    def direct(enc):
+        return enc.inputs[0, encoding.DIRECT.start] * enc.scale[0]
+
+    behind = (slice(6, 8), slice(2, 5), slice(None))   # x > 0.5, y in (-0.5, 0.25): hidden by the partition
+    in_front = (slice(2, 6), slice(2, 5), slice(None))
+    assert direct(open_)[behind].min() > 0
+    assert np.all(direct(shadowed)[behind] == 0)
+    np.testing.assert_allclose(direct(shadowed)[in_front], direct(open_)[in_front], rtol=1e-5)
+
+
+def test_the_bounce_is_the_lit_walls_reflected_light():
+    """One bounce follows the albedo linearly: black walls reflect nothing, white walls twice what grey
+    ones do; it is there wherever the walls are lit and scaled out like the direct light."""
+    lamp = ceiling_lamp(half_size=0.3, height=0.95, radiance=5.0)
+
+    def bounce(albedo):
+        enc = encode(Scene.concatenate("room", [box(inward=True, albedo=albedo, name="room"), lamp]), m=8, n=16)
+        return enc.inputs[:, encoding.BOUNCE] * enc.scale[:, None, None, None, None], enc
+
+    black, _ = bounce(0.0)
+    grey, enc = bounce(0.4)
+    white, _ = bounce(0.8)
+    assert np.all(black == 0)
+    assert grey[:, 0].min() > 0
+    np.testing.assert_allclose(white, 2 * grey, rtol=1e-4, atol=1e-7 * np.abs(grey).max())
+    # the lamp lights the floor, not the ceiling: the bounce comes from below (Y_1-1 < 0), and most
+    # steeply under the dark ceiling
+    tilt = grey[0, 1, 4, :, 4] / grey[0, 0, 4, :, 4]
+    assert np.all(tilt < 0) and tilt[-1] < tilt[3]

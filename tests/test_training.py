@@ -9,7 +9,7 @@ import pytest
 
 torch = pytest.importorskip("torch", reason="the train extra (torch) is needed")
 
-from viewer import neural  # noqa: E402
+from viewer import encoding, neural  # noqa: E402
 from viewer.training import dataset, generate, shards, truth  # noqa: E402
 from viewer.training.models import ProbeNet, ProbeNetConfig  # noqa: E402
 from viewer.training.samples import load_split  # noqa: E402
@@ -32,7 +32,7 @@ def tiny(tmp_path_factory):
 
 def test_loss_falls_and_the_run_resumes(tiny, tmp_path):
     train_set, val_set = load_split(tiny, "train", 8, quiet=True), load_split(tiny, "val", 8, quiet=True)
-    assert train_set.inputs.shape[1:3] == (3, 21) and train_set.targets.shape[2] == 18
+    assert train_set.inputs.shape[1:3] == (3, encoding.CHANNELS) and train_set.targets.shape[2] == 18
     run = tmp_path / "run"
     model = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2))
     first = train(model, train_set, val_set, TrainSettings(epochs=30, batch=1, learning_rate=1e-2), run=run,

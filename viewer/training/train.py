@@ -63,10 +63,10 @@ class TrainSettings:
     deterministic but biased (16% on v2 rooms, docs/TRAINING.md); Mitsuba's are unbiased but noisy."""
     steps: int = 0
     """Stop an epoch after this many steps (0: the whole split): a pass over thousands of rooms."""
-    direct_input: str = "unshadowed"
-    """What the direct-light features hold: `unshadowed` (the encoding's, `viewer.encoding`) or `traced`
-    (the truth's own direct light, shadows included: the experiment of a network that only adds the
-    bounces to an exactly traced direct term)."""
+    direct_input: str = "encoded"
+    """What the direct-light features hold: `encoded` (the encoding's, `viewer.encoding`: shadows traced
+    on a coarse grid) or `traced` (the truth's own direct light: the experiment of a network whose
+    direct term is exact)."""
 
 
 @dataclass
@@ -143,7 +143,7 @@ def batches(samples: Samples, indices: np.ndarray, size: int):
 
 
 def traced_direct(batch: Batch) -> Batch:
-    """The batch with the truth's direct light (shadows traced) in place of the unshadowed features."""
+    """The batch with the truth's direct light in place of the encoding's."""
     x = batch.x.clone()
     x[:, encoding.DIRECT] = batch.y[:, TOTAL] - batch.y[:, REFLECTED]
     return Batch(batch.pick, x, batch.y, batch.valid, batch.unbiased, batch.has_unbiased)
@@ -334,7 +334,7 @@ def main(argv=None) -> int:
     parser.add_argument("--reflected-weight", type=float, default=TrainSettings.reflected_weight)
     parser.add_argument("--solver-weight", type=float, default=TrainSettings.solver_weight)
     parser.add_argument("--threads", type=int, default=TrainSettings.threads)
-    parser.add_argument("--direct-input", choices=("unshadowed", "traced"), default="unshadowed")
+    parser.add_argument("--direct-input", choices=("encoded", "traced"), default="encoded")
     parser.add_argument("--encoded-only", action="store_true",
                         help="train on the shards encoded so far (a dataset still being made)")
     parser.add_argument("--val-rooms", type=int, default=100, help="validation rooms scored every epoch")
