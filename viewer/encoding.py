@@ -11,7 +11,7 @@ Three choices make a small network generalize beyond the layouts it was trained 
   monochrome and runs as a batch of three, so a pink wall is just a wall whose albedo differs between
   the three passes, and every training scene teaches three problems.
 - **Scale out.** Transport is linear in the emitted light too: each channel's inputs are divided by a
-  scale `s` (the mean unshadowed direct radiance over the probes) and the network's output is
+  scale `s` (the mean direct radiance over the probes, shadows included) and the network's output is
   multiplied by it, so a lamp twice as bright gives exactly twice the light, whatever was trained.
 - **Direct light as an input, shadowed.** The light arriving straight from the emitters is most of the
   field: one term per emitting lattice cell, times its visibility from the probe. The shadows are
