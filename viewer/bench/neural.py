@@ -172,8 +172,8 @@ def network_configs(configs, probes: int, repeats: int) -> list[tuple[str, int, 
 def table(results: dict, model: str) -> list[str]:
     lines = [f"Model {model}; medians; the stages in CPU ms of the one thread they run on, the last column in "
              "wall-clock ms; `passes`: colour passes the network ran (3: all; 0: its output reused, scaled).", "",
-             "| scene | probes | voxels | edit | voxels (voxelize + occluders, or recolour) | encode | network | passes | unpack | "
-             "encode + network + unpack | edit to probes (CPU) | edit to probes (wall) |",
+             "| scene | probes | voxels | edit | voxels (voxelize + occluders, or recolour) | encode | network | passes | "
+             "unpack | encode + network + unpack | edit to probes (CPU) | edit to probes (wall) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for (name, probes, voxels), rows in results.items():
         for what, r in rows.items():
