@@ -34,8 +34,7 @@ def random_model(seed: int = 0) -> ProbeNet:
 
 
 def encoded(scene: Scene, m: int = 8) -> encoding.Encoding:
-    lo, hi = scene.bounds
-    return encoding.encode(voxelize(scene, 16), scene.sun, lo, hi, m)
+    return encoding.encode_scene(scene, m, 16)
 
 
 @pytest.fixture(scope="module")
@@ -107,9 +106,10 @@ def test_predictions_after_edits_equal_fresh_ones(exported):
              ("lamp moved", scene.transformed_group("light", matrix))]
     for what, edited in steps:
         voxels = voxelize(edited, 16)
-        kept = field.predict(voxels, edited.sun, lo, hi, include_emitted=False)
+        blockers = encoding.occluders(edited, voxels)
+        kept = field.predict(voxels, edited.sun, lo, hi, blockers, include_emitted=False)
         passes = field.passes_run
-        fresh = field.predict(voxels, edited.sun, lo, hi, include_emitted=False, reuse=False)
+        fresh = field.predict(voxels, edited.sun, lo, hi, blockers, include_emitted=False, reuse=False)
         np.testing.assert_allclose(kept.coefficients, fresh.coefficients, rtol=1e-4,
                                    atol=1e-5 * np.abs(fresh.coefficients).max(), err_msg=what)
         assert np.array_equal(kept.valid, fresh.valid)

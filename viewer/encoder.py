@@ -2,20 +2,24 @@
 edit recomputes only what it changes.
 
 Geometry changes rarely and light often (DESIGN.md). `encode` spends most of its time on the direct
-light (every emitting patch against every probe) and on splatting the voxels onto the lattice. An
-`Encoder` keeps, for the voxel geometry it last saw (positions, normals, areas):
+light (every emitting patch against every probe, its shadows traced: `encoding.patch_visibility`) and
+on splatting the voxels onto the lattice. An `Encoder` keeps, for the voxel geometry it last saw
+(positions, normals, areas) and the occluders it was given (`encoding.occluders`):
 
 - the trilinear splat as a sparse matrix (lattice cells x voxels), and what it gives from geometry
   alone: the density and normal features, with the coordinate and extent ones;
 - the emitters: the emitting patches of `encoding.emitting_patches`, in groups that share one colour
-  and touch each other (a lamp), each with the unshadowed SH of its patches at every probe summed
-  once (`emitter_basis`). The direct light is linear in the emitted radiance, so a lamp's colour or
-  intensity is its basis times a new RGB;
-- the sun's visibility per direction (`encoding.sun_visibility`): its irradiance is a factor.
+  and touch each other (a lamp), each with the shadowed SH of its patches at every probe summed once
+  (`emitter_basis`): each patch's terms times its visibility, traced as `encode` traces it (one ray
+  per probe and cluster of patches, `encoding.shadow_targets`). The direct light is linear in the
+  emitted radiance, so a lamp's colour or intensity is its basis times a new RGB;
+- the sun's visibility for the last direction (`encoding.sun_visibility`): its irradiance is a factor.
 
-So an emission colour or intensity edit is a few products over the cached bases, an albedo edit
-recomputes the albedo feature, a moved lamp recomputes the basis of its own patches (the other
-emitters keep theirs), and a new geometry recomputes the splat.
+So an emission colour or intensity edit is a few products over the cached bases, and an albedo edit
+recomputes the albedo feature; neither traces a ray. New occluders (a moved lamp or object: the
+triangles cast other shadows) recompute every basis and the sun's visibility. With the same occluders,
+patches that start emitting or change cluster get new bases, traced for their clusters alone (the
+other emitters keep theirs), and a new geometry recomputes the splat.
 
 A colour pass whose inputs an edit leaves unchanged is noted in `revisions`, so that the network's
 output for it can be reused: the scale-out normalization divides each pass's light by its own scale,
@@ -33,7 +37,7 @@ import numba
 import numpy as np
 from scipy import ndimage, sparse
 
-from viewer import encoding, sh
+from viewer import dda, encoding, sh
 from viewer.encoding import CHANNELS, DIRECT, NEAR_FIELD, Encoding
 from viewer.probes import ProbeGrid
 from viewer.voxels import VoxelGrid
@@ -75,8 +79,6 @@ class _Geometry:
         extent = hi - lo
         self.features[18:21] = (extent / extent.max())[:, None]
         self.spacing = spacing
-        self._sun: tuple[bytes, np.ndarray] | None = None
-        self._m = m
 
     def fits(self, voxels: VoxelGrid) -> bool:
         return all(a is b or np.array_equal(a, b) for a, b in (
@@ -86,13 +88,46 @@ class _Geometry:
         """Area-weighted per-voxel values (K, C) splatted onto the lattice cells: (cells, C)."""
         return self.splat @ (self.area[:, None] * values)
 
+
+class _Shadows:
+    """What the encoding's shadows take from the occluders (`encoding.occluders`; None: nothing casts a
+    shadow) on one lattice: the visibility rays of emitting patches, and the sun's visibility for the
+    last direction asked."""
+
+    def __init__(self, blockers: dda.Cells | None, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray):
+        self.blockers, self.points, self.lo, self.spacing = blockers, points, lo, spacing
+        self._sun: tuple[bytes, np.ndarray] | None = None
+
+    def fits(self, blockers: dda.Cells | None) -> bool:
+        """Whether `blockers` are these occluders: the same object, or equal arrays (a new listing of the
+        same triangles)."""
+        a, b = self.blockers, blockers
+        if a is b:
+            return True
+        if a is None or b is None:
+            return False
+        return all(np.array_equal(x, y) for x, y in zip(a.args(), b.args()))
+
+    def targets(self, position: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`encoding.shadow_targets` of the emitting patches: (C, 3) where each cluster's ray ends, (E,)
+        each patch's cluster (one cluster at the origin when nothing casts a shadow)."""
+        if self.blockers is None:
+            return np.zeros((min(len(position), 1), 3)), np.zeros(len(position), np.int64)
+        return encoding.shadow_targets(self.blockers, position, normal, self.lo, self.spacing)
+
+    def visibility(self, target: np.ndarray) -> np.ndarray:
+        """(C, P) float32: 1 where probe p sees the end of ray c, as `encoding.patch_visibility` traces
+        it (the same `dda.pairs_clear`, each pair on its own: any subset of the clusters gives their
+        columns of the whole)."""
+        if self.blockers is None:
+            return np.ones((len(target), len(self.points)), np.float32)
+        return np.ascontiguousarray(dda.pairs_clear(self.blockers, self.points, target).T)
+
     def sun_visibility(self, direction: np.ndarray) -> np.ndarray:
-        """(P,) `encoding.sun_visibility` for this geometry, kept for the last direction asked."""
+        """(P,) `encoding.sun_visibility` against these occluders, kept for the last direction asked."""
         key = direction.tobytes()
         if self._sun is None or self._sun[0] != key:
-            m = self._m
-            visible = encoding.sun_visibility(self.density.reshape(m, m, m) / self.cell_area, direction, self.spacing)
-            self._sun = (key, visible.reshape(-1))
+            self._sun = (key, encoding.sun_visibility(self.blockers, self.points, direction))
         return self._sun[1]
 
 
@@ -101,18 +136,21 @@ class Emitter:
     """Emitting patches that share one colour and touch each other: a lamp, or one glowing object."""
 
     weights: dict[bytes, float]
-    """Patch (position, normal, area as bytes) -> its share w: its radiance is w x `radiance`."""
+    """Patch (position, normal, area and the end of its visibility ray, as bytes) -> its share w: its
+    radiance is w x `radiance`."""
     basis: np.ndarray
-    """(9, P) float32: sum over the patches of w x their unshadowed SH at the probes (radiance 1)."""
+    """(9, P) float32: sum over the patches of w x their SH at the probes (radiance 1), times their
+    visibility."""
     radiance: np.ndarray
     """(3,) the current radiance per unit weight."""
 
 
 class Encoder:
-    """`encoding.encode(voxels, sun, lo, hi, resolution)`, kept across calls (see the module docstring).
+    """`encoding.encode(voxels, sun, lo, hi, resolution, blockers)`, kept across calls (see the module
+    docstring).
 
-    One encoder serves one lattice; any voxel grid may be passed to `encode`, and whatever still holds
-    from the previous call is reused."""
+    One encoder serves one lattice; any voxel grid and occluders may be passed to `encode`, and whatever
+    still holds from the previous call is reused."""
 
     def __init__(self, lo, hi, resolution: int):
         self.lo, self.hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
@@ -126,9 +164,10 @@ class Encoder:
         one's; equal revisions of one encoder mean equal inputs."""
         self.emitters: list[Emitter] = []
         self.recomputed: list[str] = []
-        """What the last `encode` had to recompute: `geometry`, `albedo`, `emission`, `emitters` (a
-        basis), `sun`."""
+        """What the last `encode` had to recompute: `geometry`, `shadows` (new occluders), `albedo`,
+        `emission`, `emitters` (a basis), `sun`."""
         self._geometry: _Geometry | None = None
+        self._shadows: _Shadows | None = None
         self._albedo = self._emission = None        # the voxels' (K, 3) of the last call
         self._albedo_feature = None                 # (3, cells) float32
         self._emitted = None                        # (cells, 3) splatted emitted radiance x area
@@ -140,11 +179,15 @@ class Encoder:
         return (int(resolution) == self.resolution and np.array_equal(np.asarray(lo, np.float64), self.lo)
                 and np.array_equal(np.asarray(hi, np.float64), self.hi))
 
-    def encode(self, voxels: VoxelGrid, sun) -> Encoding:
-        """The network's input for `voxels` and `sun`: `encoding.encode`'s numbers (to float32 round-off)."""
+    def encode(self, voxels: VoxelGrid, sun, blockers: dda.Cells | None) -> Encoding:
+        """The network's input for `voxels` and `sun`, shadowed by `blockers` (`encoding.occluders` of the
+        scene; None: nothing casts a shadow): `encoding.encode`'s numbers (to float32 round-off). Pass
+        the same occluders object while the scene's triangles stay the same: an equal new one is found
+        equal, at the cost of comparing its arrays."""
         direction, irradiance = _sun_parts(sun)
-        if (voxels is self._last_voxels and _same_sun((direction, irradiance), self._sun)
-                and self._last is not None):
+        shadows_changed = self._shadows is None or not self._shadows.fits(blockers)
+        if (voxels is self._last_voxels and not shadows_changed
+                and _same_sun((direction, irradiance), self._sun) and self._last is not None):
             self.recomputed = []
             return self._last
         self.recomputed = []
@@ -152,23 +195,27 @@ class Encoder:
         if geometry_changed:
             self._geometry = _Geometry(voxels, self.lo, self.hi, self.points)
             self.recomputed.append("geometry")
+        if shadows_changed:
+            self._shadows = _Shadows(blockers, self.points, self.lo, self._geometry.spacing)
+            self.emitters = []   # every basis holds the old shadows
+            self.recomputed.append("shadows")
         g = self._geometry
         albedo_changed = (np.ones(3, bool) if geometry_changed
                           else ~_same_columns(self._albedo, voxels.albedo))
         if albedo_changed.any():
             self._albedo_feature = np.asarray((g.gather(voxels.albedo) / g.safe[:, None]).T, np.float32)
             self.recomputed.append("albedo")
-        light_changed = geometry_changed or not np.array_equal(self._emission, voxels.emission)
+        light_changed = geometry_changed or shadows_changed or not np.array_equal(self._emission, voxels.emission)
         emitters_changed = False
         if light_changed:
             self._emitted = g.gather(voxels.emission)
             emitters_changed = self._update_emitters(voxels)
             self.recomputed.append("emission")
         sun_moved = not _same_direction(direction, self._sun[0])
-        if sun_moved and direction is not None:
+        if (sun_moved or shadows_changed) and direction is not None:
             self.recomputed.append("sun")
         unchanged = ~albedo_changed
-        if geometry_changed or emitters_changed or sun_moved:
+        if geometry_changed or shadows_changed or emitters_changed or sun_moved:
             unchanged[:] = False
         elif light_changed or not np.array_equal(irradiance, self._sun[1]):
             unchanged &= _proportional_channels((self._emission, self._sun[1]), (voxels.emission, irradiance))
@@ -214,7 +261,7 @@ class Encoder:
                 if emitter.radiance[c] != 0.0:
                     direct[c] += np.float32(emitter.radiance[c]) * emitter.basis
         if direction is not None and np.any(irradiance > 0):
-            visible = self._geometry.sun_visibility(direction).astype(np.float32)
+            visible = self._shadows.sun_visibility(direction).astype(np.float32)
             delta = sh.basis(direction / np.linalg.norm(direction))  # per unit irradiance (sh.project_delta)
             for c in range(3):
                 if irradiance[c] != 0.0:
@@ -223,10 +270,12 @@ class Encoder:
 
     def _update_emitters(self, voxels: VoxelGrid) -> bool:
         """Match the emitting patches to the emitters kept so far; patches of no kept emitter (a lamp
-        moved or resized, a new light, a colour no longer shared) form new ones, whose bases are
-        computed. Returns whether the emitters changed (beyond their radiances)."""
+        moved or resized, a new light, a colour no longer shared, a patch whose cluster of visibility
+        rays gained or lost a patch) form new ones, whose rays are traced and bases computed. Returns
+        whether the emitters changed (beyond their radiances)."""
         position, normal, area, radiance = encoding.emitting_patches(self._geometry.cell, voxels)
-        keys = _patch_keys(position, normal, area)
+        target, cluster = self._shadows.targets(position, normal)
+        keys = _patch_keys(position, normal, area, target[cluster])
         index = {key: e for e, key in enumerate(keys)}
         claimed = np.zeros(len(keys), bool)
         kept = []
@@ -244,11 +293,16 @@ class Encoder:
                 kept.append(emitter)
         fresh = np.flatnonzero(~claimed)
         changed = len(kept) != len(self.emitters) or len(fresh) > 0
+        row, visible = np.full(len(target), -1), None   # each traced cluster's row of `visible`
         if len(fresh):
             self.recomputed.append("emitters")
+            traced = np.unique(cluster[fresh])
+            row[traced] = np.arange(len(traced))
+            visible = self._shadows.visibility(target[traced])
         for members in self._lamps(fresh, position, radiance, voxels.voxel_size):
             weights = radiance[members].max(axis=1)
-            basis = emitter_basis(self._points32, position[members], normal[members], area[members], weights)
+            basis = emitter_basis(self._points32, position[members], normal[members], area[members], weights,
+                                  visible, row[cluster[members]])
             kept.append(Emitter({keys[e]: float(w) for e, w in zip(members, weights)}, basis,
                                 radiance[members[0]] / weights[0]))
         self.emitters = kept
@@ -279,10 +333,10 @@ class Encoder:
         return out
 
 
-def _patch_keys(position, normal, area) -> list[bytes]:
-    """A patch's identity across edits: its position, normal and area (equal patches, should two ever
-    coincide, are told apart by their order)."""
-    keys = [row.tobytes() for row in np.column_stack([position, normal, area])]
+def _patch_keys(position, normal, area, target) -> list[bytes]:
+    """A patch's identity across edits: its position, normal, area and the end of its visibility ray
+    (equal patches, should two ever coincide, are told apart by their order)."""
+    keys = [row.tobytes() for row in np.column_stack([position, normal, area, target])]
     if len(set(keys)) < len(keys):
         seen: dict[bytes, int] = {}
         for e, key in enumerate(keys):
@@ -333,14 +387,17 @@ def _proportional_channels(before, after) -> np.ndarray:
     return out
 
 
-def emitter_basis(points: list[np.ndarray], position, normal, area, weights) -> np.ndarray:
-    """(9, P) float32: sum over patches of weight x the SH of their unshadowed light at the probes, for
-    radiance 1: `encoding.emitter_sh`'s terms (cos_e A / (r^2 + A/pi) towards each patch whose front
-    faces the probe), summed once per emitter instead of per edit."""
+def emitter_basis(points: list[np.ndarray], position, normal, area, weights, visible: np.ndarray,
+                  ray: np.ndarray) -> np.ndarray:
+    """(9, P) float32: sum over patches of weight x the SH of their light at the probes, for radiance 1:
+    `encoding.emitter_sh`'s terms (cos_e A / (r^2 + A/pi) towards each patch whose front faces the
+    probe, times its visibility: row `ray[e]` of `visible` (C, P)), summed once per emitter instead of
+    per edit."""
     f32 = [np.ascontiguousarray(a, np.float32) for a in
            (position[:, 0], position[:, 1], position[:, 2], normal[:, 0], normal[:, 1], normal[:, 2], area, weights)]
     out = np.empty((sh.SH_COUNT, len(points[0])), np.float32)
-    _emitter_basis(*points, *f32, np.float32(NEAR_FIELD), out)
+    _emitter_basis(*points, *f32, np.ascontiguousarray(visible, np.float32), np.asarray(ray, np.int64),
+                   np.float32(NEAR_FIELD), out)
     return out
 
 
@@ -350,7 +407,7 @@ probe loop inside it vectorizes."""
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def _emitter_basis(px, py, pz, sx, sy, sz, nx, ny, nz, area, weight, near_field, out):
+def _emitter_basis(px, py, pz, sx, sy, sz, nx, ny, nz, area, weight, visible, ray, near_field, out):
     count = px.shape[0]
     total = np.empty((9, BLOCK), np.float32)
     for start in range(0, count, BLOCK):
@@ -359,13 +416,14 @@ def _emitter_basis(px, py, pz, sx, sy, sz, nx, ny, nz, area, weight, near_field,
         for e in range(sx.shape[0]):
             ax, ay, az, mx, my, mz = sx[e], sy[e], sz[e], nx[e], ny[e], nz[e]
             flux, clamp = weight[e] * area[e], area[e] * near_field
+            seen = visible[ray[e], start:start + n]   # 0 or 1: the patch's shadow at each probe
             for i in range(n):
                 x, y, z = ax - px[start + i], ay - py[start + i], az - pz[start + i]
                 r2 = x * x + y * y + z * z
                 inv = np.float32(1.0) / math.sqrt(max(r2, np.float32(1e-12)))
                 x, y, z = x * inv, y * inv, z * inv
                 cosine = max(-(x * mx + y * my + z * mz), np.float32(0.0))
-                w = cosine * flux / (r2 + clamp)   # the patch's solid angle, as encoding.emitter_sh
+                w = cosine * flux / (r2 + clamp) * seen[i]   # its solid angle if seen, as encoding.emitter_sh
                 total[0, i] += w
                 total[1, i] += w * y
                 total[2, i] += w * z

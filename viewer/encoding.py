@@ -11,7 +11,7 @@ Four choices make a small network generalize beyond the layouts it was trained o
   monochrome and runs as a batch of three, so a pink wall is just a wall whose albedo differs between
   the three passes, and every training scene teaches three problems.
 - **Scale out.** Transport is linear in the emitted light too: each channel's inputs are divided by a
-  scale `s` (the mean unshadowed direct radiance over the probes) and the network's output is
+  scale `s` (the mean direct radiance over the probes, shadows included) and the network's output is
   multiplied by it, so a lamp twice as bright gives exactly twice the light, whatever was trained.
 - **Direct light as an input, shadowed.** The light arriving straight from the emitters is most of the
   field: one term per emitting lattice cell, times its visibility from the probe. The shadows are
@@ -199,11 +199,22 @@ def emitting_patches(cell: np.ndarray, voxels: VoxelGrid):
 
 def patch_visibility(blockers: dda.Cells, points: np.ndarray, position: np.ndarray, normal: np.ndarray,
                      lo: np.ndarray, spacing: np.ndarray) -> np.ndarray:
-    """(P, E) float32, 1 where probe p sees emitting patch e (at `position` facing `normal`), else 0.
-    Patches are clustered VISIBILITY_CELLS lattice cells a side per facing; each cluster is one ray to
-    the mean of its patches' positions, lifted SHADOW_OFFSET voxels along their normal."""
+    """(P, E) float32, 1 where probe p sees emitting patch e (at `position` facing `normal`), else 0: one
+    ray per probe and cluster of patches (`shadow_targets`)."""
     if len(position) == 0:
         return np.ones((len(points), 0), np.float32)
+    target, cluster = shadow_targets(blockers, position, normal, lo, spacing)
+    return dda.pairs_clear(blockers, points, target)[:, cluster]
+
+
+def shadow_targets(blockers: dda.Cells, position: np.ndarray, normal: np.ndarray, lo: np.ndarray,
+                   spacing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the visibility rays of emitting patches end: (C, 3) one point per cluster, and (E,) each
+    patch's cluster. Patches are clustered VISIBILITY_CELLS lattice cells a side per facing; a cluster's
+    ray ends at the mean of its patches' positions, lifted SHADOW_OFFSET voxels along their normal. So
+    a patch's visibility depends on every patch of its cluster, whichever emitter they belong to."""
+    if len(position) == 0:
+        return np.zeros((0, 3)), np.zeros(0, np.int64)
     facing = np.argmax(np.abs(normal) * 2 + (normal > 0), axis=1)
     block = np.floor((position - lo) / (spacing * VISIBILITY_CELLS)).astype(np.int64)
     _, cluster = np.unique(np.column_stack([block, facing]), axis=0, return_inverse=True)
@@ -213,8 +224,7 @@ def patch_visibility(blockers: dda.Cells, points: np.ndarray, position: np.ndarr
     centre /= np.bincount(cluster, minlength=count)[:, None]
     lift = np.stack([np.bincount(cluster, normal[:, a], minlength=count) for a in range(3)], 1)
     lift /= np.maximum(np.linalg.norm(lift, axis=1, keepdims=True), 1e-12)
-    target = centre + SHADOW_OFFSET * blockers.h * lift
-    return dda.pairs_clear(blockers, points, target)[:, cluster]
+    return centre + SHADOW_OFFSET * blockers.h * lift, cluster
 
 
 def emitter_sh(lights, points: np.ndarray, visible: np.ndarray | None = None) -> np.ndarray:

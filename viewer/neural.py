@@ -18,7 +18,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from viewer import encoding
+from viewer import dda, encoding
 from viewer.domain import Domain, Shape, measure, outside
 from viewer.encoder import Encoder
 from viewer.probes import ProbeGrid
@@ -155,12 +155,14 @@ class NeuralField:
     def resolution(self) -> int:
         return self.card.probes
 
-    def predict(self, voxels: VoxelGrid, sun, lo, hi, include_emitted: bool = True,
+    def predict(self, voxels: VoxelGrid, sun, lo, hi, blockers: dda.Cells | None, include_emitted: bool = True,
                 timings: dict | None = None, resolution: int | None = None, reuse: bool = True) -> ProbeGrid:
         """Probes over [lo, hi]: all the incident light (`include_emitted`, as `sample` and Mitsuba see
-        it) or the light reflected by surfaces alone (what the renderer samples). `resolution` other
-        than the card's runs the same convolutional network on another lattice (for timing; its
-        accuracy there is not what the card measured).
+        it) or the light reflected by surfaces alone (what the renderer samples). `blockers` cast the
+        direct light's shadows: `encoding.occluders` of the scene the voxels were made from, the same
+        object while its triangles stay the same. `resolution` other than the card's runs the same
+        convolutional network on another lattice (for timing; its accuracy there is not what the card
+        measured).
 
         The encoder of the lattice is kept (viewer.encoder), so a call after an edit recomputes only
         what the edit changed, and the network runs only for the colour passes whose inputs changed
@@ -170,7 +172,7 @@ class NeuralField:
         clock = clock_now()
         with _one_blas_thread():
             encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m)
-            enc = encoder.encode(voxels, sun)
+            enc = encoder.encode(voxels, sun, blockers)
         encoded = clock_now()
         out = self._network(encoder, enc.inputs) if reuse else self._run(enc.inputs)  # (3, 19, M, M, M)
         ran = clock_now()
@@ -209,13 +211,14 @@ class NeuralField:
         return self.session.run(None, {self.input_name: inputs})[0]
 
     def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:
-        """Voxelize the scene at the card's resolution and predict over its bounds."""
+        """Voxelize the scene at the card's resolution, list its occluders, and predict over its bounds."""
         clock = clock_now()
         voxels = voxelize(scene, self.card.voxels)
+        blockers = encoding.occluders(scene, voxels)
         if timings is not None:
             timings["voxelize"] = clock_now() - clock
         lo, hi = scene.bounds
-        return self.predict(voxels, scene.sun, lo, hi, include_emitted, timings)
+        return self.predict(voxels, scene.sun, lo, hi, blockers, include_emitted, timings)
 
 
 class SceneVoxels:
@@ -223,7 +226,8 @@ class SceneVoxels:
     (viewer.voxels.Voxelization): the voxels of any scene with the same triangles, whatever its colours,
     are one sparse product away (`voxels_of`). Kept per (voxel, face) (viewer.voxel_faces), so that the
     voxels of a scene where some faces moved (a dragged lamp) are made from the `previous` ones and the
-    moved faces alone. With the triangles' shape for the domain check."""
+    moved faces alone. With what casts the encoding's shadows (`encoding.occluders`, listed afresh: they
+    are the triangles) and the triangles' shape for the domain check."""
 
     def __init__(self, scene: Scene, resolution: int, previous: "SceneVoxels | None" = None):
         clock = clock_now()
@@ -238,8 +242,11 @@ class SceneVoxels:
         self._colours = None
         self._grid = self.voxelization.grid
         self.voxels_of(scene)   # colours by the faces' shares from the start: every edit's come the same way
+        self.blockers = encoding.occluders(scene, self._grid)
+        """The occluders of these triangles, one object for every colour edit (the encoder keeps its
+        shadows while it is given the same)."""
         self.seconds = clock_now() - clock
-        """How long voxelizing took."""
+        """How long voxelizing and listing the occluders took."""
 
     @property
     def resolution(self) -> int:
@@ -271,8 +278,9 @@ class NeuralGI:
     """The neural field on a scene and its edits, as `viewer.gi.PhysicalGI` is for the solver: the
     voxels of the scene's geometry are kept (`SceneVoxels`), so a colour edit (an albedo, a lamp's
     colour or intensity) recolours them instead of voxelizing, and the field's encoder recomputes only
-    what the edit changed (viewer.encoder). A moved lamp or a new scene is voxelized again: `prepare`
-    (which can run on a worker thread) and `install`, or `update` for both."""
+    what the edit changed (viewer.encoder). A moved lamp or a new scene is voxelized again and its
+    occluders listed again (so the encoder traces its shadows again): `prepare` (which can run on a
+    worker thread) and `install`, or `update` for both."""
 
     def __init__(self, field: NeuralField, resolution: int | None = None, voxels: int | None = None):
         self.field = field
@@ -301,7 +309,8 @@ class NeuralGI:
         if timings is not None:
             timings["recolour"] = clock_now() - clock
         lo, hi = self.voxels.bounds
-        return self.field.predict(grid, scene.sun, lo, hi, include_emitted, timings, self.resolution)
+        return self.field.predict(grid, scene.sun, lo, hi, self.voxels.blockers, include_emitted, timings,
+                                  self.resolution)
 
     def outside(self, scene: Scene) -> list[str]:
         """Why `scene` (with the installed geometry) lies outside the model's training domain

@@ -35,7 +35,8 @@ from viewer.scene import Scene
 ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- bench-neural -->"
 STAGES = ("voxels", "encode", "network", "unpack")
-"""`voxels`: voxelizing (a new geometry) or recolouring the kept voxels (a colour edit)."""
+"""`voxels`: voxelizing and listing the occluders (a new geometry) or recolouring the kept voxels (a colour
+edit)."""
 CONFIGS = ("w8-h16", "w12-h24", "w16-h32", "w8-h8", "w12-h8", "w16-h8", "w4-h8", "w8-h8-hl1", "w8-h16-nearest",
            "w8-h8-nearest")
 """ProbeNet sizes for `--configs`: width, hidden; `hl1`: a one-layer head (two by default); `nearest`:
@@ -116,10 +117,11 @@ def _before(scene: Scene, field: NeuralField, probes: int, voxels: int) -> dict[
     wall = time.perf_counter()
     clock = clock_now()
     grid = voxelize(scene, voxels)
+    blockers = encoding.occluders(scene, grid)   # with the voxels, as NeuralGI lists them
     lo, hi = scene.bounds
     voxelized = clock_now()
     with _one_blas_thread():
-        enc = encoding.encode(grid, scene.sun, lo, hi, probes, encoding.occluders(scene, grid))
+        enc = encoding.encode(grid, scene.sun, lo, hi, probes, blockers)
     encoded = clock_now()
     out = field.session.run(None, {field.input_name: enc.inputs})[0]
     ran = clock_now()
@@ -135,13 +137,11 @@ def network_configs(configs, probes: int, repeats: int) -> list[tuple[str, int, 
     """(config, parameters, median ms) of onnxruntime alone on the Cornell box's encoded inputs."""
     import torch
 
-    from viewer.encoder import Encoder
     from viewer.training.export import export_onnx
     from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
-    from viewer.voxels import voxelize
 
     scene = scenes.load("cornell")
-    inputs = Encoder(*scene.bounds, probes).encode(voxelize(scene, probes), scene.sun).inputs
+    inputs = encoding.encode_scene(scene, probes, probes).inputs
     out = []
     torch.manual_seed(0)
     with tempfile.TemporaryDirectory() as folder:
@@ -172,8 +172,8 @@ def network_configs(configs, probes: int, repeats: int) -> list[tuple[str, int, 
 def table(results: dict, model: str) -> list[str]:
     lines = [f"Model {model}; medians; the stages in CPU ms of the one thread they run on, the last column in "
              "wall-clock ms; `passes`: colour passes the network ran (3: all; 0: its output reused, scaled).", "",
-             "| scene | probes | voxels | edit | voxels (voxelize or recolour) | encode | network | passes | unpack | "
-             "encode + network + unpack | edit to probes (CPU) | edit to probes (wall) |",
+             "| scene | probes | voxels | edit | voxels (voxelize + occluders, or recolour) | encode | network | passes | "
+             "unpack | encode + network + unpack | edit to probes (CPU) | edit to probes (wall) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for (name, probes, voxels), rows in results.items():
         for what, r in rows.items():

@@ -78,6 +78,7 @@ def measure_scene(scene: scenes.Scene, methods: dict, points_count: int, directi
 
 
 def neural_method(model: Path):
+    from viewer.encoding import occluders
     from viewer.neural import NeuralField
     from viewer.voxels import voxelize
 
@@ -85,7 +86,8 @@ def neural_method(model: Path):
 
     def solve(scene):  # one voxelization and one network run: the second ask reuses the output
         voxels, (lo, hi) = voxelize(scene, field.card.voxels), scene.bounds
-        return tuple(field.predict(voxels, scene.sun, lo, hi, include_emitted=part) for part in (True, False))
+        blockers = occluders(scene, voxels)
+        return tuple(field.predict(voxels, scene.sun, lo, hi, blockers, include_emitted=part) for part in (True, False))
 
     return field, solve
 

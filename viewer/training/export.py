@@ -75,7 +75,7 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
             "name": "inputs", "shape": ["3 x scenes", encoding.CHANNELS, resolution, resolution, resolution],
             "features": list(encoding.FEATURES), "encoding_version": encoding.VERSION, "voxels": ENCODING_VOXELS,
             "normalization": "one pass per colour channel; emission and direct light divided by the pass's "
-                             "scale (mean unshadowed direct radiance DC over the probes), outputs multiplied by it",
+                             "scale (mean direct radiance DC over the probes, shadows traced), outputs multiplied by it",
         },
         "outputs": {"name": "probes", "channels": OUTPUTS,
                     "layout": "0-8 SH of all incident light, 9-17 SH of the light reflected by surfaces, "

