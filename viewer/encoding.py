@@ -232,48 +232,58 @@ def emitter_sh(lights, points: np.ndarray, visible: np.ndarray | None = None) ->
     angle cos_e A / (r^2 + A/pi), seen from the probe if its front faces it, times `visible` (P, E)
     (`patch_visibility`; None: nothing in the way)."""
     source, normal, area, radiance = lights
-    out = np.zeros((len(points), sh.SH_COUNT, 3), np.float32)
+    out = np.zeros((3, sh.SH_COUNT, len(points)), np.float32)
     if len(area) == 0:
-        return out.astype(np.float64)
-    f32 = [np.ascontiguousarray(a, np.float32) for a in (points, source, normal, area, radiance)]
-    seen = (np.ones((len(points), 1), np.float32) if visible is None
-            else np.ascontiguousarray(visible, np.float32))
+        return out.transpose(2, 1, 0).astype(np.float64)
+    f32 = [np.ascontiguousarray(a, np.float32) for a in (points.T, source, normal, area, radiance)]
+    seen = (np.ones((len(area), 1), np.float32) if visible is None
+            else np.ascontiguousarray(np.asarray(visible, np.float32).T))
     _emitter_sh(*f32, seen, visible is not None, np.float32(NEAR_FIELD), out)
-    return out.astype(np.float64)
+    return out.transpose(2, 1, 0).astype(np.float64)
+
+
+SH_BLOCK = 256
+"""Probes per block of `_emitter_sh`: the patch loop runs over a block that stays in L1, and the probe
+loop inside it vectorizes."""
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
 def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_field, out):
-    """The terms of `emitter_sh`, probe by probe, patch by patch (one pass, no (P, E) temporaries)."""
-    acc = np.empty(9, np.float32)
-    for p in range(points.shape[0]):
-        px, py, pz = points[p, 0], points[p, 1], points[p, 2]
+    """The terms of `emitter_sh`: points (3, P), visible (E, P) when `shadowed`, out (3, 9, P)."""
+    count = points.shape[1]
+    w = np.empty(SH_BLOCK, np.float32)
+    b = np.empty((9, SH_BLOCK), np.float32)
+    for start in range(0, count, SH_BLOCK):
+        n = min(SH_BLOCK, count - start)
         for e in range(source.shape[0]):
-            w = visible[p, e] if shadowed else np.float32(1.0)
-            if w == 0:
-                continue
-            x, y, z = source[e, 0] - px, source[e, 1] - py, source[e, 2] - pz
-            r2 = x * x + y * y + z * z
-            inv = np.float32(1.0) / math.sqrt(max(r2, np.float32(1e-12)))
-            x, y, z = x * inv, y * inv, z * inv
-            cosine = -(x * normal[e, 0] + y * normal[e, 1] + z * normal[e, 2])
-            if cosine <= 0:
-                continue
-            w *= cosine * area[e] / (r2 + area[e] * near_field)
-            acc[0] = np.float32(0.282095)
-            acc[1] = np.float32(0.488603) * y
-            acc[2] = np.float32(0.488603) * z
-            acc[3] = np.float32(0.488603) * x
-            acc[4] = np.float32(1.092548) * x * y
-            acc[5] = np.float32(1.092548) * y * z
-            acc[6] = np.float32(0.315392) * (np.float32(3.0) * z * z - np.float32(1.0))
-            acc[7] = np.float32(1.092548) * x * z
-            acc[8] = np.float32(0.546274) * (x * x - y * y)
+            sx, sy, sz = source[e, 0], source[e, 1], source[e, 2]
+            mx, my, mz = normal[e, 0], normal[e, 1], normal[e, 2]
+            flux, clamp = area[e], area[e] * near_field
+            for i in range(n):
+                x, y, z = sx - points[0, start + i], sy - points[1, start + i], sz - points[2, start + i]
+                r2 = x * x + y * y + z * z
+                inv = np.float32(1.0) / math.sqrt(max(r2, np.float32(1e-12)))
+                x, y, z = x * inv, y * inv, z * inv
+                weight = max(-(x * mx + y * my + z * mz), np.float32(0.0)) * flux / (r2 + clamp)
+                if shadowed:
+                    weight *= visible[e, start + i]
+                w[i] = weight
+                b[0, i] = np.float32(0.282095)
+                b[1, i] = np.float32(0.488603) * y
+                b[2, i] = np.float32(0.488603) * z
+                b[3, i] = np.float32(0.488603) * x
+                b[4, i] = np.float32(1.092548) * x * y
+                b[5, i] = np.float32(1.092548) * y * z
+                b[6, i] = np.float32(0.315392) * (np.float32(3.0) * z * z - np.float32(1.0))
+                b[7, i] = np.float32(1.092548) * x * z
+                b[8, i] = np.float32(0.546274) * (x * x - y * y)
             for c in range(3):
-                wc = w * radiance[e, c]
-                if wc != 0:
-                    for k in range(9):
-                        out[p, k, c] += wc * acc[k]
+                rc = radiance[e, c]
+                if rc == 0:
+                    continue
+                for k in range(9):
+                    for i in range(n):
+                        out[c, k, start + i] += rc * w[i] * b[k, i]
 
 
 BOUNCE_PATCH = 2
