@@ -114,3 +114,19 @@ def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
     # with the solver's rooms weighted 0, matching Mitsuba's probes costs nothing, the solver's a lot
     assert float(loss_terms(Constant(2.0), batch, settings)[0]) == pytest.approx(0.0, abs=1e-9)
     assert float(loss_terms(Constant(1.0), batch, settings)[0]) == pytest.approx(0.5)  # 1^2 / (1 + 1)
+
+
+def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
+    """The head starts at zero: all the light is the encoding's direct light plus its bounce, and the
+    reflected light is the bounce; the convolutions read the light through an exportable asinh."""
+    from viewer.scene import load
+    from viewer.training.models import REFLECTED, TOTAL, asinh
+
+    enc = encoding.encode_scene(load("cornell"), 8, 16)
+    x = torch.from_numpy(enc.inputs)
+    with torch.no_grad():
+        out = ProbeNet(ProbeNetConfig(width=4, hidden=8))(x)
+    torch.testing.assert_close(out[:, REFLECTED], x[:, encoding.BOUNCE])
+    torch.testing.assert_close(out[:, TOTAL], x[:, encoding.DIRECT] + x[:, encoding.BOUNCE])
+    t = torch.linspace(-400.0, 400.0, 10001)
+    torch.testing.assert_close(asinh(t), torch.asinh(t), atol=1e-6, rtol=1e-6)

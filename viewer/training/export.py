@@ -28,8 +28,16 @@ ROOT = Path(__file__).resolve().parents[2]
 TOLERANCE = 1e-4
 
 
+def shipped_checkpoint(run: Path) -> Path:
+    """The run's best epoch (`train.BEST`) where it kept one, else its latest."""
+    from viewer.training.train import BEST
+
+    best = Path(run) / BEST
+    return best if best.exists() else Path(run) / "checkpoint.pt"
+
+
 def load_run(run: Path) -> ProbeNet:
-    state = torch.load(Path(run) / "checkpoint.pt", weights_only=False)
+    state = torch.load(shipped_checkpoint(run), weights_only=False)
     model = ProbeNet(ProbeNetConfig(**state["config"]))
     model.load_state_dict(state["model"])
     return model.eval()
@@ -116,9 +124,11 @@ def main(argv=None) -> int:
     history = json.loads((args.run / "history.json").read_text())
     metrics = json.loads(args.metrics.read_text()) if args.metrics else {}
     data = json.loads((args.run / "data.json").read_text()) if (args.run / "data.json").exists() else {}
-    training = {"run": str(args.run), "epochs": len(history["epochs"]),
-                "final_val_relative_rmse": history["val_relative_rmse"][-1],
-                **({"final_val": history["val_metrics"][-1]} if history.get("val_metrics") else {}), **data}
+    chosen = torch.load(shipped_checkpoint(args.run), weights_only=False)["history"]
+    epoch = len(chosen["epochs"]) - 1   # the shipped epoch's own validation (the best, or the last)
+    training = {"run": str(args.run), "epochs": len(history["epochs"]), "shipped_epoch": epoch + 1,
+                "final_val_relative_rmse": history["val_relative_rmse"][epoch],
+                **({"final_val": history["val_metrics"][epoch]} if history.get("val_metrics") else {}), **data}
     card = export(args.run, args.out / f"{args.name}.onnx", args.probes, inputs, training, metrics)
     print(f"wrote {args.out / args.name}.onnx ({card['parameters']} parameters, "
           f"onnx vs torch {card['metrics']['onnx_max_difference']:.1e})", file=sys.stderr)

@@ -36,6 +36,9 @@ ODD_IN = {0: [3, 4, 7], 2: [2, 5, 7]}
 NORMAL_CHANNEL = {0: 1, 2: 3}
 COORD_CHANNEL = {0: 15, 2: 17}
 VALIDITY_WEIGHT = 0.05
+BEST = "best.pt"
+"""The checkpoint of the epoch with the lowest validation loss so far (what `viewer.training.export`
+ships); `checkpoint.pt` is the latest, which a resumed run continues."""
 
 
 @dataclass
@@ -285,6 +288,10 @@ def train(model: ProbeNet, train_set: Samples, val_set: Samples, settings: Train
                         "schedule": schedule.state_dict(), "history": history.__dict__,
                         "config": model.config.to_dict()}, checkpoint)
             (run / "history.json").write_text(json.dumps(history.__dict__, indent=1))
+            if metrics["loss"] <= min(history.val):
+                # the epoch the export ships: validation wanders by several points between epochs
+                torch.save({"model": model.state_dict(), "history": history.__dict__, "epoch": epoch,
+                            "config": model.config.to_dict()}, run / BEST)
     if run:
         plot_history(history, run / "loss.png", title=run.name)
     return history
