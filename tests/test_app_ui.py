@@ -385,7 +385,7 @@ def test_recolouring_a_wall_updates_the_indirect_light_in_the_background(ctx, co
 
 
 def test_the_neural_source_warns_on_a_scene_outside_its_training_domain(ctx, imgui_frame):
-    """A nearly white wall (albedo 0.99, the shipped model trained up to 0.90) shown by the neural source:
+    """A nearly white wall (albedo 0.99, the shipped model trained up to 0.95) shown by the neural source:
     a warning names the albedo and points to the physical solver, stays on screen (drawn in the messages
     window), and goes when an edit brings the scene back inside."""
     from viewer.gpu.renderer import RenderSettings, Renderer
@@ -412,7 +412,7 @@ def test_the_neural_source_warns_on_a_scene_outside_its_training_domain(ctx, img
         settle()
         [message] = [m for m in session.messages if m.warning]
         assert "outside what the neural model was trained on" in message.text
-        assert "'back' albedo 0.99 is above the trained 0.90" in message.text and "physical solver" in message.text
+        assert "'back' albedo 0.99 is above the trained 0.95" in message.text and "physical solver" in message.text
         assert gi.domain_warning == message.text
         frame, _ = imgui_frame
         for _ in range(2):   # an auto-sized window is measured in its first frame, drawn from the second

@@ -59,7 +59,7 @@ def test_a_flat_scene_samples_with_only_the_timing_line_on_stderr(tmp_path, poin
 
 
 def test_neural_sample_warns_on_a_scene_outside_the_models_training_domain(tmp_path, points):
-    """The Cornell box with a near-white back wall (0.99; the shipped model trained up to 0.90): a warning
+    """The Cornell box with a near-white back wall (0.99; the shipped model trained up to 0.95): a warning
     line on stderr that names the albedo and the physical solver, the probes all the same, exit 0."""
     if not (ROOT / "models" / "probenet.onnx").is_file():
         pytest.skip("no shipped model")
@@ -72,7 +72,7 @@ def test_neural_sample_warns_on_a_scene_outside_the_models_training_domain(tmp_p
     result = run("sample", tmp_path / "white.obj", "--points", points, "--method", "neural", "--out", out)
     assert result.returncode == 0, result.stderr
     warning, timing = result.stderr.strip().splitlines()
-    assert warning.startswith("warning: ") and "'back' albedo 0.99 is above the trained 0.90" in warning
+    assert warning.startswith("warning: ") and "'back' albedo 0.99 is above the trained 0.95" in warning
     assert "physical solver" in warning and timing.startswith("sample neural:")
     assert np.load(out).shape == (3, 9, 3)
     inside = run("sample", "cornell", "--points", points, "--method", "neural", "--out", out)

@@ -255,8 +255,8 @@ def ship_run(run: Path, args, evaluation) -> dict:
     from viewer.training.dataset import room_refs
     from viewer.training.samples import ENCODING_VOXELS, training_split
 
-    state = torch.load(run / "checkpoint.pt", weights_only=False)
-    history = state["history"]
+    state = torch.load(exporter.shipped_checkpoint(run), weights_only=False)
+    history = state["history"]   # up to the shipped epoch (the best, where the run kept one)
     config = state["config"]
     m = args.probes
     scene = scenes.load("paper-test")
@@ -270,6 +270,8 @@ def ship_run(run: Path, args, evaluation) -> dict:
     files = {split: len(room_refs(args.data, split)) for split in ("train", "val", "paper")}
     truth = manifest.get("settings", manifest).get("truth", "mitsuba")  # format 2 keeps it in "settings"
     training["dataset"] = {"command": manifest.get("command"), "truth": truth, "files_used": files}
+    if (run / "data.json").exists():   # what the run trained on: training_rooms, ranges (train.record_data)
+        training.update(json.loads((run / "data.json").read_text()))
     path = run / "probenet.onnx"
     card = exporter.export(run, path, m, inputs, training,
                            {"val_relative_rmse_probes": history["val_relative_rmse"][-1]})
