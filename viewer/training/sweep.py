@@ -261,7 +261,9 @@ def ship_run(run: Path, args, evaluation) -> dict:
     m = args.probes
     scene = scenes.load("paper-test")
     inputs = encoding.encode_scene(scene, m, ENCODING_VOXELS).inputs
-    train_scenes = len(training_split(args.data, m, quiet=True))
+    recorded = run / "data.json"   # what the run trained on (train.record_data): the dataset may have grown
+    train_scenes = (json.loads(recorded.read_text())["training_rooms"] if recorded.exists()
+                    else len(training_split(args.data, m, quiet=True)))
     training = {"data": str(args.data), "scenes": train_scenes, "epochs": len(history["epochs"]),
                 "seconds": float(sum(history["seconds"])),
                 "command": f"python -m viewer.training.train --data {args.data} --out {run} --width {config['width']} "
@@ -270,8 +272,8 @@ def ship_run(run: Path, args, evaluation) -> dict:
     files = {split: len(room_refs(args.data, split)) for split in ("train", "val", "paper")}
     truth = manifest.get("settings", manifest).get("truth", "mitsuba")  # format 2 keeps it in "settings"
     training["dataset"] = {"command": manifest.get("command"), "truth": truth, "files_used": files}
-    if (run / "data.json").exists():   # what the run trained on: training_rooms, ranges (train.record_data)
-        training.update(json.loads((run / "data.json").read_text()))
+    if recorded.exists():
+        training.update(json.loads(recorded.read_text()))
     path = run / "probenet.onnx"
     card = exporter.export(run, path, m, inputs, training,
                            {"val_relative_rmse_probes": history["val_relative_rmse"][-1]})
