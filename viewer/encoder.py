@@ -30,15 +30,13 @@ intensity) leaves that channel's network input as it was. The network then does 
 from __future__ import annotations
 
 import itertools
-import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 from scipy import ndimage, sparse
 
 from viewer import dda, encoding, sh
-from viewer.encoding import BOUNCE, CHANNELS, DIRECT, NEAR_FIELD, Encoding
+from viewer.encoding import BOUNCE, CHANNELS, DIRECT, Encoding
 from viewer.probes import ProbeGrid
 from viewer.voxels import VoxelGrid
 
@@ -156,7 +154,6 @@ class Encoder:
         self.lo, self.hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         self.resolution = int(resolution)
         self.points = ProbeGrid.positions_for(self.lo, self.hi, self.resolution).reshape(-1, 3)  # x slowest, as encode
-        self._points32 = [np.ascontiguousarray(self.points[:, a], np.float32) for a in range(3)]
         self.serial = next(_serials)
         """Tells encoders apart (a cache of the network's outputs keys on it and on `revisions`)."""
         self.revisions = np.zeros(3, np.int64)
@@ -307,7 +304,7 @@ class Encoder:
             visible = self._shadows.visibility(target[traced])
         for members in self._lamps(fresh, position, radiance, voxels.voxel_size):
             weights = radiance[members].max(axis=1)
-            basis = emitter_basis(self._points32, position[members], normal[members], area[members], weights,
+            basis = emitter_basis(self.points, position[members], normal[members], area[members], weights,
                                   visible, row[cluster[members]])
             kept.append(Emitter({keys[e]: float(w) for e, w in zip(members, weights)}, basis,
                                 radiance[members[0]] / weights[0]))
@@ -393,60 +390,10 @@ def _proportional_channels(before, after) -> np.ndarray:
     return out
 
 
-def emitter_basis(points: list[np.ndarray], position, normal, area, weights, visible: np.ndarray,
+def emitter_basis(points: np.ndarray, position, normal, area, weights, visible: np.ndarray,
                   ray: np.ndarray) -> np.ndarray:
-    """(9, P) float32: sum over patches of weight x the SH of their light at the probes, for radiance 1:
-    `encoding.emitter_sh`'s terms (cos_e A / (r^2 + A/pi) towards each patch whose front faces the
-    probe, times its visibility: row `ray[e]` of `visible` (C, P)), summed once per emitter instead of
-    per edit."""
-    f32 = [np.ascontiguousarray(a, np.float32) for a in
-           (position[:, 0], position[:, 1], position[:, 2], normal[:, 0], normal[:, 1], normal[:, 2], area, weights)]
-    out = np.empty((sh.SH_COUNT, len(points[0])), np.float32)
-    _emitter_basis(*points, *f32, np.ascontiguousarray(visible, np.float32), np.asarray(ray, np.int64),
-                   np.float32(NEAR_FIELD), out)
-    return out
-
-
-BLOCK = 256
-"""Probes per block of the compiled basis: the patch loop runs over a block that stays in L1, and the
-probe loop inside it vectorizes."""
-
-
-@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def _emitter_basis(px, py, pz, sx, sy, sz, nx, ny, nz, area, weight, visible, ray, near_field, out):
-    count = px.shape[0]
-    total = np.empty((9, BLOCK), np.float32)
-    for start in range(0, count, BLOCK):
-        n = min(BLOCK, count - start)
-        total[:, :n] = 0.0
-        for e in range(sx.shape[0]):
-            ax, ay, az, mx, my, mz = sx[e], sy[e], sz[e], nx[e], ny[e], nz[e]
-            flux, clamp = weight[e] * area[e], area[e] * near_field
-            seen = visible[ray[e], start:start + n]   # 0 or 1: the patch's shadow at each probe
-            for i in range(n):
-                x, y, z = ax - px[start + i], ay - py[start + i], az - pz[start + i]
-                r2 = x * x + y * y + z * z
-                inv = np.float32(1.0) / math.sqrt(max(r2, np.float32(1e-12)))
-                x, y, z = x * inv, y * inv, z * inv
-                cosine = max(-(x * mx + y * my + z * mz), np.float32(0.0))
-                w = cosine * flux / (r2 + clamp) * seen[i]   # its solid angle if seen, as encoding.emitter_sh
-                total[0, i] += w
-                total[1, i] += w * y
-                total[2, i] += w * z
-                total[3, i] += w * x
-                total[4, i] += w * x * y
-                total[5, i] += w * y * z
-                total[6, i] += w * z * z
-                total[7, i] += w * x * z
-                total[8, i] += w * (x * x - y * y)
-        for i in range(n):
-            p = start + i
-            out[0, p] = 0.282095 * total[0, i]      # the SH constants of DESIGN.md (viewer.sh.basis)
-            out[1, p] = 0.488603 * total[1, i]
-            out[2, p] = 0.488603 * total[2, i]
-            out[3, p] = 0.488603 * total[3, i]
-            out[4, p] = 1.092548 * total[4, i]
-            out[5, p] = 1.092548 * total[5, i]
-            out[6, p] = 0.315392 * (3.0 * total[6, i] - total[0, i])
-            out[7, p] = 1.092548 * total[7, i]
-            out[8, p] = 0.546274 * total[8, i]
+    """(9, P) float32: sum over patches of weight x the SH of their light at the probes (P, 3), for
+    radiance 1: `encoding.emitter_sh`'s terms, each patch seen where row `ray[e]` of `visible` (C, P)
+    says so, summed once per emitter instead of per edit."""
+    lights = (position, normal, area, np.asarray(weights)[:, None])
+    return encoding.emitter_sh_rows(lights, points, np.asarray(visible)[np.asarray(ray, np.int64)])[0]

@@ -92,10 +92,10 @@ SHADOW_CELLS = 2
 """The occluders' grid is this many times finer than the voxels' (the cells a shadow ray marches)."""
 
 
-def occluders(scene, voxels: VoxelGrid, finer: int | None = None) -> dda.Cells:
+def occluders(scene, voxels: VoxelGrid) -> dda.Cells:
     """What casts the encoding's shadows: every triangle of `scene`, listed on the cells of `voxels`
-    divided `finer` (SHADOW_CELLS) times per axis."""
-    k = SHADOW_CELLS if finer is None else int(finer)
+    divided SHADOW_CELLS times per axis."""
+    k = SHADOW_CELLS
     return dda.Cells.blocking(scene, voxels.lo, voxels.voxel_size / k, voxels.resolution * k)
 
 
@@ -231,15 +231,23 @@ def emitter_sh(lights, points: np.ndarray, visible: np.ndarray | None = None) ->
     """(P, 9, 3) SH of the light arriving straight from the emitting patches: each patch is a solid
     angle cos_e A / (r^2 + A/pi), seen from the probe if its front faces it, times `visible` (P, E)
     (`patch_visibility`; None: nothing in the way)."""
+    rows = None if visible is None else np.asarray(visible).T
+    return emitter_sh_rows(lights, points, rows).transpose(2, 1, 0).astype(np.float64)
+
+
+def emitter_sh_rows(lights, points: np.ndarray, visible: np.ndarray | None = None) -> np.ndarray:
+    """`emitter_sh` as (C, 9, P) float32 for a radiance of C channels (lights[3] is (E, C)), with the
+    visibility as (E, P) rows: the layout the compiled loop works in (`viewer.encoder` keeps one
+    channel per emitter, a radiance of 1 times its weights)."""
     source, normal, area, radiance = lights
-    out = np.zeros((3, sh.SH_COUNT, len(points)), np.float32)
+    radiance = np.asarray(radiance)   # (E, C)
+    out = np.zeros((radiance.shape[1], sh.SH_COUNT, len(points)), np.float32)
     if len(area) == 0:
-        return out.transpose(2, 1, 0).astype(np.float64)
-    f32 = [np.ascontiguousarray(a, np.float32) for a in (points.T, source, normal, area, radiance)]
-    seen = (np.ones((len(area), 1), np.float32) if visible is None
-            else np.ascontiguousarray(np.asarray(visible, np.float32).T))
+        return out
+    f32 = [np.ascontiguousarray(a, np.float32) for a in (np.asarray(points).T, source, normal, area, radiance)]
+    seen = np.ones((len(area), 1), np.float32) if visible is None else np.ascontiguousarray(visible, np.float32)
     _emitter_sh(*f32, seen, visible is not None, np.float32(NEAR_FIELD), out)
-    return out.transpose(2, 1, 0).astype(np.float64)
+    return out
 
 
 SH_BLOCK = 256
@@ -249,7 +257,8 @@ loop inside it vectorizes."""
 
 @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
 def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_field, out):
-    """The terms of `emitter_sh`: points (3, P), visible (E, P) when `shadowed`, out (3, 9, P)."""
+    """The terms of `emitter_sh`: points (3, P), radiance (E, C), visible (E, P) when `shadowed`, out
+    (C, 9, P)."""
     count = points.shape[1]
     w = np.empty(SH_BLOCK, np.float32)
     b = np.empty((9, SH_BLOCK), np.float32)
@@ -277,7 +286,7 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
                 b[6, i] = np.float32(0.315392) * (np.float32(3.0) * z * z - np.float32(1.0))
                 b[7, i] = np.float32(1.092548) * x * z
                 b[8, i] = np.float32(0.546274) * (x * x - y * y)
-            for c in range(3):
+            for c in range(radiance.shape[1]):
                 rc = radiance[e, c]
                 if rc == 0:
                     continue
