@@ -224,6 +224,30 @@ def test_format_1_files_still_read(tmp_path):
     np.testing.assert_array_equal(example.raw[4], arrays["sh_4"])
 
 
+def test_a_coarser_lattice_is_read_out_of_a_finer_one():
+    """A room stored at 12^3 probes also answers at 4^3 (every third probe, from the second: the
+    centres of the coarse cells), with the numbers the truth computes at 4^3 directly."""
+    import io
+
+    assert dataset.coarser_lattices(24) == [(8, slice(1, None, 3))] and dataset.coarser_lattices(16) == []
+    scene, params = dataset.make_scene("train", 0, 1)
+    lo, hi = scene.bounds
+    arrays = truth.targets(scene, lo, hi, (12, 4), "physical", directions=32, seed=0, solver_voxels=8)
+    stored = {k: v for k, v in arrays.items() if k.endswith("_12") or "_12_" in k}
+    stored.update(dataset.scene_arrays(scene), lo=lo, hi=hi, params=np.array(json.dumps(params)),
+                  generator=np.array(json.dumps({"format": 2})))
+    buffer = io.BytesIO()
+    np.savez(buffer, **stored)
+    buffer.seek(0)
+    with np.load(buffer) as data:
+        example = dataset.example_from(data, "room.npz")
+    assert sorted(example.raw) == [4, 12]
+    np.testing.assert_allclose(example.raw[4], arrays["sh_4"], atol=1e-5)
+    np.testing.assert_allclose(example.direct[4], arrays["sh_4_direct"], atol=1e-5)
+    np.testing.assert_array_equal(example.valid[4], arrays["valid_4"])
+    np.testing.assert_allclose(example.targets[4], arrays["sh_4_filled"], atol=1e-5)
+
+
 def test_the_stored_scene_is_what_the_truth_saw():
     scene, _ = dataset.make_scene("train", 2, 1)
     arrays = dataset.scene_arrays(scene)

@@ -149,20 +149,37 @@ def room_bytes(arrays: dict[str, np.ndarray]) -> bytes:
 
 
 def example_from(data, path: Path) -> Example:
-    """An Example from an open `.npz` of either format."""
+    """An Example from an open `.npz` of either format, with the coarser lattices its stored ones contain
+    (`coarser_lattices`)."""
     resolutions = sorted(int(k[3:]) for k in data.files if k.startswith("sh_") and k[3:].isdigit())
     raw = {m: np.asarray(data[f"sh_{m}"], np.float32) for m in resolutions}
     valid = {m: np.asarray(data[f"valid_{m}"], bool) for m in resolutions}
-    filled = {m: (np.asarray(data[f"sh_{m}_filled"], np.float32) if f"sh_{m}_filled" in data.files
-                  else fill_invalid(raw[m], valid[m])) for m in resolutions}
+    direct = {m: np.asarray(data[f"sh_{m}_direct"], np.float32) for m in resolutions}
     unbiased = [m for m in resolutions if f"sh_{m}_mitsuba" in data.files]
+    mitsuba = {m: np.asarray(data[f"sh_{m}_mitsuba"], np.float32) for m in unbiased}
+    mitsuba_direct = {m: np.asarray(data[f"sh_{m}_mitsuba_direct"], np.float32) for m in unbiased}
+    stored = {m: (np.asarray(data[f"sh_{m}_filled"], np.float32) if f"sh_{m}_filled" in data.files else None)
+              for m in resolutions}
+    for fine, (m, pick) in [(r, c) for r in resolutions for c in coarser_lattices(r)]:
+        if m in raw:
+            continue
+        for arrays in (raw, valid, direct) + ((mitsuba, mitsuba_direct) if fine in mitsuba else ()):
+            arrays[m] = arrays[fine][pick, pick, pick]
+        stored[m] = None
+    filled = {m: stored[m] if stored[m] is not None else fill_invalid(raw[m], valid[m]) for m in raw}
     return Example(path=path, scene=scene_from_arrays(data), lo=data["lo"], hi=data["hi"], targets=filled,
-                   raw=raw, direct={m: np.asarray(data[f"sh_{m}_direct"], np.float32) for m in resolutions},
-                   valid=valid, params=json.loads(str(data["params"])),
+                   raw=raw, direct=direct, valid=valid, params=json.loads(str(data["params"])),
                    generator=json.loads(str(data["generator"])),
-                   mitsuba={m: fill_invalid(np.asarray(data[f"sh_{m}_mitsuba"], np.float32), valid[m])
-                            for m in unbiased},
-                   mitsuba_direct={m: np.asarray(data[f"sh_{m}_mitsuba_direct"], np.float32) for m in unbiased})
+                   mitsuba={m: fill_invalid(v, valid[m]) for m, v in mitsuba.items()}, mitsuba_direct=mitsuba_direct)
+
+
+def coarser_lattices(resolution: int) -> list[tuple[int, slice]]:
+    """[(m, slice)] for the lattices of m^3 cells over the same box whose probes are probes of the
+    `resolution`^3 one: the probes sit at cell centres, so where `resolution` = k m with k odd, the centre
+    of coarse cell j is the centre of fine cell k j + (k - 1) / 2 (the 8^3 probes of a 24^3 room are its
+    probes 1, 4, ..., 22 along each axis). Lattices under 4^3 are left out."""
+    return [(resolution // k, slice((k - 1) // 2, None, k)) for k in range(3, resolution // 4 + 1, 2)
+            if resolution % k == 0]
 
 
 def load_example(ref, room: str | None = None) -> Example:
