@@ -2,7 +2,12 @@
 resolutions, error against size and against inference time; the smallest model within 10% of the best
 error is exported to models/probenet.onnx with its card.
 
-    python -m viewer.training.sweep --data data/gi-v1 [--epochs 24] [--final-epochs 60]
+    python -m viewer.training.sweep --data data/gi-v2 [--epochs 24] [--final-epochs 60]
+    python -m viewer.training.sweep --data data/gi-v2 --compare-runs runs/a runs/b ... --probes 24
+
+The second form compares finished `viewer.training.train` runs (trained alike, in the background: on
+thousands of rooms a candidate takes an hour, more than one command should) and ships the smallest
+within 10% of the best, at the epoch each run kept.
 
 For every configuration: train (runs/sweep/<name>/), export to ONNX, time onnxruntime on the encoded
 Cornell box (median of 20 runs, one thread), and measure the relative RMSE of `sample --method neural`
@@ -142,7 +147,7 @@ def plot(results: list[dict], chosen: dict, path: Path) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=110)
     for ax, key, label in ((axes[0], "parameters", "parameters"), (axes[1], "ms_total", "neural update, ms (1 thread)")):
-        for probes, marker in ((16, "o"), (8, "s")):
+        for probes, marker in zip(sorted({r["candidate"]["probes"] for r in results}, reverse=True), "osD^"):
             rows = sorted((r for r in results if r["candidate"]["probes"] == probes), key=lambda r: r[key])
             if rows:
                 ax.plot([r[key] for r in rows], [100 * r["mean_error"] for r in rows], marker=marker,
@@ -164,7 +169,7 @@ def plot(results: list[dict], chosen: dict, path: Path) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m viewer.training.sweep", description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/gi-v1"))
+    parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
     parser.add_argument("--epochs", type=int, default=24)
     parser.add_argument("--final-epochs", type=int, default=60)
     parser.add_argument("--runs", type=Path, default=Path("runs/sweep"))
@@ -174,7 +179,13 @@ def main(argv=None) -> int:
     parser.add_argument("--speed-only", action="store_true", help="only time the shipped model (docs/PERFORMANCE.md)")
     parser.add_argument("--ship-run", type=Path, help="ship this finished training run (a `viewer.training.train` "
                                                        "folder) instead of sweeping")
+    parser.add_argument("--compare-runs", type=Path, nargs="+", metavar="RUN",
+                        help="sweep these finished training runs instead of training the candidates")
     args = parser.parse_args(argv)
+    if args.compare_runs:
+        evaluation = evaluation_set()
+        results = [measure_run(run, args, evaluation) for run in args.compare_runs]
+        return report_sweep(results, args, ship=not args.no_ship)
     if args.ship_run:
         final = ship_run(args.ship_run, args, evaluation_set())
         write_shipped_tables(final)
@@ -193,6 +204,16 @@ def main(argv=None) -> int:
         results.append(result)
         print(f"{candidate.name}: {result['parameters']} parameters, mean {100 * result['mean_error']:.1f}%, "
               f"worst {100 * result['worst_error']:.1f}%, {result['ms_total']:.1f} ms", file=sys.stderr)
+    chosen = report_sweep(results, args, ship=False)
+    if not args.no_ship:
+        final = ship(Candidate(**chosen["candidate"]), args, evaluation)
+        write_shipped_tables(final)
+    return 0
+
+
+def report_sweep(results: list[dict], args, ship: bool) -> dict:
+    """The sweep's JSON, chart and table of docs/ACCURACY.md; with `ship`, the chosen result (already
+    trained for good: `--compare-runs`) becomes models/probenet.onnx. Returns the chosen result."""
     chosen = choose(results)
     out = ROOT / "docs" / "data" / "neural_sweep.json"
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -200,10 +221,9 @@ def main(argv=None) -> int:
     plot(results, chosen, ROOT / "docs" / "images" / "neural_sweep.png")
     print(f"chosen: {chosen['name']}", file=sys.stderr)
     write_sweep_table(results, chosen, args)
-    if not args.no_ship:
-        final = ship(Candidate(**chosen["candidate"]), args, evaluation)
-        write_shipped_tables(final)
-    return 0
+    if ship:
+        write_shipped_tables(install(chosen))
+    return chosen
 
 
 def _load_line() -> str:
@@ -221,8 +241,14 @@ def write_sweep_table(results: list[dict], chosen: dict, args) -> None:
         mark = " **(chosen)**" if r["name"] == chosen["name"] else ""
         rows.append(f"| {r['name']}{mark} | {r['candidate']['probes']}^3 | {r['parameters']} | {r['epochs']} | "
                     f"{100 * r['mean_error']:.1f}% | {100 * r['worst_error']:.1f}% | {r['ms_total']:.1f} |")
+    command = (f"python -m viewer.training.sweep --data {args.data} --compare-runs "
+               f"{' '.join(str(r) for r in args.compare_runs)} --probes {args.probes}" if args.compare_runs
+               else f"python -m viewer.training.sweep --data {args.data} --epochs {args.epochs}")
+    trained = sorted({r.get("training_rooms") for r in results if r.get("training_rooms")})
+    rooms = f" on {', '.join(f'{n:,}' for n in trained)} training rooms" if trained else ""
     block = ("\n".join(rows) + f"\n\n![error against size and time](images/neural_sweep.png)\n\n"
-             f"Command: `python -m viewer.training.sweep --data {args.data} --epochs {args.epochs}`; "
+             f"Every model trained{rooms}, the same epochs and steps; errors at the epoch each run kept. "
+             f"Command: `{command}`; "
              f"timings measured at {_load_line()} (one onnxruntime thread).\n")
     replace_block(ROOT / "docs" / "ACCURACY.md", "<!-- neural-sweep -->", block, "# Accuracy")
 
@@ -249,6 +275,12 @@ def write_shipped_tables(final: dict) -> None:
 
 def ship_run(run: Path, args, evaluation) -> dict:
     """Export a finished `viewer.training.train` run, measure it like a sweep candidate, and ship it."""
+    return install(measure_run(run, args, evaluation))
+
+
+def measure_run(run: Path, args, evaluation) -> dict:
+    """A finished `viewer.training.train` run exported (its kept epoch) to `run`/probenet.onnx with its
+    card, and measured like a sweep candidate."""
     import torch
 
     from viewer.training import export as exporter
@@ -277,11 +309,16 @@ def ship_run(run: Path, args, evaluation) -> dict:
     path = run / "probenet.onnx"
     card = exporter.export(run, path, m, inputs, training,
                            {"val_relative_rmse_probes": history["val_relative_rmse"][-1]})
-    final = {"candidate": {"width": config["width"], "hidden": config["hidden"], "levels": config["levels"], "probes": m},
-             "name": path.stem, "parameters": card["parameters"], "onnx": str(path), **measure(path, evaluation)}
+    candidate = Candidate(config["width"], config["hidden"], config["levels"], m)
+    final = {"candidate": candidate.__dict__, "name": candidate.name, "run": str(run), "parameters": card["parameters"],
+             "epochs": len(history["epochs"]), "training_rooms": train_scenes,
+             "train_seconds": training["seconds"], "val_relative_rmse": history["val_relative_rmse"][-1],
+             "onnx": str(path), **measure(path, evaluation)}
     final["worst_error"] = max(final["errors"].values())
     final["mean_error"] = float(np.mean(list(final["errors"].values())))
-    return install(final)
+    print(f"{run}: {final['parameters']} parameters, mean {100 * final['mean_error']:.1f}%, "
+          f"worst {100 * final['worst_error']:.1f}%, {final['ms_total']:.1f} ms", file=sys.stderr)
+    return final
 
 
 def ship(candidate: Candidate, args, evaluation) -> dict:

@@ -1,11 +1,12 @@
 """The paper's Table 1, reproduced: the five families with and without L2 regularization on the same
 splits, train / validation / test MSE on standardized coefficients, and relative RMSE in radiance units.
 
-    python -m viewer.training.table1 --data data/gi-v1 [--epochs 200] [--out docs/TABLE1.md] [--models runs/table1]
+    python -m viewer.training.table1 --data data/gi-v2 [--epochs 200] [--out docs/TABLE1.md] [--models runs/table1]
 
 Splits: train = the procedural `train` split plus the paper's five training layouts; validation = the
 procedural `val` split (new layouts from the same distribution); test = `paper-test` (the held-out scene
-of the paper: a new sphere and a pink back wall). Targets: the dataset's 8^3 ground-truth probes.
+of the paper: a new sphere and a pink back wall). Targets: the dataset's 8^3 ground-truth probes (read
+out of a 24^3 dataset: every third probe is an 8^3 one, `dataset.coarser_lattices`).
 The production network (ProbeNet, 8^3 lattice) is trained on the same data and scored the same way,
 as a last row.
 
@@ -155,8 +156,9 @@ def score(model, split: Split, std: Standardized) -> tuple[float, float]:
     return mse, relative_rmse(out * std.std + std.mean, split.targets)
 
 
-def probenet_row(root: Path, data: dict, std: Standardized, epochs: int) -> tuple[dict, list]:
-    """ProbeNet on the 8^3 lattice, scored in the paper's standardized units too."""
+def probenet_row(root: Path, data: dict, std: Standardized, epochs: int) -> tuple[dict, list, int]:
+    """ProbeNet on the 8^3 lattice, scored in the paper's standardized units too: (scores, loss curve,
+    parameters)."""
     from viewer.training.models import ProbeNet, ProbeNetConfig
     from viewer.training.train import TrainSettings, train
 
@@ -178,7 +180,7 @@ def probenet_row(root: Path, data: dict, std: Standardized, epochs: int) -> tupl
         mse = float(np.mean((standardized - (split.targets - std.mean) / std.std) ** 2))
         scores[name] = (mse, relative_rmse(flat, split.targets))
     curve = list(zip(np.array(history.epochs) + 1, history.train, history.val))
-    return scores, curve
+    return scores, curve, sum(p.numel() for p in model.parameters())
 
 
 def predict_physical(model, samples: Samples) -> np.ndarray:
@@ -207,7 +209,7 @@ def load_data(root: Path) -> dict[str, Split]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m viewer.training.table1", description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/gi-v1"))
+    parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
     parser.add_argument("--epochs", type=int, default=200)
     parser.add_argument("--families", default=",".join(pm.FAMILIES))
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "TABLE1.md")
@@ -223,19 +225,21 @@ def main(argv=None) -> int:
         for weight_decay in ((0.0,) if family == "probenet" else (0.0, LAMBDA)):
             key = f"{family}|{weight_decay:g}"
             exported = family == "probenet" or model_path(args.models, family, weight_decay).is_file()
-            if key in results and results[key].get("epochs") == args.epochs and exported:
+            done = results.get(key, {})
+            if done.get("epochs") == args.epochs and done.get("data") == str(args.data) and exported:
                 continue
             start = time.perf_counter()
             if family == "probenet":
-                scores, curve = probenet_row(args.data, data, std, max(args.epochs // 4, 1))
+                scores, curve, parameters = probenet_row(args.data, data, std, max(args.epochs // 4, 1))
             else:
                 scores, curve, model = train_family(paper_config(family), data, std, weight_decay, args.epochs)
                 export_family(model, std, model_path(args.models, family, weight_decay))
+                parameters = sum(p.numel() for p in model.parameters())
             results[key] = {"family": family, "lambda": weight_decay, "epochs": args.epochs, "scores": scores,
                             "trained_epochs": max(args.epochs // 4, 1) if family == "probenet" else args.epochs,
                             "curve": [list(map(float, c)) for c in curve], "seconds": time.perf_counter() - start,
-                            "parameters": sum(p.numel() for p in pm.PaperNet(paper_config(family)).parameters())
-                            if family != "probenet" else None}
+                            "parameters": parameters, "data": str(args.data),
+                            "training_rooms": len(data["train"].names)}
             print(f"{key}: train {scores['train'][0]:.4f} val {scores['val'][0]:.4f} test {scores['test'][0]:.4f}"
                   f"  rel. RMSE test {100 * scores['test'][1]:.1f}%  ({results[key]['seconds']:.0f} s)", file=sys.stderr)
             args.results.parent.mkdir(parents=True, exist_ok=True)
@@ -261,15 +265,17 @@ def write_report(results: dict, args) -> None:
             "test rel. RMSE | paper's test MSE | train time |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for key, r in sorted(results.items(), key=lambda kv: (list(LABELS).index(kv[1]["family"]), kv[1]["lambda"])):
         s = r["scores"]
-        rows.append(f"| {LABELS[r['family']]} | {r['lambda']:g} | {r['parameters'] or 45267} | {r.get('trained_epochs', r['epochs'])} | "
+        rows.append(f"| {LABELS[r['family']]} | {r['lambda']:g} | {r['parameters']} | {r.get('trained_epochs', r['epochs'])} | "
                     f"{s['train'][0]:.3f} | "
                     f"{s['val'][0]:.3f} | {s['test'][0]:.3f} | {100 * s['val'][1]:.1f}% | {100 * s['test'][1]:.1f}% | "
                     f"{PAPER_REPORTED.get(r['family'], '')} | {r['seconds']:.0f} s |")
     plot_curves(results, ROOT / "docs" / "images" / "table1_curves.png")
     from viewer.bench.report import replace_block
 
-    table = "\n".join(rows) + f"\n\n![loss curves](images/table1_curves.png)\n\nCommand: `python -m viewer.training.table1 " \
-        f"--data {args.data} --epochs {args.epochs}`\n"
+    rooms = sorted({r.get("training_rooms") for r in results.values() if r.get("training_rooms")})
+    trained = f"Every network trained on the same {' / '.join(f'{n:,}' for n in rooms)} rooms. " if rooms else ""
+    table = "\n".join(rows) + f"\n\n![loss curves](images/table1_curves.png)\n\n{trained}Command: " \
+        f"`python -m viewer.training.table1 --data {args.data} --epochs {args.epochs}`\n"
     replace_block(args.out, MARKER, table, "# Table 1 of the paper, reproduced")
 
 

@@ -351,7 +351,8 @@ def main(argv=None) -> int:
     val_set = val_set.subset(np.arange(min(args.val_rooms, len(val_set))))
     if args.limit:
         train_set = train_set.subset(np.arange(min(args.limit, len(train_set))))
-    record_data(args.out, args.data, train_set, val_set, args.probes)
+    record_data(args.out, args.data, train_set, val_set, args.probes,
+                " ".join(["python -m viewer.training.train", *(sys.argv[1:] if argv is None else argv)]))
     config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels)
     model = ProbeNet(config)
     print(f"ProbeNet {config}: {parameter_count(model)} parameters, {len(train_set)} training scenes",
@@ -364,9 +365,10 @@ def main(argv=None) -> int:
     return 0
 
 
-def record_data(run: Path, data: Path, train_set: Samples, val_set: Samples, probes: int) -> None:
-    """`run/data.json`: what the run trains on (the export copies it onto the model card). A resumed run
-    with more rooms (the dataset grew) records the latest count."""
+def record_data(run: Path, data: Path, train_set: Samples, val_set: Samples, probes: int,
+                command: str | None = None) -> None:
+    """`run/data.json`: what the run trains on, and the command that trained it (the export copies both
+    onto the model card). A resumed run with more rooms (the dataset grew) records the latest count."""
     from viewer.training.samples import ENCODING_VOXELS
 
     manifest = Path(data) / "manifest.json"
@@ -374,7 +376,7 @@ def record_data(run: Path, data: Path, train_set: Samples, val_set: Samples, pro
     record = {"data": str(data), "training_rooms": len(train_set), "validation_rooms": len(val_set),
               "rooms_with_mitsuba_probes": int(np.sum(train_set.has_unbiased)) if train_set.has_unbiased is not None else 0,
               "ranges": settings.get("ranges", "v1"), "truth": settings.get("truth"), "seed": settings.get("seed"),
-              "probes": probes, "voxels": ENCODING_VOXELS}
+              "probes": probes, "voxels": ENCODING_VOXELS, **({"command": command} if command else {})}
     run.mkdir(parents=True, exist_ok=True)
     (run / "data.json").write_text(json.dumps(record, indent=1) + "\n")
 
