@@ -111,3 +111,8 @@ def test_every_sweep_model_is_a_neural_entry_with_its_file_in_its_memory(tmp_pat
     assert method.memory_bytes == texture_bytes(8) + path.stat().st_size
     grid = method.prepare()(load("cornell"), None)
     assert grid.resolution == 8
+    # the sweep's model shipped: one row, the shipped one's
+    shipped = tmp_path / "models" / "probenet.onnx"
+    shipped.parent.mkdir()
+    shipped.write_bytes(path.read_bytes())
+    assert model_files(tmp_path) == [shipped]

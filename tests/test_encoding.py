@@ -123,3 +123,25 @@ def test_the_bounce_is_the_lit_walls_reflected_light():
     # steeply under the dark ceiling
     tilt = grey[0, 1, 4, :, 4] / grey[0, 0, 4, :, 4]
     assert np.all(tilt < 0) and tilt[-1] < tilt[3]
+
+
+def test_both_sides_of_a_thin_wall_reflect_apart():
+    """A thin partition lit on one side reflects that light whether or not its dark back is modelled:
+    the back's voxels share cells with the front's, and merged with them into one patch their normals
+    cancel and the lit side shines nowhere (the first v3 encoding did this)."""
+    assert list(encoding.facings(np.vstack([np.eye(3), -np.eye(3)]))) == [1, 3, 5, 0, 2, 4]
+    lamp = ceiling_lamp(half_size=0.15, height=0.95, radiance=10.0)
+    room = box(inward=True, albedo=0.5, name="room")
+    v = np.array([[0.4, 1.0, -1.0], [0.4, 1.0, 1.0], [0.4, -0.6, 1.0], [0.4, -0.6, -1.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]])
+    lit_side = [f for f in faces if np.cross(*(v[f[1:]] - v[f[0]]))[0] < 0]   # facing -x: towards the lamp
+    assert len(lit_side) == 2
+
+    def bounce(partition_faces):
+        partition = Scene("partition", v, np.array(partition_faces), 0.8, 0.0, 0, ("partition",))
+        enc = encode(Scene.concatenate("room", [room, lamp, partition]), m=8, n=16)
+        return (enc.inputs[0, encoding.BOUNCE.start] * enc.scale[0])[4:6, 3:7, 2:6]   # just before the partition
+
+    one_sided, two_sided = bounce(lit_side), bounce(faces)
+    assert one_sided.min() > 0
+    np.testing.assert_allclose(two_sided, one_sided, rtol=0.02)

@@ -43,7 +43,7 @@ import numpy as np
 from viewer import dda, sh
 from viewer.voxels import VoxelGrid
 
-VERSION = 3
+VERSION = 4
 """Bump when the features change: a model card records the version its network was trained on, and
 `viewer.neural` refuses a model of another version."""
 FEATURES = (
@@ -176,6 +176,14 @@ def _splat(points: np.ndarray, lo: np.ndarray, spacing: np.ndarray, m: int):
     return out
 
 
+def facings(normal: np.ndarray) -> np.ndarray:
+    """(K,) int 0-5: the signed axis each normal (K, 3) is closest to (2 a + 1 for +a, 2 a for -a). Patches
+    merge surfaces of one facing only: the two sides of a thin wall in one cell have opposite normals,
+    and merged, their mean normal is zero and the patch shines nowhere."""
+    axis = np.argmax(np.abs(normal), axis=1)
+    return axis * 2 + (np.take_along_axis(normal, axis[:, None], 1)[:, 0] > 0)
+
+
 def emitting_patches(cell: np.ndarray, voxels: VoxelGrid):
     """The emitting voxels merged per lattice cell and facing: (positions (E, 3), normals (E, 3), areas
     (E,), radiance (E, 3)). Seen from the probes (a lattice cell or more away), the pieces of a lamp in
@@ -183,7 +191,7 @@ def emitting_patches(cell: np.ndarray, voxels: VoxelGrid):
     lit = np.flatnonzero(np.any(voxels.emission > 0, axis=1))
     if len(lit) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
-    facing = np.argmax(np.abs(voxels.normal[lit]) * 2 + (voxels.normal[lit] > 0), axis=1)
+    facing = facings(voxels.normal[lit])
     key, group = np.unique(cell[lit] * 8 + facing, return_inverse=True)
     count = len(key)
     a = voxels.area[lit]
@@ -215,7 +223,7 @@ def shadow_targets(blockers: dda.Cells, position: np.ndarray, normal: np.ndarray
     a patch's visibility depends on every patch of its cluster, whichever emitter they belong to."""
     if len(position) == 0:
         return np.zeros((0, 3)), np.zeros(0, np.int64)
-    facing = np.argmax(np.abs(normal) * 2 + (normal > 0), axis=1)
+    facing = facings(normal)
     block = np.floor((position - lo) / (spacing * VISIBILITY_CELLS)).astype(np.int64)
     _, cluster = np.unique(np.column_stack([block, facing]), axis=0, return_inverse=True)
     cluster = cluster.ravel()
@@ -319,7 +327,7 @@ def bounce_sh(voxels: VoxelGrid, direct: np.ndarray, lo: np.ndarray, hi: np.ndar
     front = voxels.position + 0.5 * voxels.voxel_size * voxels.normal
     incident = sum(w[:, None, None] * direct[index] for index, w in _splat(front, lo, spacing, m))  # (K, 9, 3)
     leaving = voxels.albedo * np.maximum(sh.irradiance(incident, voxels.normal), 0.0) / np.pi  # (K, 3)
-    facing = np.argmax(np.abs(voxels.normal) * 2 + (voxels.normal > 0), axis=1)
+    facing = facings(voxels.normal)
     block = np.floor((voxels.position - lo) / (spacing * BOUNCE_PATCH)).astype(np.int64)
     _, patch = np.unique(np.column_stack([block, facing]), axis=0, return_inverse=True)
     patch = patch.ravel()

@@ -260,9 +260,15 @@ def mitsuba_probes_method(probes: int, directions: int) -> Method:
 # ---- neural models ----------------------------------------------------------------------------------
 
 def model_files(root: Path = ROOT) -> list[Path]:
-    """The shipped model and every model of the size sweep (runs/sweep/*/*.onnx) that exists."""
-    files = [root / "models" / "probenet.onnx"] + sorted((root / "runs" / "sweep").glob("*/*.onnx"))
-    return [f for f in files if f.is_file()]
+    """The shipped model and every model of the size sweep (runs/sweep/*/*.onnx) that exists, the sweep's
+    copy of the shipped model left out (one model, one row)."""
+    shipped = root / "models" / "probenet.onnx"
+    files = [shipped] + sorted((root / "runs" / "sweep").glob("*/*.onnx"))
+    files = [f for f in files if f.is_file()]
+    if shipped.is_file():
+        same = shipped.read_bytes()
+        files = [shipped] + [f for f in files[1:] if f.stat().st_size != len(same) or f.read_bytes() != same]
+    return files
 
 
 def neural_method(path: Path, root: Path = ROOT) -> Method:

@@ -156,7 +156,8 @@ def plot(results: list[dict], chosen: dict, path: Path) -> None:
                            facecolors="none", edgecolors="grey", label=f"{probes}^3 probes, worst scene")
         ax.scatter([chosen[key]], [100 * chosen["mean_error"]], s=160, facecolors="none", edgecolors="red",
                    label="shipped")
-        ax.set_xscale("log")
+        if key == "parameters":
+            ax.set_xscale("log")
         ax.set_xlabel(label)
         ax.set_ylabel("rel. RMSE vs Mitsuba (%)")
         ax.grid(True, which="both", alpha=0.3)
@@ -241,6 +242,8 @@ def write_sweep_table(results: list[dict], chosen: dict, args) -> None:
         mark = " **(chosen)**" if r["name"] == chosen["name"] else ""
         rows.append(f"| {r['name']}{mark} | {r['candidate']['probes']}^3 | {r['parameters']} | {r['epochs']} | "
                     f"{100 * r['mean_error']:.1f}% | {100 * r['worst_error']:.1f}% | {r['ms_total']:.1f} |")
+        if "kept_epoch" in r:   # a run keeps its best epoch: say which
+            rows[-1] = rows[-1].replace(f"| {r['epochs']} |", f"| {r['epochs']} (kept {r['kept_epoch']}) |", 1)
     command = (f"python -m viewer.training.sweep --data {args.data} --compare-runs "
                f"{' '.join(str(r) for r in args.compare_runs)} --probes {args.probes}" if args.compare_runs
                else f"python -m viewer.training.sweep --data {args.data} --epochs {args.epochs}")
@@ -278,6 +281,13 @@ def ship_run(run: Path, args, evaluation) -> dict:
     return install(measure_run(run, args, evaluation))
 
 
+def trained_epochs(run: Path) -> int:
+    """How many epochs a `viewer.training.train` run went through (its latest checkpoint's history)."""
+    import torch
+
+    return len(torch.load(Path(run) / "checkpoint.pt", weights_only=False)["history"]["epochs"])
+
+
 def measure_run(run: Path, args, evaluation) -> dict:
     """A finished `viewer.training.train` run exported (its kept epoch) to `run`/probenet.onnx with its
     card, and measured like a sweep candidate."""
@@ -306,12 +316,12 @@ def measure_run(run: Path, args, evaluation) -> dict:
     training["dataset"] = {"command": manifest.get("command"), "truth": truth, "files_used": files}
     if recorded.exists():
         training.update(json.loads(recorded.read_text()))
-    path = run / "probenet.onnx"
+    candidate = Candidate(config["width"], config["hidden"], config["levels"], m)
+    path = run / f"{candidate.name}.onnx"   # named by its size: the benchmark lists every sweep model
     card = exporter.export(run, path, m, inputs, training,
                            {"val_relative_rmse_probes": history["val_relative_rmse"][-1]})
-    candidate = Candidate(config["width"], config["hidden"], config["levels"], m)
     final = {"candidate": candidate.__dict__, "name": candidate.name, "run": str(run), "parameters": card["parameters"],
-             "epochs": len(history["epochs"]), "training_rooms": train_scenes,
+             "epochs": trained_epochs(run), "kept_epoch": len(history["epochs"]), "training_rooms": train_scenes,
              "train_seconds": training["seconds"], "val_relative_rmse": history["val_relative_rmse"][-1],
              "onnx": str(path), **measure(path, evaluation)}
     final["worst_error"] = max(final["errors"].values())
