@@ -240,10 +240,9 @@ def write_sweep_table(results: list[dict], chosen: dict, args) -> None:
             "|---|---|---|---|---|---|---|"]
     for r in sorted(results, key=lambda r: (r["candidate"]["probes"], r["parameters"])):
         mark = " **(chosen)**" if r["name"] == chosen["name"] else ""
-        rows.append(f"| {r['name']}{mark} | {r['candidate']['probes']}^3 | {r['parameters']} | {r['epochs']} | "
+        epochs = f"{r['epochs']} (kept {r['kept_epoch']})" if "kept_epoch" in r else r["epochs"]  # a run's best
+        rows.append(f"| {r['name']}{mark} | {r['candidate']['probes']}^3 | {r['parameters']} | {epochs} | "
                     f"{100 * r['mean_error']:.1f}% | {100 * r['worst_error']:.1f}% | {r['ms_total']:.1f} |")
-        if "kept_epoch" in r:   # a run keeps its best epoch: say which
-            rows[-1] = rows[-1].replace(f"| {r['epochs']} |", f"| {r['epochs']} (kept {r['kept_epoch']}) |", 1)
     command = (f"python -m viewer.training.sweep --data {args.data} --compare-runs "
                f"{' '.join(str(r) for r in args.compare_runs)} --probes {args.probes}" if args.compare_runs
                else f"python -m viewer.training.sweep --data {args.data} --epochs {args.epochs}")
@@ -289,8 +288,8 @@ def trained_epochs(run: Path) -> int:
 
 
 def measure_run(run: Path, args, evaluation) -> dict:
-    """A finished `viewer.training.train` run exported (its kept epoch) to `run`/probenet.onnx with its
-    card, and measured like a sweep candidate."""
+    """A finished `viewer.training.train` run exported (its kept epoch) into `run` as <candidate name>.onnx
+    with its card, and measured like a sweep candidate."""
     import torch
 
     from viewer.training import export as exporter
