@@ -112,7 +112,7 @@ def train_family(config: pm.PaperConfig, data: dict, std: Standardized, weight_d
             optimizer.step()
             total += float(mse.detach()) * len(pick)
         schedule.step()
-        if epoch % 10 == 9 or epoch == epochs - 1:
+        if epochs <= 20 or epoch % 10 == 9 or epoch == epochs - 1:   # a short run: every epoch
             curve.append((epoch + 1, total / len(x), score(model, data["val"], std)[0]))
     scores = {name: score(model, split, std) for name, split in data.items()}
     return scores, curve, model
@@ -211,7 +211,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m viewer.training.table1", description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
     parser.add_argument("--epochs", type=int, default=200)
-    parser.add_argument("--families", default=",".join(pm.FAMILIES))
+    parser.add_argument("--families", default=",".join(pm.FAMILIES + ("probenet",)))
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "TABLE1.md")
     parser.add_argument("--results", type=Path, default=ROOT / "docs" / "data" / "table1.json")
     parser.add_argument("--models", type=Path, default=ROOT / "runs" / "table1",
@@ -292,8 +292,9 @@ def plot_curves(results: dict, path: Path) -> None:
                 continue
             curve = np.array(r["curve"])
             units = " (its own loss: scaled SH)" if r["family"] == "probenet" else ""
-            line, = ax.semilogy(curve[:, 0], curve[:, 1], label=f"{LABELS[r['family']]} train{units}")
-            ax.semilogy(curve[:, 0], curve[:, 2], ls="--", color=line.get_color())
+            # markers: a short run records its curve at one or two epochs only
+            line, = ax.semilogy(curve[:, 0], curve[:, 1], marker="o", label=f"{LABELS[r['family']]} train{units}")
+            ax.semilogy(curve[:, 0], curve[:, 2], ls="--", marker="x", color=line.get_color())
         ax.set_title(f"lambda = {lam:g} (solid: train, dashed: validation)")
         ax.set_xlabel("epoch")
         ax.grid(True, which="both", alpha=0.3)
