@@ -345,3 +345,23 @@ def test_display_image_is_the_hdr_image_tone_mapped(ctx, cornell, settings):
     finally:
         reference.release()
         offscreen.release()
+
+
+def test_a_capture_without_a_camera_shows_what_the_viewer_opens_with(tmp_path):
+    """A file without a camera of its own (no sidecar) is framed, in the viewer and in a headless
+    capture alike: the Cornell box moved 5 units up is out of the default camera's view, not of the
+    capture's."""
+    from dataclasses import replace
+
+    from viewer.training.dataset import write_obj
+
+    box = load("cornell")
+    path = tmp_path / "moved.obj"
+    write_obj(replace(box, vertices=box.vertices + [0.0, 5.0, 0.0]), path)
+    path.with_suffix(".json").unlink()   # its sidecar names a camera: without it, the file has none
+    out = tmp_path / "moved.png"
+    args = Namespace(scene=str(path), out=str(out), size="64x48", gi="off", view="albedo")
+    assert run_capture(args) == 0
+    image = np.asarray(Image.open(out), np.float64)
+    assert image[16:32, 24:40].mean() > 40      # the back wall fills the middle
+    assert (image.mean(axis=2) > 10).mean() > 0.25   # the framed box, margins around it

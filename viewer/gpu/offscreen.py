@@ -199,7 +199,7 @@ def run_capture(args, probe_source: ProbeSource | None = None) -> int:
 
     scene (name or file, default cornell), out (.png/.jpg, or .npy for linear HDR; required),
     size ("WxH" or (W, H); 512x512), gi (off|compute|solver|neural; off), view (one of VIEWS; final),
-    camera ("ox,oy,oz,tx,ty,tz"; the scene's), fov (degrees; the scene's), exposure (EV; 0),
+    camera ("ox,oy,oz,tx,ty,tz"; the one the viewer opens the scene with), fov (degrees; the scene's), exposure (EV; 0),
     tonemap (aces|reinhard|none; aces), msaa (samples; 4), light_samples (32), sun ("dx,dy,dz,r,g,b"),
     voxel_color (albedo|radiance; albedo) and the GI settings of `solver_probes`.
 
@@ -232,8 +232,12 @@ def run_capture(args, probe_source: ProbeSource | None = None) -> int:
             camera = parse_camera(camera, float(fov) if fov is not None else scene.camera.fov)
         except ValueError as exc:
             raise CaptureError(str(exc)) from None
-    elif camera is None and fov is not None:
-        camera = replace(scene.camera, fov=float(fov))
+    elif camera is None:  # the viewer's opening view: the file's camera, else one framing the scene
+        from viewer.ui.camera_controller import home_camera
+
+        camera = home_camera(scene, value("scene", "cornell"))
+        if fov is not None:
+            camera = replace(camera, fov=float(fov))
     try:
         settings = RenderSettings(exposure=float(value("exposure", 0.0)), tonemap=value("tonemap", "aces"),
                                   light_samples=int(value("light_samples", 32)),

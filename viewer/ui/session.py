@@ -13,29 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from viewer.gpu.renderer import Renderer
-from viewer.scene import ASSETS, SUPPORTED_SUFFIXES, Camera, Scene, load, read_sidecar
+from viewer.scene import SUPPORTED_SUFFIXES, Scene, load
 from viewer.ui.background import BackgroundTask
-from viewer.ui.camera_controller import OrbitCamera, framing_camera
+from viewer.ui.camera_controller import OrbitCamera, home_camera
 from viewer.ui.gi_sources import GIController
 from viewer.ui.panels import Message
 from viewer.ui.scene_edits import SceneEdits
-
-
-def scene_path(source: str | Path) -> Path:
-    """The file behind a scene argument (a built-in name resolves to assets/scenes/<name>.obj)."""
-    path = Path(source)
-    if not path.suffix and not path.exists():
-        return ASSETS / f"{source}.obj"
-    return path
-
-
-def home_camera(scene: Scene, source: str | Path) -> Camera:
-    """The scene's own camera when its file comes with one (a sidecar .json), else one that frames it."""
-    try:
-        has_camera = "camera" in read_sidecar(scene_path(source))
-    except ValueError:
-        has_camera = False
-    return scene.camera if has_camera else framing_camera(*scene.bounds)
 
 
 class Session:
