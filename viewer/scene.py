@@ -32,19 +32,25 @@ def builtin_names() -> list[str]:
     return sorted(p.stem for p in ASSETS.glob("*.obj"))
 
 
+def scene_file(source: str | Path) -> Path:
+    """The file behind a scene argument: a built-in name (no suffix, no such file) is
+    assets/scenes/<name>.obj."""
+    path = Path(source)
+    if not path.suffix and not path.exists():
+        return ASSETS / f"{source}.obj"
+    return path
+
+
 def load(source: str | Path, sun: DirectionalLight | None = None) -> Scene:
     """Load a built-in scene by name (`cornell`, `paper-train-1` ... `paper-test`) or a file.
 
     A sidecar `<file>.json` next to the file may give a sun and a camera (see `read_sidecar`); `sun`
     overrides both the sidecar and a glTF `KHR_lights_punctual` directional light.
     """
-    path = Path(source)
-    if not path.suffix and not path.exists():
-        candidate = ASSETS / f"{source}.obj"
-        if not candidate.exists():
-            raise SceneError(f"unknown scene {str(source)!r}: not a file and not a built-in "
-                             f"({', '.join(builtin_names())})")
-        path = candidate
+    path = scene_file(source)
+    if path != Path(source) and not path.exists():
+        raise SceneError(f"unknown scene {str(source)!r}: not a file and not a built-in "
+                         f"({', '.join(builtin_names())})")
     if not path.exists():
         raise SceneError(f"{path}: no such file")
     if path.is_dir():

@@ -199,7 +199,8 @@ def run_capture(args, probe_source: ProbeSource | None = None) -> int:
 
     scene (name or file, default cornell), out (.png/.jpg, or .npy for linear HDR; required),
     size ("WxH" or (W, H); 512x512), gi (off|compute|solver|neural; off), view (one of VIEWS; final),
-    camera ("ox,oy,oz,tx,ty,tz"; the one the viewer opens the scene with), fov (degrees; the scene's), exposure (EV; 0),
+    camera ("ox,oy,oz,tx,ty,tz"; the one the viewer opens the scene with), fov (degrees; that camera's),
+    exposure (EV; 0),
     tonemap (aces|reinhard|none; aces), msaa (samples; 4), light_samples (32), sun ("dx,dy,dz,r,g,b"),
     voxel_color (albedo|radiance; albedo) and the GI settings of `solver_probes`.
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer.scene import ASSETS, Camera, Scene, read_sidecar
+from viewer.scene import Camera, Scene, read_sidecar, scene_file
 
 MAX_PITCH = math.radians(89.0)
 
@@ -114,19 +114,11 @@ def framing_camera(lo: np.ndarray, hi: np.ndarray, fov: float = Camera.fov) -> C
     return Camera(tuple(origin), tuple(centre), (0.0, 1.0, 0.0), fov)
 
 
-def scene_path(source: str | Path) -> Path:
-    """The file behind a scene argument (a built-in name resolves to assets/scenes/<name>.obj)."""
-    path = Path(source)
-    if not path.suffix and not path.exists():
-        return ASSETS / f"{source}.obj"
-    return path
-
-
 def home_camera(scene: Scene, source: str | Path) -> Camera:
     """The scene's own camera when its file comes with one (a sidecar .json), else one that frames it:
     what the viewer opens a scene with, and what a headless capture shows."""
     try:
-        has_camera = "camera" in read_sidecar(scene_path(source))
+        has_camera = "camera" in read_sidecar(scene_file(source))
     except ValueError:
         has_camera = False
     return scene.camera if has_camera else framing_camera(*scene.bounds)
