@@ -76,8 +76,19 @@ def test_cornell_box_has_a_red_left_wall_a_green_right_wall_and_a_lit_floor(offs
     assert lamp.min() > 0.95
 
 
-def test_direct_light_has_no_indirect_part_and_gi_lights_the_shadows(offscreen, cornell):
+def test_direct_light_has_no_indirect_part_and_gi_lights_the_shadows(ctx, cornell):
+    """A uniform probe field read as it is: without the final gather, which would light the box face
+    with what the room reflects of the lamp (test_final_gather.py)."""
+    offscreen = OffscreenRenderer(SIZE, RenderSettings(final_gather=0), samples=0, ctx=ctx)
+    try:
+        check_direct_and_uniform_indirect(offscreen, cornell)
+    finally:
+        offscreen.release()
+
+
+def check_direct_and_uniform_indirect(offscreen, cornell):
     renderer = offscreen.renderer
+    renderer.set_scene(cornell)
     renderer.set_probes(None)
     dark = region(offscreen.render_hdr(view="final"), SMALL_BOX_FRONT)
     renderer.set_probes(constant_probes(cornell, [0.3, 0.3, 0.3]))
@@ -117,7 +128,7 @@ def test_probe_textures_clamp_at_the_edges(ctx, cornell):
     c = np.zeros((m, m, m, 9, 3), np.float32)
     c[m - 1, :, :, 0, :] = 5.0
     probes = ProbeGrid(lo, hi, c, np.ones((m, m, m), bool))
-    offscreen = OffscreenRenderer(SIZE, RenderSettings(probe_normal_offset=0.0), samples=0, ctx=ctx)
+    offscreen = OffscreenRenderer(SIZE, RenderSettings(probe_normal_offset=0.0, final_gather=0), samples=0, ctx=ctx)
     try:
         offscreen.renderer.set_scene(cornell)
         offscreen.renderer.set_probes(probes)
@@ -304,7 +315,8 @@ def test_box_faces_are_not_darkened_by_the_probes_inside_the_boxes(ctx, cornell)
     A uniform radiance field gives every surface the same irradiance, so under indirect light only each
     pixel of the boxes' faces must be as bright as the floor in front of them. Plain trilinear
     interpolation mixes in the dark probes behind the faces: dark blotches, as on the boxes' faces of
-    the Cornell box before (the faces' darkest 5% at 65% of the floor, 100% now)."""
+    the Cornell box before (the faces' darkest 5% at 65% of the floor, 100% now). The probes as they
+    are, without the final gather."""
     m = 24
     lo, hi = cornell.bounds
     probes = constant_probes(cornell, (1.0, 1.0, 1.0), m)
@@ -314,13 +326,13 @@ def test_box_faces_are_not_darkened_by_the_probes_inside_the_boxes(ctx, cornell)
     coefficients = probes.coefficients.reshape(-1, 9, 3).copy()
     coefficients[inside] = 0.0
     probes = ProbeGrid(lo, hi, coefficients.reshape(probes.coefficients.shape), ~inside.reshape(m, m, m))
-    faces, floor = box_face_and_floor_radiance(ctx, cornell, probes, RenderSettings())
+    faces, floor = box_face_and_floor_radiance(ctx, cornell, probes, RenderSettings(final_gather=0))
     assert len(faces) > 500
     assert np.percentile(faces, 5) > 0.95 * floor, (np.percentile(faces, 5), floor)
     # The same with the probes inside the boxes marked valid: the weight that fades probes behind the
     # shaded surface's plane alone keeps the faces within 10% of the floor (97% measured).
     probes = ProbeGrid(lo, hi, probes.coefficients, np.ones((m, m, m), bool))
-    faces, floor = box_face_and_floor_radiance(ctx, cornell, probes, RenderSettings())
+    faces, floor = box_face_and_floor_radiance(ctx, cornell, probes, RenderSettings(final_gather=0))
     assert np.percentile(faces, 5) > 0.9 * floor, (np.percentile(faces, 5), floor)
 
 

@@ -43,7 +43,8 @@ def render(ctx, scene, probes, size, views=("final",), settings=None):
 def test_the_baked_indirect_light_is_the_weighted_probes_at_each_pixel(gl_context, cornell):
     """The `indirect` view (baked) at pixels of the walls, the floor and a box face is albedo / pi x
     SurfaceWeights' irradiance at the surface point seen there, within the lightmap's bilinear
-    interpolation (texels 2 cm apart, probes varying smoothly)."""
+    interpolation (texels 2 cm apart, probes varying smoothly). Without the final gather, which
+    test_final_gather.py checks apart."""
     from test_gpu_render import pixel_on_plane
 
     m = 6
@@ -54,7 +55,7 @@ def test_the_baked_indirect_light_is_the_weighted_probes_at_each_pixel(gl_contex
     lo, hi = cornell.bounds
     probes = ProbeGrid(lo, hi, c, np.ones((m, m, m), bool))
     size = (96, 96)
-    image = render(gl_context, cornell, probes, size, ("indirect",))["indirect"]
+    image = render(gl_context, cornell, probes, size, ("indirect",), RenderSettings(final_gather=0))["indirect"]
     from viewer import dda
     from viewer.geometry import voxelize_with_faces
     cells = dda.Cells.of(voxelize_with_faces(cornell, 32), cornell)
@@ -70,20 +71,22 @@ def test_the_baked_indirect_light_is_the_weighted_probes_at_each_pixel(gl_contex
 
 
 def test_no_dark_streaks_on_the_boxes_against_mitsuba(gl_context, cornell, cornell_probes):
-    """The final view at 256x256 against Mitsuba (128 spp), in 16-pixel blocks lying on one face: the
-    probe grid interpolated per fragment darkened the small box's face camera-side in vertical streaks
-    (its worst blocks at 0.80 of Mitsuba, RMS 3.6% off over all blocks). With the per-texel weights:
-    worst box block 0.94, RMS 1.8% (the worst blocks left are near the box's top edge and its
-    contact with the floor, where the lattice's spacing is too coarse)."""
+    """The final view at 256x256 against Mitsuba (256 spp: at 128 its noise alone moves a block 2%), in
+    16-pixel blocks lying on one face: the probe grid interpolated per fragment darkened the small box's
+    face camera-side in vertical streaks (its worst blocks at 0.80 of Mitsuba, RMS 3.6% off over all
+    blocks). With the per-texel weights:
+    worst box block 0.92, RMS 1.9% (near the box's top edge, where the face looks out of the box's open
+    side: the probes' SH cannot say that half the hemisphere is dark). With the final gather every
+    block is within 5% (worst 1.04, RMS 1.0%)."""
     reference = pytest.importorskip("viewer.reference")
     pytest.importorskip("mitsuba")
-    truth = reference.render(cornell, cornell.camera, 256, 256, 128)
+    truth = reference.render(cornell, cornell.camera, 256, 256, 256)
     images = render(gl_context, cornell, cornell_probes, (256, 256), ("final", "normals"))
     ratios, corners, tilted = face_blocks(images["final"], truth, images["normals"])
     assert len(ratios) > 100 and tilted.sum() > 15
     rms = float(np.sqrt(np.mean((ratios - 1.0) ** 2)))
-    assert rms < 0.025, rms
-    assert np.abs(ratios[tilted] - 1.0).max() < 0.1, (ratios[tilted].min(), ratios[tilted].max())
+    assert rms < 0.015, rms
+    assert np.abs(ratios - 1.0).max() < 0.05, (ratios.min(), ratios.max())
 
 
 def test_no_steps_along_silhouettes(gl_context, cornell, cornell_probes):

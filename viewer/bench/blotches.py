@@ -4,9 +4,10 @@ on the boxes of the Cornell scenes, and steps along silhouettes.
     python -m viewer.bench.blotches [--scenes cornell paper-test] [--size 256] [--spp 256]
                                     [--points 4000]
 
-For the default renderer (the probes baked per lightmap texel with the weights of
-viewer/probe_weights.py) and the exact path (the probes interpolated per fragment,
-shaders/probe_grid.glsl), per scene:
+For the default renderer (`gather`: the indirect light baked per lightmap texel by the final gather of
+viewer/final_gather.py, the probes lighting the second bounce on), the probes alone baked per texel with
+the weights of viewer/probe_weights.py (`baked`, RenderSettings.final_gather = 0) and the exact path
+(the probes interpolated per fragment, shaders/probe_grid.glsl), per scene:
 
 - **streaks** (`face_blocks`): the final view (no MSAA, linear HDR) against Mitsuba's render, on
   16x16-pixel blocks lying wholly on one face: ours / Mitsuba of the blocks' mean luminance, the worst
@@ -14,7 +15,7 @@ shaders/probe_grid.glsl), per scene:
   from 1 over all blocks.
 - **silhouette steps** (`silhouette_steps`, at 640x360): the largest and the 99th percentile jump of
   the indirect light between consecutive pixels along silhouettes.
-- **points**: the renderer's lookup at random points on the faces (`SurfaceWeights`, or
+- **points**: the probes' lookup at random points on the faces (`SurfaceWeights`, or
   `ProbeGrid.surface_irradiance` for the exact path, tested against the shaders) against Mitsuba's
   indirect irradiance there (`reference.irradiance(indirect_only=True)`), relative RMS error of the
   luminance (errors relative to the point's own value, or to a fifth of the median where that is
@@ -162,7 +163,8 @@ def measure(ctx, name: str, size: int, spp: int, points: int) -> list[dict]:
     tilted = off_axis(n)
     cells = dda.Cells.of(voxelize_with_faces(scene, 32), scene)
     rows = []
-    for path, settings in (("baked", RenderSettings()), ("exact", RenderSettings(baked=False))):
+    for path, settings in (("gather", RenderSettings()), ("baked", RenderSettings(final_gather=0)),
+                           ("exact", RenderSettings(baked=False))):
         images = {}
         for image_size, views in (((size, size), ("final", "normals")), ((640, 360), ("final", "direct", "normals"))):
             offscreen = OffscreenRenderer(image_size, settings, samples=0, ctx=ctx)
@@ -179,7 +181,7 @@ def measure(ctx, name: str, size: int, spp: int, points: int) -> list[dict]:
         wide = (640, 360)
         steps = silhouette_steps(images[wide, "final"] - images[wide, "direct"],
                                  2.0 * _srgb(images[wide, "normals"]) - 1.0, images[wide, "depth"])
-        if path == "baked":
+        if path != "exact":
             lookup = SurfaceWeights.of(p, n, probes, cells).irradiance(probes, n)
         else:
             lookup = probes.surface_irradiance(p, n, settings.probe_normal_offset, settings.probe_plane_falloff)

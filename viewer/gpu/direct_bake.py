@@ -96,6 +96,8 @@ class BakedDirectLight(TriangleBuffer):
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, texel: float):
         super().__init__(ctx)
+        self.texel = texel
+        """Texel spacing in scene units."""
         origin, n, self.size = lightmap_layout(scene, texel)
         self.tile_origin, self.tile_n = origin, n
         """Each face's tile: its lower-left atlas texel (F, 2) and its triangle's texels per side (F,)."""

@@ -1,7 +1,12 @@
-"""Baked indirect light: the probe grid's irradiance at every texel of the lightmap atlas
-(viewer/gpu/direct_bake.py), weighted per texel as viewer/probe_weights.py says (trilinear, validity,
-back-face and exact visibility: a face never mixes in a probe it cannot see), so that the per-frame
-surface pass reads a surface's indirect irradiance with one bilinear fetch beside the direct one.
+"""Baked indirect light: the indirect irradiance at every texel of the lightmap atlas
+(viewer/gpu/direct_bake.py), so that the per-frame surface pass reads it with one bilinear fetch beside
+the direct light. Two steps per GI update: the probe grid's irradiance, weighted per texel as
+viewer/probe_weights.py says (trilinear, validity, back-face and exact visibility: a face never mixes
+in a probe it cannot see); then, with `gather_rays` (RenderSettings.final_gather, the default), a final
+gather (viewer/final_gather.py): each sample sums what the texels its rays land on reflect, albedo x
+(direct + that probe light), and a tent over its coplanar neighbours takes the noise out. The probes
+then light only the second bounce on, and light they cannot resolve (a face looking out of an open
+side, contacts) comes from the surfaces themselves.
 
 The weights depend on the scene and the probe lattice only: they are computed once (a few tenths of a
 second for the Cornell box, numba) with each texel's (probe, normal) pairs (`SurfaceBake`). Each new
@@ -20,8 +25,10 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import moderngl
 import numba
 import numpy as np
+from scipy.spatial import cKDTree
 
 from viewer import dda
+from viewer.final_gather import GatherRays
 from viewer.geometry import voxelize_with_faces
 from viewer.gpu.direct_bake import BakedDirectLight
 from viewer.probe_weights import SurfaceBake, SurfaceWeights
@@ -40,6 +47,11 @@ mesh, which get one sample each)."""
 MAX_SAMPLES = 3_000_000
 """Above this many samples (both sides) the probes stay per fragment: their weights would take minutes
 and gigabytes (a detailed mesh of 82k triangles has 0.3 M)."""
+FILTER_RADIUS = 1.5
+"""The final gather's samples are averaged with those on their plane within this many sample spacings
+(a tent): its noise falls about 4x, and light that changes over less than 6 cm is still resolved."""
+FILTER_MAX = 16
+"""The most samples averaged (the nearest; coincident samples repeat along the edges of a face's tiles)."""
 KEPT_LATTICES = 2
 """Weights kept per scene: the GI sources' lattices (the network's and the solver's) when they differ."""
 
@@ -102,7 +114,8 @@ class BakedIndirectLight:
     computed on a worker thread (numba releases the GIL) and `ready_for` answers False until they are
     installed, so that the caller can draw the probes per fragment meanwhile instead of stalling."""
 
-    def __init__(self, ctx: moderngl.Context, lightmap: BakedDirectLight, scene: Scene, background: bool = False):
+    def __init__(self, ctx: moderngl.Context, lightmap: BakedDirectLight, scene: Scene, background: bool = False,
+                 gather_rays: int = 0):
         self.lightmap = lightmap
         self.scene = scene
         height, width = lightmap.covered.shape
@@ -121,6 +134,12 @@ class BakedIndirectLight:
                          np.concatenate([weights, weights]))
         """(pixels, their samples' pixels, weights) of every texel, both sides."""
         self._cells: dda.Cells | None = None
+        self.gather_rays = gather_rays
+        """Final-gather rays per sample (viewer/final_gather.py); 0: the probes' light alone."""
+        self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None
+        """The final gather's rays and each sample's neighbours (`_neighbours`), once per geometry."""
+        self._sample_rows = np.arange(len(self._pixels))
+        self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
         self._bake: SurfaceBake | None = None
         self.weights_key = None
         """lattice_key of the probe grid whose weights are installed (None: none yet)."""
@@ -175,9 +194,18 @@ class BakedIndirectLight:
                                  return_inverse=True)
         faces = faces[self._samples]
         normal_id = np.concatenate([ids[faces], ids[len(face_normal) + faces]])
-        weights = SurfaceWeights.of(np.concatenate([lightmap.texel_points[self._samples]] * 2), normals[normal_id],
-                                    probes, self._cells)
+        points = np.concatenate([lightmap.texel_points[self._samples]] * 2)
+        weights = SurfaceWeights.of(points, normals[normal_id], probes, self._cells)
+        if self.gather_rays and self._gather is None:
+            rays = self._gather_rays(points, normals[normal_id], probes)
+            self._gather = (rays, self._neighbours(rays))
         return SurfaceBake.of(weights, normal_id, normals)
+
+    def _gather_rays(self, points: np.ndarray, normals: np.ndarray, probes: ProbeGrid) -> GatherRays:
+        keep = self.scene.face_areas > 0
+        face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
+        return GatherRays.of(points, normals, self._cells, face_tile, self.lightmap.tile_origin, self.lightmap.tile_n,
+                             self.lightmap.covered.shape[1], 1e-4 * float(np.min(probes.spacing)), self.gather_rays)
 
     def _install(self, key: tuple, bake: SurfaceBake) -> None:
         self._bake, self.weights_key = bake, key
@@ -220,11 +248,56 @@ class BakedIndirectLight:
         first = np.unique(pixels, return_index=True)[1]
         return pixels[first], sources[first]
 
+    def _neighbours(self, rays: GatherRays) -> tuple[np.ndarray, np.ndarray]:
+        """(S, K) the samples within FILTER_RADIUS sample spacings of each sample on its plane and side
+        (coplanar, the same normal: across the edges of a face's triangles too), 0 with weight 0 past
+        the last, and their tent weights 1 - distance / radius, normalized. Samples inside a solid (most
+        of their rays meet the backs of faces: the floor under a box) are nobody's neighbours, so that
+        their darkness does not spread onto the visible floor beside."""
+        lightmap = self.lightmap
+        points = lightmap.texel_points[self._samples].astype(np.float64)     # the front sides'; the back
+        normals = lightmap.texel_normals[self._samples].astype(np.float64)   # sides' are the same again
+        radius = FILTER_RADIUS * SAMPLE_STRIDE * lightmap.texel
+        distance, near = cKDTree(points).query(points, FILTER_MAX, distance_upper_bound=radius)
+        found = near < len(points)                   # the missing are numbered len(points)
+        near = np.where(found, near, 0)
+        coplanar = found & (np.einsum("skc,sc->sk", normals[near], normals) > 0.999) \
+            & (np.abs(np.einsum("skc,sc->sk", points[near] - points[:, None], normals)) < 0.05 * radius)
+        tent = np.where(coplanar, 1.0 - distance / radius, 0.0).astype(np.float32)
+        near, tent = np.concatenate([near, near + len(points)]), np.concatenate([tent, tent])
+        own = near == np.arange(len(near))[:, None]
+        tent[rays.inside(lightmap.covered.shape[1])[near] & ~own] = 0.0
+        tent[tent.sum(axis=1) == 0.0, 0] = 1.0        # (a sample among more coincident ones than FILTER_MAX)
+        return near, tent / tent.sum(axis=1, keepdims=True)
+
     def update(self, probes: ProbeGrid) -> None:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
         rows, weights = self._texel_rows
-        _gather(self._bake.irradiance(probes.coefficients), rows, weights, self._texel_pixels, self._image)
+        values = self._bake.irradiance(probes.coefficients)
+        _gather(values, rows, weights, self._texel_pixels, self._image)
+        if self._gather is not None:
+            rays, (near, tent) = self._gather
+            albedo, reflected = self._reflected()
+            np.multiply(albedo, self._image, out=self._scratch)
+            self._scratch += reflected
+            _gather(rays.irradiance(self._scratch), near, tent, self._sample_rows, values)
+            _gather(values, rows, weights, self._texel_pixels, self._image)
         self.texture.write(self._image)
+
+    def _reflected(self) -> tuple[np.ndarray, np.ndarray]:
+        """(albedo, albedo x direct irradiance) of every pixel of the (front | back) image, read once."""
+        if self._reflectance is None:
+            lightmap = self.lightmap
+            height, width = lightmap.covered.shape
+            direct = np.frombuffer(lightmap.texture.read(), np.float16).reshape(height * 2 * width, 4)[:, :3]
+            albedo = np.zeros((height, 2 * width, 3), np.float32)
+            rows, columns = np.nonzero(lightmap.covered)
+            face_albedo = self.scene.albedo[self.scene.face_areas > 0][lightmap.texel_faces]
+            albedo[rows, columns] = albedo[rows, columns + width] = face_albedo
+            albedo = albedo.reshape(-1, 3)
+            self._reflectance = (albedo, albedo * direct.astype(np.float32))
+            self._scratch = np.empty_like(albedo)
+        return self._reflectance
 
     def use(self, unit: int) -> dict:
         """Bind the indirect lightmap; returns the surface shader's uniforms."""

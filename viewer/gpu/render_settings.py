@@ -64,11 +64,19 @@ class RenderSettings:
     `probe_plane_falloff`)."""
     lightmap_texel: float = 0.02
     """Lightmap texel spacing of the baked light, in scene units (metres for the Cornell box)."""
+    final_gather: int = 72
+    """With `baked`: rays per lightmap sample of the final gather (viewer/final_gather.py), which takes each
+    sample's indirect light from the direct and probe-lit light that its surroundings reflect, so that
+    light the probes cannot resolve (contacts, corners, a face half open to the outside) is right. 2 r^2
+    (a full grid of strata: 32, 72, 128, ...); 0: the probes' light alone."""
 
     def __post_init__(self):
         if self.tonemap not in TONEMAPS:
             raise ValueError(f"tonemap must be one of {', '.join(TONEMAPS)}, not {self.tonemap!r}")
         if not 0.0 <= self.probe_plane_falloff <= 20.0:
             raise ValueError(f"probe_plane_falloff must be in [0, 20], not {self.probe_plane_falloff}")
+        rows = round((self.final_gather / 2) ** 0.5)
+        if self.final_gather < 0 or 2 * rows * rows != self.final_gather:
+            raise ValueError(f"final_gather must be 0 or 2 r^2 rays (32, 72, 128, ...), not {self.final_gather}")
         if self.voxel_color not in VOXEL_COLORS:
             raise ValueError(f"voxel_color must be one of {', '.join(VOXEL_COLORS)}, not {self.voxel_color!r}")

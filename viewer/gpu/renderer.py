@@ -276,7 +276,7 @@ class Renderer:
     def _ensure_baked(self) -> BakedDirectLight:
         """The lightmapped mesh and its baked direct irradiance, redone when the scene, the lights or the
         texel size change."""
-        key = (self._shadow_key, self.settings.lightmap_texel, self.settings.shadow_bias)
+        key = (self._shadow_key, self.settings.lightmap_texel, self.settings.shadow_bias, self.settings.final_gather)
         if key != self._baked_key:
             if self._baked is not None:
                 self._baked.release()
@@ -298,7 +298,8 @@ class Renderer:
         if self.probes is None or not self.settings.indirect:
             return None
         if self._indirect is None:
-            self._indirect = BakedIndirectLight(self.ctx, self._baked, self._draw_scene, self.background_bake)
+            self._indirect = BakedIndirectLight(self.ctx, self._baked, self._draw_scene, self.background_bake,
+                                                self.settings.final_gather)
         installed = self._indirect.weights_key
         if not self._indirect.ready_for(self.probes):
             return None

@@ -1,0 +1,145 @@
+"""A final gather over the lightmap: each surface sample's indirect irradiance from the light its
+surroundings reflect, read from the lightmap where the rays land, instead of interpolated between
+probes.
+
+Probes a few centimetres to decimetres apart cannot hold light that changes over less than their
+spacing, and their L2 SH cannot say that part of a hemisphere is dark: a box face that looks out of
+the Cornell box's open side, or down at a floor it stands on, gets the probes' blur. Lightmap bakers fix
+this with a final gather. From each sample point, K cosine-weighted rays (`geometry.cosine_directions`,
+turned about the normal by an angle drawn per sample, so that neighbours do not share the pattern's
+gaps) are traced against the scene's triangles once per geometry (`GatherRays.of`); each remembers the
+lightmap pixel it lands on, front or back side, or that it left the scene. Every GI update then sums
+
+    E(p) = (1 / K) sum_k  albedo(x_k) (E_direct(x_k) + E_indirect(x_k))
+
+the irradiance integral with cosine-weighted rays (each carries pi / K of it; a diffuse surface
+reflects radiance albedo E / pi). E_direct is the baked direct lightmap (lamps and sun with their
+shadows), E_indirect the probes' light at x_k: the probes carry the second bounce on, where their blur
+is multiplied by the albedo and spread over the hemisphere. Emission is not gathered: the direct
+lightmap holds the lamps' light. A ray that leaves the scene brings nothing (the scenes have no sky).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numba
+import numpy as np
+
+from viewer import dda
+
+RAYS = 128
+"""Gather rays per sample: 2 r^2, a grid of r x 2r strata in (u1, u2)."""
+ESCAPED = -1
+"""GatherRays.hits of a ray that leaves the scene (or lands on a face without a tile)."""
+
+
+@dataclass(frozen=True)
+class GatherRays:
+    """The lightmap pixel (of the front | back image, row-major) that each of K rays of S samples lands
+    on, ESCAPED for none."""
+
+    hits: np.ndarray
+    """(S, K) int32."""
+
+    @staticmethod
+    def of(points: np.ndarray, normals: np.ndarray, cells: dda.Cells, face_tile: np.ndarray,
+           tile_origin: np.ndarray, tile_n: np.ndarray, width: int, lift: float, rays: int = RAYS,
+           seed: int = 0) -> "GatherRays":
+        """points, normals (S, 3): the samples; cells: the scene's triangles (`cells.triangle` indexes
+        the scene's faces); face_tile (F,): each scene face's lightmap tile, -1 for none; tile_origin
+        (tiles, 2) and tile_n (tiles,): the atlas layout (viewer.gpu.direct_bake.lightmap_layout),
+        `width` texels a side; lift: how far off the surface the rays start."""
+        n = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
+        helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        t = np.cross(helper, n)
+        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
+        b = np.cross(n, t)
+        rows = int(round(np.sqrt(rays / 2.0)))
+        if rows < 1 or 2 * rows * rows != rays:
+            raise ValueError(f"gather rays must be 2 r^2 (a full grid of strata: 8, 32, 72, 128, ...), not {rays}")
+        # one random shift of the strata per sample (Cranley-Patterson): unbiased over samples, where a
+        # fixed pattern errs alike on a whole face (a face looking at a bright floor at grazing angles)
+        shift = np.random.default_rng(seed).random((len(n), 2))
+        by_face = replace(cells, voxel=cells.triangle)                   # a front hit names its face
+        flipped = replace(by_face, e1=cells.e2, e2=cells.e1)             # a back hit, seen from the front
+        hits = _trace(np.ascontiguousarray(points, np.float64).reshape(-1, 3), n, np.ascontiguousarray(t),
+                      np.ascontiguousarray(b), rows, 2 * rows, shift, float(lift), by_face.args(), flipped.args(),
+                      np.ascontiguousarray(face_tile, np.int64), np.ascontiguousarray(tile_origin, np.int64),
+                      np.ascontiguousarray(tile_n, np.int64), int(width))
+        return GatherRays(hits)
+
+    def inside(self, width: int) -> np.ndarray:
+        """(S,) bool: the samples most of whose rays meet the backs of faces (inside a solid); `width`:
+        lightmap texels a side (the back sides' pixels are the columns from `width` to 2 `width`)."""
+        back = (self.hits >= 0) & (self.hits % (2 * width) >= width)
+        return back.sum(axis=1) > 0.5 * self.hits.shape[1]
+
+    def irradiance(self, reflected: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """(S, 3) float32: each sample's irradiance from what the lightmap pixels reflect, `reflected`
+        (pixels, 3) float32 = albedo x (direct + indirect irradiance) over the front | back image,
+        row-major (one array: the rays land anywhere, and each further array read costs a cache miss)."""
+        if out is None:
+            out = np.empty((len(self.hits), 3), np.float32)
+        _sum(reflected, self.hits, out)
+        return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _trace(points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile, tile_origin,
+           tile_n, width):
+    count, rays = points.shape[0], rows * columns
+    hits = np.full((count, rays), ESCAPED, np.int32)
+    none = np.zeros(0, np.int64)
+    v0, e1, e2 = cells[6], cells[7], cells[8]
+    for s in numba.prange(count):
+        ox = points[s, 0] + lift * normals[s, 0]
+        oy = points[s, 1] + lift * normals[s, 1]
+        oz = points[s, 2] + lift * normals[s, 2]
+        for k in range(rays):
+            # stratum (k // columns, k % columns) of (u1, u2), cosine-weighted: r = sqrt(u1), phi = 2 pi u2
+            u1 = (k // columns + shift[s, 0]) / rows
+            u2 = (k % columns + shift[s, 1]) / columns
+            r, phi = np.sqrt(u1), 2.0 * np.pi * u2
+            lx, ly, lz = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(1.0 - u1, 0.0))
+            dx = lx * tangents[s, 0] + ly * bitangents[s, 0] + lz * normals[s, 0]
+            dy = lx * tangents[s, 1] + ly * bitangents[s, 1] + lz * normals[s, 1]
+            dz = lx * tangents[s, 2] + ly * bitangents[s, 2] + lz * normals[s, 2]
+            face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, cells, none)
+            side = 0
+            if face == dda.BACKFACE:
+                face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, flipped, none)
+                side = 1
+            if face < 0 or face_tile[face] < 0:
+                continue
+            wx, wy, wz = ox + t * dx - v0[face, 0], oy + t * dy - v0[face, 1], oz + t * dz - v0[face, 2]
+            aa = e1[face, 0] ** 2 + e1[face, 1] ** 2 + e1[face, 2] ** 2
+            ab = e1[face, 0] * e2[face, 0] + e1[face, 1] * e2[face, 1] + e1[face, 2] * e2[face, 2]
+            bb = e2[face, 0] ** 2 + e2[face, 1] ** 2 + e2[face, 2] ** 2
+            wa = wx * e1[face, 0] + wy * e1[face, 1] + wz * e1[face, 2]
+            wb = wx * e2[face, 0] + wy * e2[face, 1] + wz * e2[face, 2]
+            det = aa * bb - ab * ab
+            if det <= 0.0:
+                continue
+            u, v = (bb * wa - ab * wb) / det, (aa * wb - ab * wa) / det
+            tile = face_tile[face]
+            m = tile_n[tile]
+            # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
+            ku = min(max(int(np.floor(u * m + 1.0)), 0), m + 1)
+            kv = min(max(int(np.floor(v * m + 1.0)), 0), m + 1)
+            hits[s, k] = (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side * width
+    return hits
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _sum(reflected, hits, out):
+    rays = hits.shape[1]
+    for s in numba.prange(hits.shape[0]):
+        r = g = b = np.float32(0.0)
+        for k in range(rays):
+            p = hits[s, k]
+            if p >= 0:
+                r += reflected[p, 0]
+                g += reflected[p, 1]
+                b += reflected[p, 2]
+        out[s, 0], out[s, 1], out[s, 2] = r / rays, g / rays, b / rays
