@@ -5,9 +5,9 @@ probes.
 Probes a few centimetres to decimetres apart cannot hold light that changes over less than their
 spacing, and their L2 SH cannot say that part of a hemisphere is dark: a box face that looks out of
 the Cornell box's open side, or down at a floor it stands on, gets the probes' blur. Lightmap bakers fix
-this with a final gather. From each sample point, K cosine-weighted rays (`geometry.cosine_directions`,
-turned about the normal by an angle drawn per sample, so that neighbours do not share the pattern's
-gaps) are traced against the scene's triangles once per geometry (`GatherRays.of`); each remembers the
+this with a final gather. From each sample point, K cosine-weighted rays (one per cell of an r x 2r grid
+of strata, the grid shifted at random per sample so that no fixed pattern errs alike over a whole face)
+are traced against the scene's triangles once per geometry (`GatherRays.of`); each remembers the
 lightmap pixel it lands on, front or back side, or that it left the scene. Every GI update then sums
 
     E(p) = (1 / K) sum_k  albedo(x_k) (E_direct(x_k) + E_indirect(x_k))
@@ -27,9 +27,10 @@ import numba
 import numpy as np
 
 from viewer import dda
+from viewer.geometry import tangent_frames
 
-RAYS = 128
-"""Gather rays per sample: 2 r^2, a grid of r x 2r strata in (u1, u2)."""
+RAYS = 72
+"""Gather rays per sample (RenderSettings.final_gather's default): 2 r^2, a grid of r x 2r strata in (u1, u2)."""
 ESCAPED = -1
 """GatherRays.hits of a ray that leaves the scene (or lands on a face without a tile)."""
 
@@ -51,10 +52,7 @@ class GatherRays:
         (tiles, 2) and tile_n (tiles,): the atlas layout (viewer.gpu.direct_bake.lightmap_layout),
         `width` texels a side; lift: how far off the surface the rays start."""
         n = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
-        helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-        t = np.cross(helper, n)
-        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
-        b = np.cross(n, t)
+        t, b = tangent_frames(n)
         rows = int(round(np.sqrt(rays / 2.0)))
         if rows < 1 or 2 * rows * rows != rays:
             raise ValueError(f"gather rays must be 2 r^2 (a full grid of strata: 8, 32, 72, 128, ...), not {rays}")

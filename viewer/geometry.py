@@ -83,15 +83,21 @@ def cosine_directions(count: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.maximum(1.0 - u1, 0.0))], axis=1)
 
 
+def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit tangents and bitangents (N, 3) completing unit normals (N, 3) to right-handed frames."""
+    n = np.asarray(normals, np.float64)
+    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t = np.cross(helper, n)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return t, np.cross(n, t)
+
+
 def gather_directions(normals: np.ndarray, count: int) -> np.ndarray:
     """(K, count, 3) world directions of each voxel's gather rays: `cosine_directions` around its
     normal, turned about it by an angle fixed per voxel (its index times the golden angle), so that
     neighbouring voxels do not share the pattern's gaps, and the same every time (nothing flickers)."""
     n = np.asarray(normals, np.float64)
-    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t = np.cross(helper, n)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    b = np.cross(n, t)
+    t, b = tangent_frames(n)
     angle = np.arange(len(n)) * (np.pi * (3.0 - np.sqrt(5.0)))
     c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
     t, b = c * t + s * b, c * b - s * t

@@ -140,6 +140,9 @@ class BakedIndirectLight:
         """The final gather's rays and each sample's neighbours (`_neighbours`), once per geometry."""
         self._sample_rows = np.arange(len(self._pixels))
         self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
+        """(albedo, albedo x direct irradiance) of every pixel, read once (`_reflected`)."""
+        self._scratch: np.ndarray | None = None
+        """The update's albedo x (direct + indirect) of every pixel, what the gather's rays read."""
         self._bake: SurfaceBake | None = None
         self.weights_key = None
         """lattice_key of the probe grid whose weights are installed (None: none yet)."""
