@@ -1,10 +1,11 @@
 """Gallery: our renderer next to Mitsuba 3 on the built-in scenes, with PSNR and relative difference.
 
-    python -m viewer.bench.gallery [--size 256] [--spp 1024] [--out docs/GALLERY.md]
+    python -m viewer.bench.gallery [--size 256] [--spp 1024] [--gi physical neural] [--out docs/GALLERY.md]
 
-For each scene: the views final, direct, indirect and probes with the viewer's default tone mapping
-(probes from the compute solver at the GISettings defaults, indirect light only), and the final image
-from the same camera path-traced by Mitsuba (`reference.render`, cached on disk). The comparison is made
+For each scene and each of the viewer's two GI sources: the views final, direct, indirect and probes with
+the viewer's default tone mapping (probes, indirect light only, from the compute solver at the GISettings
+defaults or from the shipped network, models/probenet.onnx), and the final image from the same camera
+path-traced by Mitsuba (`reference.render`, cached on disk). The comparison is made
 on linear HDR radiance from both, through the one tone map below, never on the viewer's own ACES output.
 """
 
@@ -22,6 +23,7 @@ from viewer.bench.report import replace_block
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = ("cornell", "paper-test")
+SOURCES = ("physical", "neural")
 VIEWS = ("final", "direct", "indirect", "probes")
 MARKER = "<!-- gallery-table -->"
 
@@ -52,14 +54,24 @@ def side_by_side(left: np.ndarray, right: np.ndarray, gap: int = 4) -> np.ndarra
     return np.concatenate([left, spacer, right], axis=1)
 
 
-def render_ours(ctx, scene, size: int) -> tuple[dict[str, np.ndarray], np.ndarray, float]:
-    """The four views (uint8, default tone mapping), the linear HDR final image and the solve seconds."""
+def solve(ctx, scene, source: str):
+    """The indirect-light probes the viewer's GI source `source` (SOURCES) gives the scene."""
+    if source == "neural":
+        from viewer.neural import NeuralField
+
+        return NeuralField().solve(scene, include_emitted=False)
     from viewer.gi import GISettings
     from viewer.gpu.compute_relight import solve_probes
+
+    return solve_probes(ctx, scene, GISettings(), include_emitted=False)
+
+
+def render_ours(ctx, scene, size: int, source: str = "physical") -> tuple[dict[str, np.ndarray], np.ndarray, float]:
+    """The four views (uint8, default tone mapping), the linear HDR final image and the solve seconds."""
     from viewer.gpu.offscreen import OffscreenRenderer
 
     start = time.perf_counter()
-    probes = solve_probes(ctx, scene, GISettings(), include_emitted=False)
+    probes = solve(ctx, scene, source)
     solve_seconds = time.perf_counter() - start
     offscreen = OffscreenRenderer((size, size), ctx=ctx)
     try:
@@ -72,28 +84,39 @@ def render_ours(ctx, scene, size: int) -> tuple[dict[str, np.ndarray], np.ndarra
     return views, hdr, solve_seconds
 
 
-def run_scene(ctx, name: str, size: int, spp: int, images: Path) -> dict:
+def image_stem(name: str, source: str) -> str:
+    """`cornell` for the physical source (the names the docs have linked since the first gallery),
+    `cornell-neural` for the network."""
+    return name if source == "physical" else f"{name}-{source}"
+
+
+def run_scene(ctx, name: str, size: int, spp: int, images: Path, sources=SOURCES) -> list[dict]:
     from PIL import Image
 
     from viewer import reference
     from viewer import scene as scenes
 
     scene = scenes.load(name)
-    views, ours, solve_seconds = render_ours(ctx, scene, size)
     start = time.perf_counter()
     truth = reference.render(scene, scene.camera, size, size, spp)
     mitsuba_seconds = time.perf_counter() - start
-    ours8, truth8 = to_srgb8(ours), to_srgb8(truth)
-    for view, image in views.items():
-        Image.fromarray(image).save(images / f"{name}-{view}.png")
-    Image.fromarray(side_by_side(ours8, truth8)).save(images / f"{name}-vs-mitsuba.png")
-    row = dict(scene=name, psnr=psnr(ours8, truth8), relative=mean_relative_difference(ours, truth),
-               mean_ratio=float(ours.mean() / max(truth.mean(), 1e-12)), solve=solve_seconds,
-               mitsuba=mitsuba_seconds)
-    print(f"{name:12s} PSNR {row['psnr']:5.2f} dB  mean rel. diff {row['relative']:.3f}  "
-          f"mean ours/Mitsuba {row['mean_ratio']:.3f}  solve {solve_seconds:.1f} s  "
-          f"Mitsuba {mitsuba_seconds:.1f} s", flush=True)
-    return row
+    truth8 = to_srgb8(truth)
+    rows = []
+    for source in sources:
+        views, ours, solve_seconds = render_ours(ctx, scene, size, source)
+        ours8, stem = to_srgb8(ours), image_stem(name, source)
+        for view, image in views.items():
+            Image.fromarray(image).save(images / f"{stem}-{view}.png")
+        Image.fromarray(side_by_side(ours8, truth8)).save(images / f"{stem}-vs-mitsuba.png")
+        row = dict(scene=name, source=source, psnr=psnr(ours8, truth8),
+                   relative=mean_relative_difference(ours, truth),
+                   mean_ratio=float(ours.mean() / max(truth.mean(), 1e-12)), solve=solve_seconds,
+                   mitsuba=mitsuba_seconds)
+        print(f"{name:12s} {source:8s} PSNR {row['psnr']:5.2f} dB  mean rel. diff {row['relative']:.3f}  "
+              f"mean ours/Mitsuba {row['mean_ratio']:.3f}  solve {solve_seconds:.1f} s  "
+              f"Mitsuba {mitsuba_seconds:.1f} s", flush=True)
+        rows.append(row)
+    return rows
 
 
 def machine(ctx) -> str:
@@ -108,24 +131,26 @@ def write_report(path: Path, rows: list[dict], args, host: str) -> None:
     """Replace the generated part between the two markers in `path` (the prose around it stays)."""
     relative = os.path.relpath(Path(args.images), path.parent)
     lines = [
-        f"Generated by `python -m viewer.bench.gallery --size {args.size} --spp {args.spp}` on {host}.",
+        f"Generated by `python -m viewer.bench.gallery --size {args.size} --spp {args.spp} --gi "
+        f"{' '.join(args.gi)}` on {host}.",
         f"Images {args.size}x{args.size}; Mitsuba path tracer at {args.spp} spp (box filter); ours with "
-        "4x MSAA, probes from the compute solver at the GISettings defaults (indirect only).",
+        "4x MSAA, indirect-light probes from the compute solver at the GISettings defaults (`physical`) or "
+        "from the shipped network, models/probenet.onnx (`neural`).",
         "",
-        "| scene | PSNR (8-bit sRGB) | mean rel. diff (linear) | mean ours / Mitsuba | probe solve s | Mitsuba s |",
-        "|---|---|---|---|---|---|",
+        "| scene | GI | PSNR (8-bit sRGB) | mean rel. diff (linear) | mean ours / Mitsuba | probe solve s | Mitsuba s |",
+        "|---|---|---|---|---|---|---|",
     ]
-    lines += [f"| {r['scene']} | {r['psnr']:.2f} dB | {r['relative']:.3f} | {r['mean_ratio']:.3f} | "
+    lines += [f"| {r['scene']} | {r['source']} | {r['psnr']:.2f} dB | {r['relative']:.3f} | {r['mean_ratio']:.3f} | "
               f"{r['solve']:.1f} | {r['mitsuba']:.1f} |" for r in rows]
     lines.append("")
     lines.append("(Mitsuba seconds near 0 mean a cache hit.)")
     for r in rows:
-        name = r["scene"]
-        lines += ["", f"### {name}", "",
+        name, stem = r["scene"], image_stem(r["scene"], r["source"])
+        lines += ["", f"### {name}, {r['source']} GI", "",
                   f"Ours (left) and Mitsuba (right), both clamped and sRGB-encoded the same way:", "",
-                  f"![{name}: ours vs Mitsuba]({relative}/{name}-vs-mitsuba.png)", "",
+                  f"![{name}, {r['source']}: ours vs Mitsuba]({relative}/{stem}-vs-mitsuba.png)", "",
                   "Our views with the default tone mapping (ACES): " + ", ".join(VIEWS) + ".", "",
-                  " ".join(f"![{name} {v}]({relative}/{name}-{v}.png)" for v in VIEWS)]
+                  " ".join(f"![{name} {r['source']} {v}]({relative}/{stem}-{v}.png)" for v in VIEWS)]
     replace_block(path, MARKER, "\n".join(lines), "# Gallery")
 
 
@@ -134,6 +159,8 @@ def main(argv=None) -> int:
     parser.add_argument("--size", type=int, default=256, help="image width and height in pixels")
     parser.add_argument("--spp", type=int, default=1024, help="Mitsuba samples per pixel (1024: the reference's own noise stays well below the differences measured)")
     parser.add_argument("--scenes", nargs="+", default=list(SCENES))
+    parser.add_argument("--gi", nargs="+", choices=SOURCES, default=list(SOURCES),
+                        help="the GI sources to render (default: both)")
     parser.add_argument("--out", default=str(ROOT / "docs" / "GALLERY.md"))
     parser.add_argument("--images", default=str(ROOT / "docs" / "images" / "gallery"))
     args = parser.parse_args(argv)
@@ -143,7 +170,7 @@ def main(argv=None) -> int:
     images.mkdir(parents=True, exist_ok=True)
     ctx = create_context()
     try:
-        rows = [run_scene(ctx, name, args.size, args.spp, images) for name in args.scenes]
+        rows = [row for name in args.scenes for row in run_scene(ctx, name, args.size, args.spp, images, args.gi)]
         host = machine(ctx)
     finally:
         ctx.release()
