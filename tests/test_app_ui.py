@@ -268,6 +268,36 @@ def test_viewport_redraws_on_change_only_and_previews_while_interacting(ctx, cor
     finally:
         viewport.release()
         renderer.release()
+
+
+def test_the_viewport_is_not_settled_while_the_lightmap_weights_are_made(ctx, cornell):
+    """The viewer makes a new scene's texel weights and gather rays on a worker and shows the probes per
+    fragment meanwhile: that picture is not the settled one (captures and benchmarks wait for the baked
+    one), and the baked one is drawn when the weights land."""
+    import time
+
+    from viewer.gi import GISettings
+    from viewer.gpu.compute_relight import solve_probes
+    from viewer.gpu.renderer import RenderSettings, Renderer
+    from viewer.ui.viewport import Viewport
+
+    renderer = Renderer(ctx, RenderSettings(light_samples=4))
+    renderer.background_bake = True
+    renderer.set_scene(cornell)
+    renderer.set_probes(solve_probes(ctx, cornell, GISettings(voxels=16, probes=8), include_emitted=False))
+    screen = ctx.simple_framebuffer((80, 60), components=4)
+    viewport = Viewport(ctx, renderer)
+    try:
+        assert viewport.frame(cornell.camera, "final", (1,), screen)
+        assert renderer.baking and not viewport.settled
+        while renderer.baking:
+            time.sleep(0.02)
+            viewport.frame(cornell.camera, "final", (1,), screen)
+        assert viewport.settled
+        assert not viewport.frame(cornell.camera, "final", (1,), screen)
+    finally:
+        viewport.release()
+        renderer.release()
         screen.release()
 
 

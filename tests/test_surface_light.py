@@ -159,3 +159,53 @@ def test_a_scene_too_detailed_to_bake_keeps_the_probes_per_fragment(gl_context, 
     baked = render(gl_context, cornell, cornell_probes, (64, 64), ("indirect",))["indirect"]
     exact = render(gl_context, cornell, cornell_probes, (64, 64), ("indirect",), RenderSettings(baked=False))["indirect"]
     np.testing.assert_allclose(baked, exact, rtol=1e-5, atol=1e-6)
+
+
+def test_a_colour_edit_keeps_the_geometry_work_and_draws_what_a_fresh_renderer_draws(gl_context, cornell,
+                                                                                   cornell_probes, monkeypatch):
+    """An edit of colours (a wall's albedo, the lamp's colour and intensity) keeps the triangles: the
+    renderer keeps the texel weights and final-gather rays and the shadow maps (seconds of work on a new
+    geometry), bakes the lightmap again, and draws exactly what a renderer given the edited scene from
+    the start draws. A lamp moved is new geometry: everything is made again."""
+    from viewer.gpu import indirect_bake, renderer as renderer_module
+
+    groups = {name: cornell.group_index(name) for name in cornell.groups}
+    emitter = next(name for name, k in groups.items() if cornell.emission[cornell.face_group == k].max() > 0)
+    wall = max((n for n in groups if n != emitter), key=lambda n: cornell.face_areas[cornell.face_group == groups[n]].sum())
+    lamp = cornell.face_group == groups[emitter]
+    edits = [cornell.with_albedo(wall, (0.9, 0.3, 0.2))]
+    emission = cornell.emission.copy()
+    emission[lamp] *= np.array([0.4, 0.8, 1.6])
+    edits.append(type(cornell)(**{**cornell.__dict__, "emission": emission}))
+
+    fresh = [render(gl_context, edited, cornell_probes, (64, 64))["final"] for edited in edits]
+    made, shadows = [], []
+    original = indirect_bake.BakedIndirectLight.weights_of
+    monkeypatch.setattr(indirect_bake.BakedIndirectLight, "weights_of",
+                        lambda self, probes: made.append(probes.resolution) or original(self, probes))
+    original_shadows = renderer_module.EmitterShadows.render
+    monkeypatch.setattr(renderer_module.EmitterShadows, "render",
+                        lambda self, *args: shadows.append(1) or original_shadows(self, *args))
+    offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
+    try:
+        renderer = offscreen.renderer
+        renderer.set_scene(cornell)
+        renderer.set_probes(cornell_probes)
+        first = offscreen.render_hdr(view="final")
+        for edited, expected in zip(edits, fresh):
+            renderer.set_scene(edited)
+            renderer.set_probes(cornell_probes)
+            image = offscreen.render_hdr(view="final")
+            assert not np.allclose(image, first, rtol=1e-2)
+            assert (made, shadows) == ([24], [1]), "the geometry's work was kept"
+            np.testing.assert_allclose(image, expected, rtol=1e-4, atol=1e-6)
+            first = image
+        moved = cornell.vertices.copy()
+        lamp_vertices = np.unique(cornell.faces[lamp])
+        moved[lamp_vertices, 2] -= 0.05
+        renderer.set_scene(type(cornell)(**{**cornell.__dict__, "vertices": moved}))
+        renderer.set_probes(cornell_probes)
+        offscreen.render_hdr(view="final")
+        assert (made, shadows) == ([24, 24], [1, 1])
+    finally:
+        offscreen.release()

@@ -120,6 +120,11 @@ class BakedDirectLight(TriangleBuffer):
         self.texture.repeat_x = self.texture.repeat_y = False
         self.framebuffer = ctx.framebuffer([self.texture])
 
+    def recolour(self, scene: Scene) -> None:
+        """Take the colours (albedo, emission) of `scene`, whose triangles are those this was made for;
+        the lightmap must be baked again."""
+        self.buffer.write(lightmap_vertices(scene, self.tile_origin, self.tile_n, self.size).tobytes())
+
     def bake(self, program: moderngl.Program, first_unit: int) -> None:
         """Fill the lightmaps; `program` is direct_bake.glsl with the light uniforms set. Leaves the
         depth test off (a full-screen pass)."""

@@ -139,8 +139,11 @@ class BakedIndirectLight:
         self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None
         """The final gather's rays and each sample's neighbours (`_neighbours`), once per geometry."""
         self._sample_rows = np.arange(len(self._pixels))
+        self._direct: np.ndarray | None = None
+        """The direct irradiance of every pixel, read back once per bake (`_reflected`)."""
         self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
-        """(albedo, albedo x direct irradiance) of every pixel, read once (`_reflected`)."""
+        """(albedo, albedo x direct irradiance) of every pixel, once per bake or colour edit (`_reflected`)."""
+        self._covered_pixels: tuple[np.ndarray, np.ndarray] | None = None
         self._scratch: np.ndarray | None = None
         """The update's albedo x (direct + indirect) of every pixel, what the gather's rays read."""
         self._bake: SurfaceBake | None = None
@@ -288,19 +291,43 @@ class BakedIndirectLight:
         self.texture.write(self._image)
 
     def _reflected(self) -> tuple[np.ndarray, np.ndarray]:
-        """(albedo, albedo x direct irradiance) of every pixel of the (front | back) image, read once."""
-        if self._reflectance is None:
+        """(albedo, albedo x direct irradiance) of every pixel of the (front | back) image."""
+        if self._direct is None:
             lightmap = self.lightmap
             height, width = lightmap.covered.shape
-            direct = np.frombuffer(lightmap.texture.read(), np.float16).reshape(height * 2 * width, 4)[:, :3]
-            albedo = np.zeros((height, 2 * width, 3), np.float32)
-            rows, columns = np.nonzero(lightmap.covered)
-            face_albedo = self.scene.albedo[self.scene.face_areas > 0][lightmap.texel_faces]
-            albedo[rows, columns] = albedo[rows, columns + width] = face_albedo
-            albedo = albedo.reshape(-1, 3)
-            self._reflectance = (albedo, albedo * direct.astype(np.float32))
+            texels = np.frombuffer(lightmap.texture.read(), np.float16).reshape(height * 2 * width, 4)
+            self._direct = texels[:, :3].astype(np.float32)
+            self._reflectance = None
+        if self._reflectance is None:
+            pixels, faces = self._covered
+            albedo = np.zeros_like(self._direct)
+            albedo[pixels] = self.scene.albedo[self.scene.face_areas > 0][faces]
+            self._reflectance = (albedo, albedo * self._direct)
             self._scratch = np.empty_like(albedo)
         return self._reflectance
+
+    @property
+    def _covered(self) -> tuple[np.ndarray, np.ndarray]:
+        """(pixels, faces): the (front | back) image's pixels that a tile covers, and their faces."""
+        if self._covered_pixels is None:
+            lightmap = self.lightmap
+            width = lightmap.covered.shape[1]
+            rows, columns = np.nonzero(lightmap.covered)
+            front = rows * 2 * width + columns
+            self._covered_pixels = (np.concatenate([front, front + width]), np.concatenate([lightmap.texel_faces] * 2))
+        return self._covered_pixels
+
+    def relit(self, scene: Scene) -> None:
+        """The lightmap was baked again, for `scene` (the same triangles: the weights, rays and neighbours
+        stay): the direct light is read back again on the next update."""
+        self.scene = scene
+        self._direct = None
+
+    def recolour(self, scene: Scene) -> None:
+        """`scene` has the same triangles and lights but other albedos: what each pixel reflects is
+        computed again on the next update."""
+        self.scene = scene
+        self._reflectance = None
 
     def use(self, unit: int) -> dict:
         """Bind the indirect lightmap; returns the surface shader's uniforms."""

@@ -59,6 +59,12 @@ def in_draw_order(scene: Scene) -> Scene:
                    face_group=scene.face_group[order])
 
 
+def same_triangles(a: Scene, b: Scene) -> bool:
+    """Whether two scenes have the same triangles in the same order (their colours may differ)."""
+    return (a.faces.shape == b.faces.shape and a.vertices.shape == b.vertices.shape
+            and np.array_equal(a.faces, b.faces) and np.array_equal(a.vertices, b.vertices))
+
+
 class SceneMesh(TriangleBuffer):
     """The scene as a non-indexed triangle list: every vertex carries its face's normal, albedo and
     emission (flat shading, one material per face). Degenerate faces are dropped (no normal)."""

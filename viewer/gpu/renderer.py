@@ -28,7 +28,7 @@ from viewer.gpu.indirect_bake import BakedIndirectLight
 from viewer.gpu.camera import gl_bytes, view_projection
 from viewer.gpu.debug_views import DebugViews
 from viewer.gpu.lights import emitter_samples
-from viewer.gpu.mesh import SceneMesh, in_draw_order
+from viewer.gpu.mesh import SceneMesh, in_draw_order, same_triangles
 from viewer.gpu.probe_textures import ProbeTextures, empty_grid
 from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
 from viewer.gpu.render_settings import TONEMAPS, VIEWS, VOXEL_COLORS, RenderSettings  # noqa: F401 (re-exported)
@@ -83,7 +83,18 @@ class Renderer:
         """New texel weights on a worker, the probes read per fragment meanwhile (the viewer), instead of in
         the frame that needs them (captures and tests: the same image every time)."""
         self._baked: BakedDirectLight | None = None
-        self._baked_key = None
+        self._geometry = 0
+        """Counts the scenes whose triangles differ from the one before (a colour edit keeps them)."""
+        self._layout_key = None
+        """What the lightmap's layout and the indirect light's weights and rays were made for."""
+        self._lit_key = None
+        """What the lightmap's direct light was baked for."""
+        self._scene_version = 0
+        """Counts set_scene calls: colours and lights may change with any."""
+        self._shadows_for = None
+        """The _scene_version the shadow maps' light samples are those of."""
+        self._lights = 0
+        """Counts the changes of the light sources (places, powers): the direct light to bake again."""
         self._scratch: HdrTarget | None = None
         self.timer = None
         """A viewer.gpu.pass_timer.PassTimer to time each pass with, or None."""
@@ -93,15 +104,26 @@ class Renderer:
 
     # ---- inputs ------------------------------------------------------------------------------------
     def set_scene(self, scene: Scene) -> None:
-        """Upload the scene's triangles; its shadow maps are rendered on the next draw."""
+        """Upload the scene's triangles; its shadow maps and lightmap are rendered on the next draw. A scene
+        with the same triangles as the last (an edit of colours: albedo, emission) keeps the lightmap's
+        layout and the indirect light's probe weights and final-gather rays, the seconds of work that
+        depend on the geometry alone: its lightmap is baked again and the indirect light gathered again."""
         if self.mesh is not None:
             self.mesh.release()
-        self._release_baked()
+        draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
+        if self.scene is None or not same_triangles(draw_scene, self._draw_scene):
+            self._geometry += 1
+            self._release_baked()
+        elif self._baked is not None:
+            self._baked.recolour(draw_scene)
+            if self._indirect is not None:
+                self._indirect.recolour(draw_scene)
+                self._indirect_fresh = False
         self.scene = scene
         self.bounds = scene.bounds   # (lo, hi); Scene.bounds scans the faces, so not once per frame
-        self._draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
+        self._draw_scene = draw_scene
         self.mesh = SceneMesh(self.ctx, self._draw_scene)
-        self._shadow_key = None
+        self._scene_version += 1
 
     def set_probes(self, probes: ProbeGrid | None) -> None:
         """The indirect light (incident radiance without emitters and sun), or None for GI off."""
@@ -123,7 +145,7 @@ class Renderer:
                 self.mesh.forget_programs()
             if self._baked is not None:
                 self._baked.forget_programs()
-            self._baked_key = None
+            self._lit_key = None
             for array in self._present_arrays.values():
                 array.release()
             self._present_arrays.clear()
@@ -256,10 +278,22 @@ class Renderer:
             self._present_arrays[key].render(moderngl.TRIANGLES, vertices=3)
 
     def _ensure_shadows(self) -> None:
+        """The emitter samples' shadow cubes and the sun's map: rendered again when the triangles or the
+        shadow settings change, or when the lights move; a light's new colour or intensity only changes
+        the samples' powers."""
         s = self.settings
-        key = (id(self.mesh), s.light_samples, s.shadow_tile, s.sun_shadow_size)
+        key = (self._geometry, s.light_samples, s.shadow_tile, s.sun_shadow_size)
         if key == self._shadow_key:
-            return
+            if self._shadows_for == self._scene_version:
+                return
+            self._shadows_for = self._scene_version
+            power, sun = self._emitter_shadows.samples.power, self._sun_shadow.sun
+            if (self._emitter_shadows.repower(emitter_samples(self.scene, s.light_samples))
+                    and self._sun_shadow.resun(self.scene.sun)):
+                if not (np.array_equal(power, self._emitter_shadows.samples.power) and (sun is None or np.array_equal(
+                        sun.irradiance, self._sun_shadow.sun.irradiance))):
+                    self._lights += 1   # an albedo edit leaves the direct irradiance as it was
+                return
         for shadow in (self._emitter_shadows, self._sun_shadow):
             if shadow is not None:
                 shadow.release()
@@ -270,18 +304,20 @@ class Renderer:
         self._emitter_shadows.render(depth, self.mesh.render)
         self._sun_shadow = SunShadow(self.ctx, self.scene.sun, lo, hi, s.sun_shadow_size)
         self._sun_shadow.render(depth, self.mesh.render)
-        self._shadow_key = key
-        self._baked_key = None
+        self._shadow_key, self._shadows_for = key, self._scene_version
+        self._lights += 1
 
     def _ensure_baked(self) -> BakedDirectLight:
-        """The lightmapped mesh and its baked direct irradiance, redone when the scene, the lights or the
-        texel size change."""
-        key = (self._shadow_key, self.settings.lightmap_texel, self.settings.shadow_bias, self.settings.final_gather)
-        if key != self._baked_key:
-            if self._baked is not None:
-                self._baked.release()
+        """The lightmapped mesh and its baked direct irradiance: laid out again when the triangles or the
+        texel size change, baked again when the lights do (its texels hold irradiance: an albedo edit
+        changes only the surface pass's colours and what the indirect light's gather reflects)."""
+        layout = (self._geometry, self.settings.lightmap_texel, self.settings.final_gather)
+        if layout != self._layout_key:
             self._release_baked()
             self._baked = BakedDirectLight(self.ctx, self._draw_scene, self.settings.lightmap_texel)
+            self._layout_key = layout
+        lit = (self._shadow_key, self._lights, self.settings.shadow_bias)
+        if lit != self._lit_key:
             program = self.programs.get("direct_bake")
             self._emitter_shadows.use(ATLAS_UNIT)
             self._sun_shadow.use(SUN_UNIT)
@@ -289,7 +325,10 @@ class Renderer:
                          **self._emitter_shadows.uniforms(ATLAS_UNIT), **self._sun_shadow.uniforms(SUN_UNIT))
             self._baked.bake(program, BAKED_UNIT)
             self.ctx.enable(moderngl.DEPTH_TEST)   # the bake is a full-screen pass without depth
-            self._baked_key = key
+            self._lit_key = lit
+            if self._indirect is not None:    # what its gather reflects changed with the direct light
+                self._indirect.relit(self._draw_scene)
+                self._indirect_fresh = False
         return self._baked
 
     def _ensure_indirect(self) -> BakedIndirectLight | None:
@@ -314,11 +353,17 @@ class Renderer:
             self._indirect.poll()
         return (None,) if self._indirect is None else (self._indirect.weights_key, self._indirect.pending)
 
+    @property
+    def baking(self) -> bool:
+        """The lightmap's probe weights (and final-gather rays) are being made on the background worker: the
+        picture shows the probes per fragment until they land."""
+        return self._indirect is not None and self._indirect.pending
+
     def _release_baked(self) -> None:
         for obj in (self._indirect, self._baked):
             if obj is not None:
                 obj.release()
-        self._indirect, self._baked, self._baked_key = None, None, None
+        self._indirect, self._baked, self._layout_key, self._lit_key = None, None, None, None
 
     def _draw_surfaces(self, view_proj: np.ndarray, view: str, framebuffer: moderngl.Framebuffer,
                        interleave: bool = False, baked: bool = False, display: bool = False) -> None:

@@ -65,13 +65,28 @@ class EmitterShadows:
         self.framebuffer = ctx.framebuffer(depth_attachment=self.atlas)
         if samples.count > MAX_LIGHT_SAMPLES:
             raise ValueError(f"at most {MAX_LIGHT_SAMPLES} light samples, got {samples.count}")
+        self.buffer = ctx.buffer(self._packed(samples).tobytes())
+
+    def _packed(self, samples: LightSamples) -> np.ndarray:
+        """The storage buffer's contents: the samples, each with its tile's place in the atlas."""
         packed = np.zeros((MAX_LIGHT_SAMPLES, 4, 4), np.float32)
         packed[:samples.count] = samples.packed()
         width, height = self.atlas.size
         for k in range(samples.count):
             x, y = self.tile_origin(k, 0)
             packed[k, 1, 3], packed[k, 2, 3] = x / width, y / height
-        self.buffer = ctx.buffer(packed.tobytes())
+        return packed
+
+    def repower(self, samples: LightSamples) -> bool:
+        """Take `samples` if they sit where these shadow cubes were rendered from (a lamp's colour or
+        intensity edited: the same places, other powers), keeping the depth atlas; False if they do not."""
+        old = self.samples
+        if samples.count != old.count or not all(np.array_equal(a, b) for a, b in (
+                (samples.position, old.position), (samples.normal, old.normal), (samples.tangent, old.tangent))):
+            return False
+        self.samples = samples
+        self.buffer.write(self._packed(samples).tobytes())
+        return True
 
     def tile_origin(self, sample: int, face: int) -> tuple[int, int]:
         """Lower-left texel of a face's tile in the atlas."""
@@ -156,6 +171,16 @@ class SunShadow:
         program["view_proj"].write(gl_bytes(self.view_proj))
         draw(program)
         self.ctx.polygon_offset = (0.0, 0.0)
+
+    def resun(self, sun: DirectionalLight | None) -> bool:
+        """Take `sun` if it shines from where this map was rendered (or both are off), keeping the map;
+        False if it does not."""
+        sun = sun if sun is not None and np.any(sun.irradiance > 0) else None
+        if (sun is None) != (self.sun is None) or (sun is not None and not np.array_equal(sun.direction,
+                                                                                          self.sun.direction)):
+            return False
+        self.sun = sun
+        return True
 
     def uniforms(self, map_unit: int) -> dict:
         sun = self.sun

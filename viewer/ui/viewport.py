@@ -57,8 +57,8 @@ class Viewport:
 
     @property
     def settled(self) -> bool:
-        """The image shown is the full-resolution one of the current state."""
-        return self._drawn == (self._key, "full")
+        """The image shown is the full-resolution one of the current state, its indirect lightmap baked."""
+        return self._drawn == (self._key, "full") and not self.renderer.baking
 
     def frame(self, camera: Camera, view: str, content_key: tuple, framebuffer: moderngl.Framebuffer,
               preview: bool = False, force: bool = False) -> bool:

@@ -1,0 +1,123 @@
+"""Edit to converged GI on screen, through the viewer itself: the number the product is judged by.
+
+    python -m viewer.bench.edits [SCENE] [--sources compute neural] [--repeats 5] [--write]
+
+The viewer runs headless (viewer/bench/headless.py: Session, GIController, Renderer and Viewport stepped
+a frame at a time as the window steps them, the renderer's lightmap weights on their background worker
+as in the window). For each GI source, each edit is made the way the panels make it (SceneEdits) and
+timed until the viewer has settled: the GI source's probes are in, the renderer's indirect lightmap
+(its probe weights and final gather) is baked from them and the full-resolution frame is drawn. Edits:
+
+- `albedo`: the largest material group's colour (between two colours, so every edit changes it);
+- `light colour`: the lamp's colour;
+- `lamp move`: the lamp moved by 5% of the scene's size (back and forth);
+- `new scene`: another scene file opened (voxelizing and everything after it).
+
+Medians of `repeats` edits after one untimed warm-up of each. `--write` puts the table into
+docs/PERFORMANCE.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from viewer.bench.report import replace_block
+
+ROOT = Path(__file__).resolve().parents[2]
+MARKER = "<!-- bench-edits -->"
+EDITS = ("albedo", "light colour", "lamp move", "new scene")
+
+
+def largest_group(viewer) -> str:
+    scene = viewer.session.scene
+    groups = viewer.session.edits.material_groups
+    area = np.bincount(scene.face_group, weights=scene.face_areas, minlength=len(scene.groups))
+    return max(groups, key=lambda g: area[scene.group_index(g)])
+
+
+def make_edit(viewer, edit: str, step: int, other_scene: Path) -> None:
+    """Make edit number `step` of its kind (alternating between two states, so each one changes the scene)."""
+    session = viewer.session
+    if edit == "albedo":
+        session.edits.set_albedo(largest_group(viewer), (0.8, 0.5, 0.3) if step % 2 else (0.5, 0.7, 0.8))
+    elif edit == "light colour":
+        session.edits.set_light(colour=(1.0, 0.8, 0.6) if step % 2 else (0.7, 0.85, 1.0))
+    elif edit == "lamp move":
+        lo, hi = session.scene.bounds
+        offset = np.zeros(3)
+        offset[2] = -0.05 * float(np.max(hi - lo)) * (step % 2)
+        session.edits.set_light(offset=offset)
+    elif edit == "new scene":
+        session.load_file(other_scene if step % 2 else viewer.scene_path)
+    else:
+        raise ValueError(edit)
+
+
+def time_edits(source: str, scene: str, other: str, repeats: int, edits=EDITS) -> dict[str, list[float]]:
+    from viewer.bench.headless import HeadlessViewer
+    from viewer.gi import GISettings
+    from viewer.scene import scene_file
+
+    viewer = HeadlessViewer(source, GISettings(), scene)
+    viewer.renderer.background_bake = True
+    viewer.scene_path = scene_file(scene)
+    seconds: dict[str, list[float]] = {}
+    try:
+        viewer.settle()
+        for edit in edits:
+            times = []
+            for step in range(repeats + 1):
+                start = time.perf_counter()
+                make_edit(viewer, edit, step + 1, scene_file(other))
+                viewer.settle()
+                if step:   # the first is a warm-up (compiles, caches)
+                    times.append(time.perf_counter() - start)
+            if edit == "new scene" and repeats % 2 == 0:   # back to the scene the others edit
+                viewer.load(viewer.scene_path)
+            seconds[edit] = times
+            print(f"{source:7s} {edit:12s} median {1000 * statistics.median(times):7.1f} ms  "
+                  f"({', '.join(f'{1000 * t:.0f}' for t in times)})", flush=True)
+    finally:
+        viewer.release()
+    return seconds
+
+
+def table(results: dict[str, dict[str, list[float]]], scene: str, repeats: int) -> str:
+    load = os.getloadavg()[0]
+    lines = [f"`python -m viewer.bench.edits {scene} --repeats {repeats} --write`, {time.strftime('%Y-%m-%d')}, "
+             f"{os.cpu_count()} cores, 1-minute load {load:.1f} when written; median of {repeats} edits, "
+             "milliseconds from the edit to the settled full-resolution frame (probes in, indirect lightmap baked):",
+             "", "| GI source | " + " | ".join(EDITS) + " |", "|---" * (len(EDITS) + 1) + "|"]
+    for source, seconds in results.items():
+        cells = [f"{1000 * statistics.median(seconds[e]):.0f}" if e in seconds else "" for e in EDITS]
+        lines.append(f"| {source} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m viewer.bench.edits", description=__doc__.splitlines()[0])
+    parser.add_argument("scene", nargs="?", default="cornell")
+    parser.add_argument("--other", default="paper-test", help="the scene `new scene` opens (by turns with SCENE)")
+    parser.add_argument("--sources", nargs="+", default=["compute", "neural"],
+                        choices=("solver", "compute", "neural"))
+    parser.add_argument("--edits", nargs="+", default=list(EDITS), choices=EDITS)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--write", action="store_true", help="put the table into docs/PERFORMANCE.md")
+    args = parser.parse_args(argv)
+    results = {source: time_edits(source, args.scene, args.other, args.repeats, args.edits)
+               for source in args.sources}
+    text = table(results, args.scene, args.repeats)
+    print(text)
+    if args.write:
+        replace_block(ROOT / "docs" / "PERFORMANCE.md", MARKER, text, "# Performance")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
