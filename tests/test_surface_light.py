@@ -200,12 +200,55 @@ def test_a_colour_edit_keeps_the_geometry_work_and_draws_what_a_fresh_renderer_d
             assert (made, shadows) == ([24], [1]), "the geometry's work was kept"
             np.testing.assert_allclose(image, expected, rtol=1e-4, atol=1e-6)
             first = image
-        moved = cornell.vertices.copy()
-        lamp_vertices = np.unique(cornell.faces[lamp])
-        moved[lamp_vertices, 2] -= 0.05
-        renderer.set_scene(type(cornell)(**{**cornell.__dict__, "vertices": moved}))
+        moved = lamp_moved(cornell)
+        renderer.set_scene(moved)
         renderer.set_probes(cornell_probes)
-        offscreen.render_hdr(view="final")
+        image = offscreen.render_hdr(view="final")
         assert (made, shadows) == ([24, 24], [1, 1])
+        monkeypatch.undo()
+        np.testing.assert_allclose(image, render(gl_context, moved, cornell_probes, (64, 64))["final"],
+                                   rtol=1e-4, atol=1e-6)
+    finally:
+        offscreen.release()
+
+
+def lamp_moved(scene, by=-0.05):
+    """The scene with its emitting faces moved along z."""
+    lamp = np.unique(scene.faces[scene.emission.max(axis=1) > 0])
+    vertices = scene.vertices.copy()
+    vertices[lamp, 2] += by
+    return type(scene)(**{**scene.__dict__, "vertices": vertices})
+
+
+def test_a_moved_lamp_is_gathered_with_the_old_rays_until_the_new_ones_land(gl_context, cornell, cornell_probes):
+    """The viewer drags a lamp: the same faces elsewhere, the same lightmap layout. The frame right after
+    the move shows the new direct light gathered with the old geometry's rays (the baked path, not the
+    probes per fragment: no pop between two looks), the renderer is `baking` the new geometry's weights
+    meanwhile, and once they land the image is the one a renderer given the moved scene draws."""
+    import time
+
+    moved = lamp_moved(cornell)
+    expected = render(gl_context, moved, cornell_probes, (64, 64), ("indirect",))["indirect"]
+    offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
+    try:
+        renderer = offscreen.renderer
+        renderer.background_bake = True
+        renderer.set_scene(cornell)
+        renderer.set_probes(cornell_probes)
+        before = offscreen.render_hdr(view="indirect")
+        while renderer.baking:
+            time.sleep(0.02)
+            renderer.bake_version()
+        before = offscreen.render_hdr(view="indirect")
+        renderer.set_scene(moved)
+        renderer.set_probes(cornell_probes)
+        stale = offscreen.render_hdr(view="indirect")
+        assert renderer.baking and renderer._indirect.stale
+        assert not np.allclose(stale, before, rtol=1e-3), "the new direct light is gathered at once"
+        assert np.abs(stale - expected).mean() < 0.05 * expected.mean()
+        while renderer.baking:
+            time.sleep(0.02)
+            renderer.bake_version()
+        np.testing.assert_allclose(offscreen.render_hdr(view="indirect"), expected, rtol=1e-3, atol=1e-5)
     finally:
         offscreen.release()

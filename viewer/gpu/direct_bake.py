@@ -87,6 +87,12 @@ def lightmap_vertices(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tup
     return np.concatenate(columns, axis=2).reshape(-1, 14).astype(np.float32)
 
 
+def same_atlas(a: "BakedDirectLight", b: "BakedDirectLight") -> bool:
+    """Whether two lightmaps lay their tiles out alike (the same pixels for the same faces)."""
+    return (a.size == b.size and np.array_equal(a.tile_origin, b.tile_origin)
+            and np.array_equal(a.tile_n, b.tile_n))
+
+
 class BakedDirectLight(TriangleBuffer):
     """The scene's triangles with lightmap coordinates (the same vertices as SceneMesh, in the same
     order, so the renderer draws either), and the lightmap (front sides | back sides)."""

@@ -149,8 +149,18 @@ class BakedIndirectLight:
         self._bake: SurfaceBake | None = None
         self.weights_key = None
         """lattice_key of the probe grid whose weights are installed (None: none yet)."""
+        self.installs = 0
+        """Counts the weights installed (a new lattice's, or a moved geometry's in place of its stale ones)."""
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="indirect-weights") if background else None
-        self._job: tuple[tuple, Future] | None = None
+        self._job: tuple[tuple, int, Future] | None = None
+        """(lattice key, geometry, future) of the weights under way on the worker."""
+        self._geometry = 0
+        """Counts `moved` calls: work started for an earlier geometry is dropped."""
+        self._made: tuple[int, dda.Cells, tuple | None] | None = None
+        """(geometry, cells, gather or None) the last weights were made with: what the next job reuses."""
+        self.stale = False
+        """The weights and rays installed are those of the geometry before a `moved`: the updates use them
+        (the lights are new) while the worker makes the current geometry's."""
         self._last_key: tuple[ProbeGrid, tuple] | None = None
         self._kept: dict[tuple, SurfaceBake] = {}
         """The weights of the last KEPT_LATTICES lattices, newest last."""
@@ -163,36 +173,65 @@ class BakedIndirectLight:
         if self._last_key is None or self._last_key[0] is not probes:   # asked twice a frame: hash once
             self._last_key = (probes, lattice_key(probes))
         key = self._last_key[1]
-        if self.weights_key == key:
+        if self.weights_key == key and not self.stale:
             return True
-        if key in self._kept:   # a lattice met before (the viewer toggling between GI sources)
+        if key in self._kept and not self.stale:   # a lattice met before (the viewer toggling GI sources)
             self._install(key, self._kept[key])
             return True
-        if self._job is None or self._job[0] != key:
+        if self._job is None or self._job[:2] != (key, self._geometry):
             if self._executor is None:
-                self._install(key, self.weights_of(probes))
+                self._install(key, *self.weights_of(probes))
                 return True
-            self._job = (key, self._executor.submit(self.weights_of, probes))
-        return self.poll()
+            self._job = (key, self._geometry, self._executor.submit(self.weights_of, probes, *self._geometry_now()))
+        return self.poll() or self.weights_key == key   # a stale lattice of ours serves meanwhile
 
     def poll(self) -> bool:
-        """Install the worker's weights if they are done; True when they were."""
-        if self._job is None or not self._job[1].done():
+        """Install the worker's weights if they are done (and of the current geometry); True when they were."""
+        if self._job is None or not self._job[2].done():
             return False
-        key, job = self._job
+        key, geometry, job = self._job
         self._job = None
-        self._install(key, job.result())
+        if geometry != self._geometry:
+            return False
+        self._install(key, *job.result())
         return True
+
+    def moved(self, lightmap: BakedDirectLight, scene: Scene) -> None:
+        """`scene` is new geometry with the same lightmap layout as the last (a lamp moved: the same
+        triangles elsewhere), baked into `lightmap`. The weights and rays of the old geometry stay in use,
+        stale, until those of the new one are made (on the worker with `background`, else on the next
+        `ready_for`): the moved light is on screen at once, its exact gather a few seconds later."""
+        self.lightmap, self.scene = lightmap, scene
+        self._geometry += 1
+        self._cells, self._direct, self._reflectance = None, None, None
+        self._kept = {}
+        self.stale = self._bake is not None
 
     @property
     def pending(self) -> bool:
         return self._job is not None
 
-    def weights_of(self, probes: ProbeGrid) -> SurfaceBake:
-        """Every texel's probe weights for both sides (the back sides with their normals negated)."""
-        if self._cells is None:
-            self._cells = dda.Cells.of(voxelize_with_faces(self.scene, VISIBILITY_VOXELS), self.scene)
-        lightmap = self.lightmap
+    def _geometry_now(self) -> tuple:
+        """What the weights are made for, read together on the calling thread (the worker's job gets them
+        as arguments: `moved` may change them while it runs)."""
+        return self._geometry, self.scene, self.lightmap, self.stale or self._gather is None
+
+    def weights_of(self, probes: ProbeGrid, geometry: int | None = None, scene: Scene | None = None,
+                   lightmap: BakedDirectLight | None = None, rays: bool | None = None,
+                   ) -> tuple[SurfaceBake, dda.Cells, tuple | None]:
+        """Every texel's probe weights for both sides (the back sides with their normals negated), the
+        scene's triangle cells, and the final gather's rays and neighbours when the geometry has none yet
+        (else None). The cells and rays of a geometry are made once: a second lattice's weights (the
+        network's validity changes with the scene) reuse those the first job made."""
+        if scene is None:
+            geometry, scene, lightmap, rays = self._geometry_now()
+        made = self._made
+        if made is not None and made[0] == geometry:
+            cells, gather = made[1], made[2]
+        else:
+            cells = self._cells if self._cells is not None and not rays else \
+                dda.Cells.of(voxelize_with_faces(scene, VISIBILITY_VOXELS), scene)
+            gather = None
         faces = lightmap.texel_faces
         face_normal = np.zeros((int(faces.max()) + 1 if len(faces) else 0, 3))
         face_normal[faces] = lightmap.texel_normals
@@ -201,19 +240,29 @@ class BakedIndirectLight:
         faces = faces[self._samples]
         normal_id = np.concatenate([ids[faces], ids[len(face_normal) + faces]])
         points = np.concatenate([lightmap.texel_points[self._samples]] * 2)
-        weights = SurfaceWeights.of(points, normals[normal_id], probes, self._cells)
-        if self.gather_rays and self._gather is None:
-            rays = self._gather_rays(points, normals[normal_id], probes)
-            self._gather = (rays, self._neighbours(rays))
-        return SurfaceBake.of(weights, normal_id, normals)
+        weights = SurfaceWeights.of(points, normals[normal_id], probes, cells)
+        if made is None or made[0] != geometry:
+            if self.gather_rays and rays:
+                traced = self._gather_rays(scene, lightmap, cells, points, normals[normal_id], probes)
+                gather = (traced, self._neighbours(lightmap, traced))
+            self._made = (geometry, cells, gather)
+        return SurfaceBake.of(weights, normal_id, normals), cells, gather
 
-    def _gather_rays(self, points: np.ndarray, normals: np.ndarray, probes: ProbeGrid) -> GatherRays:
-        keep = self.scene.face_areas > 0
+    def _gather_rays(self, scene: Scene, lightmap: BakedDirectLight, cells: dda.Cells, points: np.ndarray,
+                     normals: np.ndarray, probes: ProbeGrid) -> GatherRays:
+        keep = scene.face_areas > 0
         face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
-        return GatherRays.of(points, normals, self._cells, face_tile, self.lightmap.tile_origin, self.lightmap.tile_n,
-                             self.lightmap.covered.shape[1], 1e-4 * float(np.min(probes.spacing)), self.gather_rays)
+        return GatherRays.of(points, normals, cells, face_tile, lightmap.tile_origin, lightmap.tile_n,
+                             lightmap.covered.shape[1], 1e-4 * float(np.min(probes.spacing)), self.gather_rays)
 
-    def _install(self, key: tuple, bake: SurfaceBake) -> None:
+    def _install(self, key: tuple, bake: SurfaceBake, cells: dda.Cells | None = None,
+                 gather: tuple | None = None) -> None:
+        if cells is not None:
+            self._cells = cells
+        if gather is not None:
+            self._gather = gather
+        self.stale = False
+        self.installs += 1
         self._bake, self.weights_key = bake, key
         self._kept = {k: v for k, v in self._kept.items() if k != key}
         self._kept[key] = bake
@@ -254,13 +303,12 @@ class BakedIndirectLight:
         first = np.unique(pixels, return_index=True)[1]
         return pixels[first], sources[first]
 
-    def _neighbours(self, rays: GatherRays) -> tuple[np.ndarray, np.ndarray]:
+    def _neighbours(self, lightmap: BakedDirectLight, rays: GatherRays) -> tuple[np.ndarray, np.ndarray]:
         """(S, K) the samples within FILTER_RADIUS sample spacings of each sample on its plane and side
         (coplanar, the same normal: across the edges of a face's triangles too), 0 with weight 0 past
         the last, and their tent weights 1 - distance / radius, normalized. Samples inside a solid (most
         of their rays meet the backs of faces: the floor under a box) are nobody's neighbours, so that
         their darkness does not spread onto the visible floor beside."""
-        lightmap = self.lightmap
         points = lightmap.texel_points[self._samples].astype(np.float64)     # the front sides'; the back
         normals = lightmap.texel_normals[self._samples].astype(np.float64)   # sides' are the same again
         radius = FILTER_RADIUS * SAMPLE_STRIDE * lightmap.texel

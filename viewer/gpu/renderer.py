@@ -23,7 +23,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from viewer.gpu.direct_bake import BakedDirectLight
+from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.gpu.indirect_bake import BakedIndirectLight
 from viewer.gpu.camera import gl_bytes, view_projection
 from viewer.gpu.debug_views import DebugViews
@@ -79,6 +79,8 @@ class Renderer:
         self._interleave: InterleaveBuffers | None = None
         self._indirect: BakedIndirectLight | None = None
         self._indirect_fresh = False
+        self._indirect_installs = -1
+        """BakedIndirectLight.installs when its lightmap was last updated."""
         self.background_bake = False
         """New texel weights on a worker, the probes read per fragment meanwhile (the viewer), instead of in
         the frame that needs them (captures and tests: the same image every time)."""
@@ -107,13 +109,16 @@ class Renderer:
         """Upload the scene's triangles; its shadow maps and lightmap are rendered on the next draw. A scene
         with the same triangles as the last (an edit of colours: albedo, emission) keeps the lightmap's
         layout and the indirect light's probe weights and final-gather rays, the seconds of work that
-        depend on the geometry alone: its lightmap is baked again and the indirect light gathered again."""
+        depend on the geometry alone: its lightmap is baked again and the indirect light gathered again.
+        The same faces moved (a lamp dragged) keep the old weights and rays, stale, until the new ones
+        are made (`_ensure_baked`)."""
         if self.mesh is not None:
             self.mesh.release()
         draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
         if self.scene is None or not same_triangles(draw_scene, self._draw_scene):
             self._geometry += 1
-            self._release_baked()
+            if self.scene is None or not np.array_equal(draw_scene.faces, self._draw_scene.faces):
+                self._release_baked()
         elif self._baked is not None:
             self._baked.recolour(draw_scene)
             if self._indirect is not None:
@@ -313,9 +318,17 @@ class Renderer:
         changes only the surface pass's colours and what the indirect light's gather reflects)."""
         layout = (self._geometry, self.settings.lightmap_texel, self.settings.final_gather)
         if layout != self._layout_key:
-            self._release_baked()
-            self._baked = BakedDirectLight(self.ctx, self._draw_scene, self.settings.lightmap_texel)
-            self._layout_key = layout
+            old, indirect = self._baked, self._indirect
+            baked = BakedDirectLight(self.ctx, self._draw_scene, self.settings.lightmap_texel)
+            if (old is not None and indirect is not None and self._layout_key[1:] == layout[1:]
+                    and same_atlas(old, baked)):   # faces moved: the stale weights serve until the new land
+                self._indirect = None
+                self._release_baked()
+                indirect.moved(baked, self._draw_scene)
+                self._indirect, self._indirect_fresh = indirect, False
+            else:
+                self._release_baked()
+            self._baked, self._layout_key = baked, layout
         lit = (self._shadow_key, self._lights, self.settings.shadow_bias)
         if lit != self._lit_key:
             program = self.programs.get("direct_bake")
@@ -339,19 +352,19 @@ class Renderer:
         if self._indirect is None:
             self._indirect = BakedIndirectLight(self.ctx, self._baked, self._draw_scene, self.background_bake,
                                                 self.settings.final_gather)
-        installed = self._indirect.weights_key
+            self._indirect_installs = -1
         if not self._indirect.ready_for(self.probes):
             return None
-        if not self._indirect_fresh or self._indirect.weights_key != installed:
-            self._indirect.update(self.probes)
-            self._indirect_fresh = True
+        if not self._indirect_fresh or self._indirect.installs != self._indirect_installs:
+            self._indirect.update(self.probes)   # new probes, lights or colours, or new weights installed
+            self._indirect_fresh, self._indirect_installs = True, self._indirect.installs
         return self._indirect
 
     def bake_version(self) -> tuple:
         """Changes when background work that changes the image has finished (a redraw key)."""
         if self._indirect is not None:
             self._indirect.poll()
-        return (None,) if self._indirect is None else (self._indirect.weights_key, self._indirect.pending)
+        return (None,) if self._indirect is None else (self._indirect.installs, self._indirect.pending)
 
     @property
     def baking(self) -> bool:

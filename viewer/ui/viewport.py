@@ -56,9 +56,15 @@ class Viewport:
         return target
 
     @property
+    def drawn(self) -> bool:
+        """The image shown is the full-resolution one of the current state (the probes perhaps read per
+        fragment, or gathered with stale rays, while the renderer is `baking`)."""
+        return self._drawn == (self._key, "full")
+
+    @property
     def settled(self) -> bool:
         """The image shown is the full-resolution one of the current state, its indirect lightmap baked."""
-        return self._drawn == (self._key, "full") and not self.renderer.baking
+        return self.drawn and not self.renderer.baking
 
     def frame(self, camera: Camera, view: str, content_key: tuple, framebuffer: moderngl.Framebuffer,
               preview: bool = False, force: bool = False) -> bool:
