@@ -24,7 +24,7 @@ from viewer import gi, reference
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, radiance, try_method
-from viewer.bench.stability.methods import METHODS, MethodSettings, without_leak_reduction
+from viewer.bench.stability.methods import METHODS, MethodSettings, size_label, without_leak_reduction
 
 COLUMNS = [("scene", "scene", "{}"), ("method", "method", "{}"), ("size", "voxels / probes", "{}"),
            ("reduction", "leak reduction", "{}"), ("lit", "lit room (rel. to truth)", "{:.3f}"),
@@ -92,7 +92,7 @@ def run(config: RunConfig) -> StudyResult:
                     estimate = radiance(grid.interpolate(points))
                     dark_mean = estimate[dark].mean()
                     result.rows.append(dict(
-                        scene=scene.name, method=name, size=f"{voxels} / {probes}",
+                        scene=scene.name, method=name, size=size_label(name, voxels, probes),
                         reduction={True: "on", False: "off", None: "-"}[reduction],
                         lit=estimate[~dark].mean() / lit_truth, dark=dark_mean / lit_truth,
                         near=estimate[near].mean() / lit_truth,
@@ -109,11 +109,13 @@ def run(config: RunConfig) -> StudyResult:
 
 
 def summarize(result: StudyResult) -> None:
-    rows = [r for r in result.rows if r["scene"] == "two-rooms" and r["size"] == "16 / 16"]
+    rows = [r for r in result.rows if r["scene"] == "two-rooms" and (
+        r["size"] == "16 / 16" or (r["method"] in METHODS and not METHODS[r["method"]].resolution))]
     for r in rows:
         if r["reduction"] in ("on", "-"):
+            size = f"{r['size'].replace(' / ', '^3 voxels, ')}^3 probes" if "/" in r["size"] else "no grid"
             result.summary.append(
-                f"`{r['method']}` (16^3 voxels, 16^3 probes): the closed dark room gets {100 * r['dark']:.2f}% of the "
+                f"`{r['method']}` ({size}): the closed dark room gets {100 * r['dark']:.2f}% of the "
                 f"lit room's light in free space ({100 * r['near']:.1f}% within a probe spacing of the wall) and "
                 f"{100 * r['wall']:.1f}% on the wall's dark face; the truth is 0.")
 

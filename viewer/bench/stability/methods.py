@@ -143,10 +143,27 @@ METHODS: dict[str, Method] = {
                       leak_reduction=False, resolution=False),
     "mitsuba-probes": Method(_path_traced_probes, "oracle: Mitsuba at the probe centres, interpolated like any "
                              "grid (the floor that the probe resolution sets)", leak_reduction=False),
-    "neural": Method(_neural, "the shipped network (models/probenet.onnx, ONNX on the CPU), one shot at its "
-                     "trained 16^3 voxels and 16^3 probes", leak_reduction=False, resolution=False),
+    "neural": Method(_neural, "the shipped network (models/probenet.onnx, ONNX on the CPU), one shot at the "
+                     "voxels and probes its card names (24^3 and 24^3 since 2026-11-25)", leak_reduction=False,
+                     resolution=False),
 }
 """Every method the studies run, in report order."""
+
+
+def size_label(name: str, voxels: int, probes: int) -> str:
+    """`voxels / probes` as a method ran them: the settings', or the model card's for the network (which
+    ignores the settings), `-` for the constant."""
+    if name == "ambient":
+        return "-"
+    if name == "neural":
+        from viewer.neural import DEFAULT_MODEL, ModelCard
+
+        try:
+            card = ModelCard.read(DEFAULT_MODEL)
+            return f"{card.voxels} / {card.probes}"
+        except Exception:  # noqa: BLE001 - no model: the method is skipped anyway
+            pass
+    return f"{voxels} / {probes}"
 
 
 def run(name: str, scene: Scene, settings: MethodSettings = MethodSettings()) -> ProbeGrid:

@@ -21,7 +21,7 @@ from viewer import gi
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, axis_irradiance, style, try_method
-from viewer.bench.stability.methods import METHODS, MethodSettings, truth_sh
+from viewer.bench.stability.methods import METHODS, MethodSettings, size_label, truth_sh
 
 COLUMNS = [("method", "method", "{}"), ("size", "voxels / probes", "{}"), ("change", "frame-to-frame change", "{:.3f}"),
            ("ratio", "change / true change", "{:.2f}"), ("jerk", "jerk (flicker)", "{:.4f}"),
@@ -58,7 +58,7 @@ def run(config: RunConfig) -> StudyResult:
                 grids.append(axis_irradiance(grid.interpolate(points)))
             if len(grids) < len(frames):
                 continue
-            size = f"{voxels} / {probes}" if name != "ambient" else "-"
+            size = size_label(name, voxels, probes)
             result.rows.append(measure(name, size, grids, truth))
             series[f"{name} {size}"] = grids
             print(f"temporal {name} {size}: jerk {result.rows[-1]['jerk']:.4f}", flush=True)
