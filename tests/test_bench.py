@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from viewer.bench.pareto import Entry, budget_sentences, front
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -116,3 +118,25 @@ def test_every_sweep_model_is_a_neural_entry_with_its_file_in_its_memory(tmp_pat
     shipped.parent.mkdir()
     shipped.write_bytes(path.read_bytes())
     assert model_files(tmp_path) == [shipped]
+
+
+def test_a_screen_edit_is_timed_to_the_settled_frame_and_scored_by_the_sources_field():
+    """`screen-edit`: the untimed half edits the scene away in the viewer, the timed half brings it back
+    and returns once the viewer has settled (probes in, the lightmap's weights made and its gather done);
+    the grid scored is the source's field of the scene itself."""
+    from viewer.bench.methods import screen_edit_method
+    from viewer.gi import GISettings, solve
+    from viewer.scene import load
+
+    scene = load("cornell")
+    produce = screen_edit_method("compute", "colour").prepare()
+    try:
+        produce.before(scene)
+        viewer = produce.viewer
+        assert not np.array_equal(viewer.session.scene.albedo, scene.albedo) and viewer.settled
+        grid = produce(scene, None)
+        assert viewer.settled and not viewer.renderer.baking
+        np.testing.assert_array_equal(viewer.session.scene.albedo, scene.albedo)
+        np.testing.assert_allclose(grid.coefficients, solve(scene, GISettings()).coefficients, rtol=1e-6)
+    finally:
+        produce.release()

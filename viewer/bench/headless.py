@@ -13,14 +13,14 @@ from viewer.gpu.context import create_context
 from viewer.gpu.gl_objects import watch
 from viewer.gpu.renderer import RenderSettings, Renderer
 from viewer.memory import Usage
-from viewer.scene import load
+from viewer.scene import Scene, load
 from viewer.ui.gi_sources import GIController
 from viewer.ui.session import Session
 from viewer.ui.viewport import Viewport
 
 
 class HeadlessViewer:
-    def __init__(self, source: str, settings: GISettings, scene: str | Path = "cornell",
+    def __init__(self, source: str, settings: GISettings, scene: str | Path | Scene = "cornell",
                  size: tuple[int, int] = (320, 180), light_samples: int = 4, timeout: float = 900.0):
         self.ctx = create_context()
         watch(self.ctx)   # GL objects freed without release() are counted, not lost
@@ -29,7 +29,9 @@ class HeadlessViewer:
         self.renderer = Renderer(self.ctx, RenderSettings(light_samples=light_samples))
         self.gi = GIController(self.ctx, source, settings)
         self.log: list[str] = []
-        self.session = Session(self.renderer, self.gi, load(scene), scene, log=self.log.append, edit_interval=0.0)
+        opened = scene if isinstance(scene, Scene) else load(scene)
+        self.session = Session(self.renderer, self.gi, opened, opened.name if isinstance(scene, Scene) else scene,
+                               log=self.log.append, edit_interval=0.0)
         self.viewport = Viewport(self.ctx, self.renderer)
         self.screen = self.ctx.framebuffer(color_attachments=[self.ctx.texture(size, 4)])
         self.frames = 0

@@ -319,6 +319,84 @@ def register_provider(provider: Callable[[bool], Iterable[Method]]) -> None:
         PROVIDERS.append(provider)
 
 
+class _ScreenEdit:
+    """An edit's time to converged GI on screen: the viewer itself, headless (viewer/bench/headless.py, the
+    renderer's lightmap weights on their worker as in the window), from the edit made as the panels make
+    it (SceneEdits) to the settled full-resolution frame: the GI source's probes in, the indirect lightmap
+    baked and gathered from them (viewer/bench/edits.py times the same, with the first frame beside).
+    Untimed (`before`), the scene is edited away and settled; timed, the edit comes back. The error is the
+    source's field of the scene itself, computed once untimed: the compute source's is the physical GI's
+    (the two relights agree to 1e-3), the neural source's the network's. `kind`: `colour` (the largest
+    group's albedo) or `lamp` (the lamp moved by a twentieth of the scene: new geometry for the renderer)."""
+
+    def __init__(self, source: str, kind: str):
+        self.source, self.kind = source, kind
+        self.viewer = None
+        self.scene_name = None
+        self.field: ProbeGrid | None = None
+        atexit.register(self.release)
+
+    def release(self) -> None:
+        if self.viewer is not None:
+            self.viewer.release()
+            self.viewer = None
+
+    def _open(self, scene: Scene) -> None:
+        from viewer.bench.headless import HeadlessViewer
+
+        self.release()
+        self.viewer = HeadlessViewer(self.source, DEFAULT, scene)
+        self.viewer.renderer.background_bake = True
+        self.viewer.settle()
+        self.scene_name = scene.name
+        if self.viewer.session.edits.light.group is None and self.kind == "lamp":
+            raise MethodUnavailable("the scene has no lamp to move")
+        if self.source == "neural":
+            from viewer.neural import NeuralField
+
+            self.field = NeuralField().solve(scene, include_emitted=True)
+        else:
+            self.field = solve(scene, DEFAULT, include_emitted=True)
+
+    def _edit(self, away: bool) -> None:
+        edits = self.viewer.session.edits
+        if self.kind == "colour":
+            base = edits.base
+            group = base.groups[int(np.argmax(np.bincount(base.face_group, base.face_areas, len(base.groups))))]
+            rgb = base.group_albedo(group)
+            edits.set_albedo(group, rgb[::-1] * 0.5 if away else rgb)
+        else:
+            lo, hi = edits.base.bounds
+            offset = np.zeros(3)
+            offset[0] = 0.05 * float(hi[0] - lo[0]) if away else 0.0
+            edits.set_light(offset=offset)
+        self.viewer.settle()
+
+    def before(self, scene: Scene) -> None:
+        if self.scene_name != scene.name:
+            self._open(scene)
+        self._edit(away=True)
+
+    def __call__(self, scene: Scene, points) -> ProbeGrid:
+        self._edit(away=False)
+        return self.field
+
+
+def screen_edit_method(source: str, kind: str) -> Method:
+    def prepare() -> Produce:
+        if source == "neural":
+            from viewer.neural import DEFAULT_MODEL
+
+            if not DEFAULT_MODEL.exists():
+                raise MethodUnavailable(f"no model at {DEFAULT_MODEL}")
+        _gl()   # a GL context can be made here
+        return _ScreenEdit(source, kind)
+
+    what = {"colour": "a colour edit", "lamp": "a lamp move"}[kind]
+    return Method("screen-edit", f"{source} {kind}", prepare, texture_bytes(DEFAULT.probes),
+                  about=f"the viewer with the {source} GI source, time from {what} to the settled frame on screen")
+
+
 def registry(quick: bool = False) -> dict[str, Method]:
     """Every method, in report order. Quick: a handful that together take well under a minute."""
     if quick:
@@ -337,6 +415,7 @@ def registry(quick: bool = False) -> dict[str, Method]:
                     numpy_method(replace(DEFAULT, voxels=16, kernel="paper"))]
         methods += [edit_method(DEFAULT, kind, backend) for backend in ("compute", "numpy")
                     for kind in ("colour", "lamp")]
+        methods += [screen_edit_method(source, kind) for source in ("compute", "neural") for kind in ("colour", "lamp")]
         methods += [mitsuba_points_method(d) for d in (16, 64, 256, 1024)]
         methods += [mitsuba_probes_method(m, d) for m, d in ((8, 64), (16, 64), (16, 256), (24, 256), (32, 256))]
     for provider in PROVIDERS:

@@ -26,7 +26,7 @@ STYLES = {
     "ambient": ("o", "#7f7f7f"), "compute": ("s", "#1f77b4"), "compute-paper": ("s", "#9ecae1"),
     "numpy": ("D", "#2ca02c"), "numpy-paper": ("D", "#98df8a"), "neural": ("^", "#d62728"),
     "paper-family": ("v", "#ff9896"), "mitsuba-probes": ("P", "#9467bd"), "mitsuba": ("x", "#8c564b"),
-    "compute-edit": ("*", "#08306b"), "numpy-edit": ("*", "#00441b"),
+    "compute-edit": ("*", "#08306b"), "numpy-edit": ("*", "#00441b"), "screen-edit": ("X", "#ff7f0e"),
 }
 """Marker and colour per method family; a family not listed here gets the next of EXTRA_STYLES."""
 EXTRA_STYLES = [("*", "#e377c2"), ("h", "#bcbd22"), ("p", "#17becf")]
@@ -34,10 +34,11 @@ SAME = 0.01
 """Errors within 1% of each other count as the same accuracy when saying what beats a default."""
 VIEWER_FAMILIES = ("compute", "compute-paper", "numpy", "numpy-paper", "neural")
 """The GI sources the viewer itself offers (its panel and `sample --method`)."""
-EDIT_FAMILIES = ("compute-edit", "numpy-edit")
-"""Time from an edit to converged probes on a scene whose geometry is already traced: drawn on the
-charts, kept off the fronts (they are not a way to light a scene from nothing), and set against the
-Mitsuba bake of the same error in their own table."""
+EDIT_FAMILIES = ("compute-edit", "numpy-edit", "screen-edit")
+"""Time from an edit to converged probes on a scene whose geometry is already traced (`screen-edit`: to
+the settled frame in the viewer, the renderer's lightmap included): drawn on the charts, kept off the
+fronts (they are not a way to light a scene from nothing), and set against the Mitsuba bake of the same
+error in their own table."""
 DEFAULTS = {"compute": "N32 M24 conv", "numpy": "N32 M24 conv", "neural": "models/probenet.onnx"}
 """The product's GI sources at their shipped defaults (viewer.gi.GISettings, the shipped model)."""
 
@@ -335,7 +336,10 @@ def against_mitsuba(rows: list[dict], scenes: list[str]) -> str:
     next to the Mitsuba bake of the probes whose error is equal or larger (the slowest such bake: the
     one closest to our accuracy), measured in the same run, and how many times faster ours is."""
     ours = [(f, DEFAULTS[f], "new scene") for f in ("numpy", "compute")]
-    ours += [(f, f"{DEFAULTS['compute']} {kind}", kind + " edit") for f in EDIT_FAMILIES for kind in ("colour", "lamp")]
+    ours += [(f, f"{DEFAULTS['compute']} {kind}", kind + " edit") for f in ("compute-edit", "numpy-edit")
+             for kind in ("colour", "lamp")]
+    ours += [("screen-edit", f"{source} {kind}", f"{kind} edit on screen, {source} source")
+             for source in ("compute", "neural") for kind in ("colour", "lamp")]
     lines = ["| scene | GI source | what | ms | rel. RMSE | Mitsuba bake of equal or larger error | its ms | "
              "ours faster by |", "|---|---|---|---|---|---|---|---|"]
     ratios: dict[str, list[float]] = {}

@@ -113,11 +113,19 @@ class EncodingDistance:
 
 
 
-def training_distances(resolution: int, data: Path = DATA) -> dict[str, EncodingDistance]:
+REFERENCE_ROOMS = 1000
+"""At most this many training rooms, evenly spaced through the split, are the reference set: 5,005
+encoded rooms at 24^3 are 12 GB to read, and the distances are in units of the set's own typical
+neighbour distance."""
+
+
+def training_distances(resolution: int, data: Path = DATA, rooms: int = REFERENCE_ROOMS) -> dict[str, EncodingDistance]:
     """Every view against the network's training split (`viewer.training.samples.training_split`,
-    encoded at the network's lattice `resolution` and cached under <data>/cache by training).
-    Raises FileNotFoundError without the dataset."""
+    encoded at the network's lattice `resolution` and cached under <data>/cache by training), at most
+    `rooms` of it. Raises FileNotFoundError without the dataset."""
     from viewer.training.samples import training_split
 
-    encodings = list(training_split(data, resolution, quiet=True).inputs)
+    inputs = training_split(data, resolution, quiet=True).inputs
+    step = max(1, -(-len(inputs) // rooms))
+    encodings = [inputs[i] for i in range(0, len(inputs), step)]
     return {name: EncodingDistance(encodings, view) for name, view in VIEWS.items()}
