@@ -250,5 +250,13 @@ def test_a_moved_lamp_is_gathered_with_the_old_rays_until_the_new_ones_land(gl_c
             time.sleep(0.02)
             renderer.bake_version()
         np.testing.assert_allclose(offscreen.render_hdr(view="indirect"), expected, rtol=1e-3, atol=1e-5)
+        fresh = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
+        try:   # only the rays the move can change were traced again, and they are all a new trace gives
+            fresh.renderer.set_scene(moved)
+            fresh.renderer.set_probes(cornell_probes)
+            fresh.render_hdr(view="indirect")
+            np.testing.assert_array_equal(renderer._indirect._gather[0].hits, fresh.renderer._indirect._gather[0].hits)
+        finally:
+            fresh.release()
     finally:
         offscreen.release()

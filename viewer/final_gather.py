@@ -51,20 +51,35 @@ class GatherRays:
         the scene's faces); face_tile (F,): each scene face's lightmap tile, -1 for none; tile_origin
         (tiles, 2) and tile_n (tiles,): the atlas layout (viewer.gpu.direct_bake.lightmap_layout),
         `width` texels a side; lift: how far off the surface the rays start."""
-        n = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
-        t, b = tangent_frames(n)
-        rows = int(round(np.sqrt(rays / 2.0)))
-        if rows < 1 or 2 * rows * rows != rays:
-            raise ValueError(f"gather rays must be 2 r^2 (a full grid of strata: 8, 32, 72, 128, ...), not {rays}")
-        # one random shift of the strata per sample (Cranley-Patterson): unbiased over samples, where a
-        # fixed pattern errs alike on a whole face (a face looking at a bright floor at grazing angles)
-        shift = np.random.default_rng(seed).random((len(n), 2))
-        by_face = replace(cells, voxel=cells.triangle)                   # a front hit names its face
-        flipped = replace(by_face, e1=cells.e2, e2=cells.e1)             # a back hit, seen from the front
-        hits = _trace(np.ascontiguousarray(points, np.float64).reshape(-1, 3), n, np.ascontiguousarray(t),
-                      np.ascontiguousarray(b), rows, 2 * rows, shift, float(lift), by_face.args(), flipped.args(),
-                      np.ascontiguousarray(face_tile, np.int64), np.ascontiguousarray(tile_origin, np.int64),
-                      np.ascontiguousarray(tile_n, np.int64), int(width))
+        frame = _Frame.of(points, normals, rays, seed)
+        hits = np.full((frame.count, rays), ESCAPED, np.int32)
+        everything = np.stack(np.divmod(np.arange(frame.count * rays, dtype=np.int64), rays), axis=1)
+        _retrace(*frame.args(lift), *_tracing_args(cells, face_tile, tile_origin, tile_n, width), everything, hits)
+        return GatherRays(hits)
+
+    def after_moving(self, sample_moved: np.ndarray, pixel_moved: np.ndarray, pixel_points: np.ndarray,
+                     moved: np.ndarray, slack: float, points: np.ndarray, normals: np.ndarray, cells: dda.Cells,
+                     face_tile: np.ndarray, tile_origin: np.ndarray, tile_n: np.ndarray, width: int, lift: float,
+                     seed: int = 0) -> "GatherRays":
+        """The rays of the same samples after some faces moved (a lamp dragged: the same faces, the same
+        lightmap layout), without tracing them all again. `points`, `normals`, `cells` and the layout are
+        as for `of`, of the scene after the move; sample_moved (S,): the samples on moved faces;
+        pixel_moved (pixels,): the pixels of their tiles; pixel_points (pixels, 3): each pixel's world
+        point before the move (within a texel of where a ray that landed on it met its face); moved
+        (M, 3, 3): the moved faces' corners now. A ray is traced again if its sample moved, if it landed on
+        a moved face, or if it meets a moved face where it is now less than `slack` beyond where it
+        landed. The others cannot have changed: nothing moved into their way, and what they met is where
+        it was. So the hits are those of `of` on the moved scene (tests/test_final_gather.py)."""
+        rays = self.hits.shape[1]
+        frame = _Frame.of(points, normals, rays, seed)
+        corners = np.ascontiguousarray(moved, np.float64).reshape(-1, 3, 3)
+        todo = _affected(*frame.args(0.0), self.hits, np.ascontiguousarray(sample_moved, np.bool_),
+                         np.ascontiguousarray(pixel_moved, np.bool_), np.ascontiguousarray(pixel_points, np.float64),
+                         corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], float(slack))
+        hits = self.hits.copy()
+        rows = np.argwhere(todo).astype(np.int64)
+        hits[todo] = ESCAPED
+        _retrace(*frame.args(lift), *_tracing_args(cells, face_tile, tile_origin, tile_n, width), rows, hits)
         return GatherRays(hits)
 
     def inside(self, width: int) -> np.ndarray:
@@ -83,50 +98,141 @@ class GatherRays:
         return out
 
 
+@dataclass(frozen=True)
+class _Frame:
+    """The samples' ray frames: the same rays for the same samples and seed, whichever are traced."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    tangents: np.ndarray
+    bitangents: np.ndarray
+    rows: int
+    shift: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return len(self.points)
+
+    @staticmethod
+    def of(points, normals, rays: int, seed: int) -> "_Frame":
+        n = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
+        t, b = tangent_frames(n)
+        rows = int(round(np.sqrt(rays / 2.0)))
+        if rows < 1 or 2 * rows * rows != rays:
+            raise ValueError(f"gather rays must be 2 r^2 (a full grid of strata: 8, 32, 72, 128, ...), not {rays}")
+        # one random shift of the strata per sample (Cranley-Patterson): unbiased over samples, where a
+        # fixed pattern errs alike on a whole face (a face looking at a bright floor at grazing angles)
+        shift = np.random.default_rng(seed).random((len(n), 2))
+        return _Frame(np.ascontiguousarray(points, np.float64).reshape(-1, 3), n, np.ascontiguousarray(t),
+                      np.ascontiguousarray(b), rows, shift)
+
+    def args(self, lift: float) -> tuple:
+        return self.points, self.normals, self.tangents, self.bitangents, self.rows, 2 * self.rows, self.shift, \
+            float(lift)
+
+
+def _tracing_args(cells: dda.Cells, face_tile, tile_origin, tile_n, width: int) -> tuple:
+    by_face = replace(cells, voxel=cells.triangle)                   # a front hit names its face
+    flipped = replace(by_face, e1=cells.e2, e2=cells.e1)             # a back hit, seen from the front
+    return (by_face.args(), flipped.args(), np.ascontiguousarray(face_tile, np.int64),
+            np.ascontiguousarray(tile_origin, np.int64), np.ascontiguousarray(tile_n, np.int64), int(width))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _direction(s, k, normals, tangents, bitangents, rows, columns, shift):
+    """Ray k of sample s: stratum (k // columns, k % columns) of (u1, u2), shifted by the sample's shift,
+    cosine-weighted (r = sqrt(u1), phi = 2 pi u2)."""
+    u1 = (k // columns + shift[s, 0]) / rows
+    u2 = (k % columns + shift[s, 1]) / columns
+    r, phi = np.sqrt(u1), 2.0 * np.pi * u2
+    lx, ly, lz = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(1.0 - u1, 0.0))
+    dx = lx * tangents[s, 0] + ly * bitangents[s, 0] + lz * normals[s, 0]
+    dy = lx * tangents[s, 1] + ly * bitangents[s, 1] + lz * normals[s, 1]
+    dz = lx * tangents[s, 2] + ly * bitangents[s, 2] + lz * normals[s, 2]
+    return dx, dy, dz
+
+
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _trace(points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile, tile_origin,
-           tile_n, width):
-    count, rays = points.shape[0], rows * columns
-    hits = np.full((count, rays), ESCAPED, np.int32)
+def _retrace(points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile, tile_origin,
+             tile_n, width, todo, hits):
+    """Trace the rays todo (N, 2) = (sample, ray) into hits (ESCAPED where they leave)."""
     none = np.zeros(0, np.int64)
     v0, e1, e2 = cells[6], cells[7], cells[8]
-    for s in numba.prange(count):
+    for i in numba.prange(todo.shape[0]):
+        s, k = todo[i, 0], todo[i, 1]
         ox = points[s, 0] + lift * normals[s, 0]
         oy = points[s, 1] + lift * normals[s, 1]
         oz = points[s, 2] + lift * normals[s, 2]
+        dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
+        face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, cells, none)
+        side = 0
+        if face == dda.BACKFACE:
+            face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, flipped, none)
+            side = 1
+        if face < 0 or face_tile[face] < 0:
+            continue
+        wx, wy, wz = ox + t * dx - v0[face, 0], oy + t * dy - v0[face, 1], oz + t * dz - v0[face, 2]
+        aa = e1[face, 0] ** 2 + e1[face, 1] ** 2 + e1[face, 2] ** 2
+        ab = e1[face, 0] * e2[face, 0] + e1[face, 1] * e2[face, 1] + e1[face, 2] * e2[face, 2]
+        bb = e2[face, 0] ** 2 + e2[face, 1] ** 2 + e2[face, 2] ** 2
+        wa = wx * e1[face, 0] + wy * e1[face, 1] + wz * e1[face, 2]
+        wb = wx * e2[face, 0] + wy * e2[face, 1] + wz * e2[face, 2]
+        det = aa * bb - ab * ab
+        if det <= 0.0:
+            continue
+        u, v = (bb * wa - ab * wb) / det, (aa * wb - ab * wa) / det
+        tile = face_tile[face]
+        m = tile_n[tile]
+        # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
+        ku = min(max(int(np.floor(u * m + 1.0)), 0), m + 1)
+        kv = min(max(int(np.floor(v * m + 1.0)), 0), m + 1)
+        hits[s, k] = (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side * width
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _affected(points, normals, tangents, bitangents, rows, columns, shift, lift, hits, sample_moved, pixel_moved,
+              pixel_points, v0, e1, e2, slack):
+    """(S, K) bool: the rays that a move of the triangles (v0, e1, e2) (their places now) may change."""
+    count, rays = hits.shape
+    todo = np.zeros((count, rays), np.bool_)
+    tolerance = 1e-4
+    for s in numba.prange(count):
+        if sample_moved[s]:
+            todo[s, :] = True
+            continue
         for k in range(rays):
-            # stratum (k // columns, k % columns) of (u1, u2), cosine-weighted: r = sqrt(u1), phi = 2 pi u2
-            u1 = (k // columns + shift[s, 0]) / rows
-            u2 = (k % columns + shift[s, 1]) / columns
-            r, phi = np.sqrt(u1), 2.0 * np.pi * u2
-            lx, ly, lz = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(1.0 - u1, 0.0))
-            dx = lx * tangents[s, 0] + ly * bitangents[s, 0] + lz * normals[s, 0]
-            dy = lx * tangents[s, 1] + ly * bitangents[s, 1] + lz * normals[s, 1]
-            dz = lx * tangents[s, 2] + ly * bitangents[s, 2] + lz * normals[s, 2]
-            face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, cells, none)
-            side = 0
-            if face == dda.BACKFACE:
-                face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, flipped, none)
-                side = 1
-            if face < 0 or face_tile[face] < 0:
+            p = hits[s, k]
+            if p >= 0 and pixel_moved[p]:
+                todo[s, k] = True
                 continue
-            wx, wy, wz = ox + t * dx - v0[face, 0], oy + t * dy - v0[face, 1], oz + t * dz - v0[face, 2]
-            aa = e1[face, 0] ** 2 + e1[face, 1] ** 2 + e1[face, 2] ** 2
-            ab = e1[face, 0] * e2[face, 0] + e1[face, 1] * e2[face, 1] + e1[face, 2] * e2[face, 2]
-            bb = e2[face, 0] ** 2 + e2[face, 1] ** 2 + e2[face, 2] ** 2
-            wa = wx * e1[face, 0] + wy * e1[face, 1] + wz * e1[face, 2]
-            wb = wx * e2[face, 0] + wy * e2[face, 1] + wz * e2[face, 2]
-            det = aa * bb - ab * ab
-            if det <= 0.0:
-                continue
-            u, v = (bb * wa - ab * wb) / det, (aa * wb - ab * wa) / det
-            tile = face_tile[face]
-            m = tile_n[tile]
-            # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
-            ku = min(max(int(np.floor(u * m + 1.0)), 0), m + 1)
-            kv = min(max(int(np.floor(v * m + 1.0)), 0), m + 1)
-            hits[s, k] = (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side * width
-    return hits
+            dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
+            far = np.inf
+            if p >= 0:
+                far = np.sqrt((pixel_points[p, 0] - points[s, 0]) ** 2 + (pixel_points[p, 1] - points[s, 1]) ** 2
+                              + (pixel_points[p, 2] - points[s, 2]) ** 2) + slack
+            for f in range(v0.shape[0]):   # Moller-Trumbore, both sides, the edges widened a little
+                px = dy * e2[f, 2] - dz * e2[f, 1]
+                py = dz * e2[f, 0] - dx * e2[f, 2]
+                pz = dx * e2[f, 1] - dy * e2[f, 0]
+                det = e1[f, 0] * px + e1[f, 1] * py + e1[f, 2] * pz
+                if det == 0.0:
+                    continue
+                inv = 1.0 / det
+                tx, ty, tz = points[s, 0] - v0[f, 0], points[s, 1] - v0[f, 1], points[s, 2] - v0[f, 2]
+                u = (tx * px + ty * py + tz * pz) * inv
+                if u < -tolerance or u > 1.0 + tolerance:
+                    continue
+                qx = ty * e1[f, 2] - tz * e1[f, 1]
+                qy = tz * e1[f, 0] - tx * e1[f, 2]
+                qz = tx * e1[f, 1] - ty * e1[f, 0]
+                v = (dx * qx + dy * qy + dz * qz) * inv
+                if v < -tolerance or u + v > 1.0 + tolerance:
+                    continue
+                t = (e2[f, 0] * qx + e2[f, 1] * qy + e2[f, 2] * qz) * inv
+                if -slack < t < far:
+                    todo[s, k] = True
+                    break
+    return todo
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

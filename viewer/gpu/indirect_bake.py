@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 from viewer import dda
 from viewer.final_gather import GatherRays
 from viewer.geometry import voxelize_with_faces
-from viewer.gpu.direct_bake import BakedDirectLight
+from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.probe_weights import SurfaceBake, SurfaceWeights
 from viewer.probes import ProbeGrid
 from viewer.scene import Scene
@@ -52,6 +52,8 @@ FILTER_RADIUS = 1.5
 (a tent): its noise falls about 4x, and light that changes over less than 6 cm is still resolved."""
 FILTER_MAX = 16
 """The most samples averaged (the nearest; coincident samples repeat along the edges of a face's tiles)."""
+MAX_MOVED = 0.1
+"""A move of at most this share of the faces traces again only the gather rays it can change."""
 KEPT_LATTICES = 2
 """Weights kept per scene: the GI sources' lattices (the network's and the solver's) when they differ."""
 
@@ -158,6 +160,9 @@ class BakedIndirectLight:
         """Counts `moved` calls: work started for an earlier geometry is dropped."""
         self._made: tuple[int, dda.Cells, tuple | None] | None = None
         """(geometry, cells, gather or None) the last weights were made with: what the next job reuses."""
+        self._traced: tuple[Scene, BakedDirectLight, GatherRays] | None = None
+        """The scene and lightmap the last gather rays were traced for, and the rays (a moved lamp's job
+        traces again only the rays the move can change)."""
         self.stale = False
         """The weights and rays installed are those of the geometry before a `moved`: the updates use them
         (the lights are new) while the worker makes the current geometry's."""
@@ -245,15 +250,46 @@ class BakedIndirectLight:
             if self.gather_rays and rays:
                 traced = self._gather_rays(scene, lightmap, cells, points, normals[normal_id], probes)
                 gather = (traced, self._neighbours(lightmap, traced))
+                self._traced = (scene, lightmap, traced)
             self._made = (geometry, cells, gather)
         return SurfaceBake.of(weights, normal_id, normals), cells, gather
 
     def _gather_rays(self, scene: Scene, lightmap: BakedDirectLight, cells: dda.Cells, points: np.ndarray,
                      normals: np.ndarray, probes: ProbeGrid) -> GatherRays:
+        """The final gather's rays: traced again only where a move can have changed them when the last
+        rays were traced for the same faces laid out alike (a lamp dragged), else all of them."""
         keep = scene.face_areas > 0
         face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
-        return GatherRays.of(points, normals, cells, face_tile, lightmap.tile_origin, lightmap.tile_n,
-                             lightmap.covered.shape[1], 1e-4 * float(np.min(probes.spacing)), self.gather_rays)
+        width = lightmap.covered.shape[1]
+        layout = (cells, face_tile, lightmap.tile_origin, lightmap.tile_n, width, 1e-4 * float(np.min(probes.spacing)))
+        moved = self._moved_tiles(scene, lightmap)
+        if moved is None:
+            return GatherRays.of(points, normals, *layout, self.gather_rays)
+        old_scene, old_lightmap, old_rays = self._traced
+        tiles = lightmap.texel_faces[self._samples]
+        sample_moved = np.isin(np.concatenate([tiles, tiles]), moved)
+        pixels, faces = self._covered
+        pixel_moved = np.zeros(lightmap.covered.size * 2, bool)
+        pixel_moved[pixels[np.isin(faces, moved)]] = True
+        pixel_points = np.zeros((lightmap.covered.size * 2, 3))
+        pixel_points[pixels] = np.concatenate([old_lightmap.texel_points] * 2)
+        corners = scene.triangles[keep][moved]
+        return old_rays.after_moving(sample_moved, pixel_moved, pixel_points, corners, 2.0 * lightmap.texel,
+                                     points, normals, *layout)
+
+    def _moved_tiles(self, scene: Scene, lightmap: BakedDirectLight) -> np.ndarray | None:
+        """The tiles (non-degenerate faces) that moved since the last rays were traced, when only some
+        did and the faces and layout are the same; else None (trace everything)."""
+        if self._traced is None:
+            return None
+        old_scene, old_lightmap, _ = self._traced
+        if (old_scene.faces.shape != scene.faces.shape or not np.array_equal(old_scene.faces, scene.faces)
+                or not same_atlas(old_lightmap, lightmap)
+                or not np.array_equal(old_scene.face_areas > 0, scene.face_areas > 0)):
+            return None
+        keep = scene.face_areas > 0
+        moved = np.flatnonzero(np.any(old_scene.triangles[keep] != scene.triangles[keep], axis=(1, 2)))
+        return moved if len(moved) <= MAX_MOVED * keep.sum() else None
 
     def _install(self, key: tuple, bake: SurfaceBake, cells: dda.Cells | None = None,
                  gather: tuple | None = None) -> None:
