@@ -260,3 +260,34 @@ def test_a_moved_lamp_is_gathered_with_the_old_rays_until_the_new_ones_land(gl_c
             fresh.release()
     finally:
         offscreen.release()
+
+
+def test_a_new_scenes_rays_are_traced_before_its_first_probes(gl_context, cornell, cornell_probes, monkeypatch):
+    """In the viewer the final gather's rays of a new scene are traced on the worker from its first frame,
+    while the GI source computes the probes (they need none), and once: the weights that follow the
+    probes reuse them."""
+    import time
+
+    from viewer.final_gather import GatherRays
+
+    traced = []
+    original = GatherRays.of
+    monkeypatch.setattr(GatherRays, "of", staticmethod(lambda *a, **k: traced.append(1) or original(*a, **k)))
+    offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
+    try:
+        renderer = offscreen.renderer
+        renderer.background_bake = True
+        renderer.set_scene(cornell)
+        offscreen.render_hdr(view="final")          # no probes yet: direct light only
+        deadline = time.monotonic() + 120
+        while not traced or renderer._indirect._made is None:
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        renderer.set_probes(cornell_probes)
+        offscreen.render_hdr(view="indirect")
+        while renderer.baking:
+            time.sleep(0.02)
+            renderer.bake_version()
+        assert traced == [1]
+    finally:
+        offscreen.release()

@@ -329,6 +329,9 @@ class Renderer:
             else:
                 self._release_baked()
             self._baked, self._layout_key = baked, layout
+            if self._indirect is None and self.background_bake and self.settings.indirect and self.settings.final_gather:
+                self._indirect = self._new_indirect()   # its rays traced while the GI source makes the probes
+                self._indirect.prefetch()
         lit = (self._shadow_key, self._lights, self.settings.shadow_bias)
         if lit != self._lit_key:
             program = self.programs.get("direct_bake")
@@ -350,15 +353,18 @@ class Renderer:
         if self.probes is None or not self.settings.indirect:
             return None
         if self._indirect is None:
-            self._indirect = BakedIndirectLight(self.ctx, self._baked, self._draw_scene, self.background_bake,
-                                                self.settings.final_gather)
-            self._indirect_installs = -1
+            self._indirect = self._new_indirect()
         if not self._indirect.ready_for(self.probes):
             return None
         if not self._indirect_fresh or self._indirect.installs != self._indirect_installs:
             self._indirect.update(self.probes)   # new probes, lights or colours, or new weights installed
             self._indirect_fresh, self._indirect_installs = True, self._indirect.installs
         return self._indirect
+
+    def _new_indirect(self) -> BakedIndirectLight:
+        self._indirect_installs = -1
+        return BakedIndirectLight(self.ctx, self._baked, self._draw_scene, self.background_bake,
+                                  self.settings.final_gather)
 
     def bake_version(self) -> tuple:
         """Changes when background work that changes the image has finished (a redraw key)."""
