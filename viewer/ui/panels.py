@@ -21,6 +21,9 @@ PANEL_WIDTH = 360
 ERROR_COLOUR = imgui.ImVec4(1.0, 0.45, 0.4, 1.0)
 NOTE_COLOUR = imgui.ImVec4(0.75, 0.75, 0.75, 1.0)
 WARNING_COLOUR = imgui.ImVec4(1.0, 0.78, 0.3, 1.0)
+BAKING_NOTE = "Lightmap: tracing the final gather for the new geometry..."
+"""Shown while Renderer.baking (seconds after a new scene or a lamp move; the picture meanwhile shows
+the probes per fragment, or the moved light gathered with the old rays)."""
 KERNELS = ("physical", "paper")
 LIGHT_SAMPLES = (4, 8, 16, 32, 64)
 HELP = """\
@@ -98,7 +101,9 @@ def scene_section(name: str, triangles: int, edits: SceneEdits, loading: Backgro
     return imgui.button("Reset edits")
 
 
-def gi_section(gi: GIController) -> None:
+def gi_section(gi: GIController, baking: bool = False) -> None:
+    """The GI source and its settings; `baking`: the renderer is making the lightmap's weights and
+    final-gather rays for new geometry (Renderer.baking), said under the source's status."""
     for index, source in enumerate(SOURCES):
         reason = gi.unavailable.get(source)
         if index % 2:
@@ -127,6 +132,8 @@ def gi_section(gi: GIController) -> None:
     imgui.text(line)
     if progress is not None and gi.busy:
         imgui.progress_bar(progress, imgui.ImVec2(-1, 0))
+    if baking:
+        imgui.text_colored(NOTE_COLOUR, BAKING_NOTE)
     if error:
         imgui.push_text_wrap_pos(0.0)
         imgui.text_colored(ERROR_COLOUR, error)
@@ -313,7 +320,7 @@ def draw_windows(session, view: ViewOptions, settings: RenderSettings, viewport,
 
     settings_panel(view.show_panel, {
         "Scene": (scene, True),
-        "Global illumination": (lambda: gi_section(session.gi), True),
+        "Global illumination": (lambda: gi_section(session.gi, session.renderer.baking), True),
         "Light": (lambda: light_section(session.edits, session.scene_size), True),
         "Materials": (lambda: materials_section(session.edits), False),
         "View": (lambda: view_section(view, settings, viewport), True),
