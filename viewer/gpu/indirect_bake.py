@@ -286,7 +286,7 @@ class BakedIndirectLight:
         moved = self._moved_tiles(scene, lightmap)
         if moved is None:
             return GatherRays.of(points, normals, *layout, self.gather_rays)
-        old_scene, old_lightmap, old_rays = self._traced
+        _, old_lightmap, old_rays = self._traced
         tiles = lightmap.texel_faces[self._samples]
         sample_moved = np.isin(np.concatenate([tiles, tiles]), moved)
         pixels, faces = self._covered

@@ -295,8 +295,8 @@ class Renderer:
             power, sun = self._emitter_shadows.samples.power, self._sun_shadow.sun
             if (self._emitter_shadows.repower(emitter_samples(self.scene, s.light_samples))
                     and self._sun_shadow.resun(self.scene.sun)):
-                if not (np.array_equal(power, self._emitter_shadows.samples.power) and (sun is None or np.array_equal(
-                        sun.irradiance, self._sun_shadow.sun.irradiance))):
+                same_sun = sun is None or np.array_equal(sun.irradiance, self._sun_shadow.sun.irradiance)
+                if not (same_sun and np.array_equal(power, self._emitter_shadows.samples.power)):
                     self._lights += 1   # an albedo edit leaves the direct irradiance as it was
                 return
         for shadow in (self._emitter_shadows, self._sun_shadow):
@@ -329,7 +329,8 @@ class Renderer:
             else:
                 self._release_baked()
             self._baked, self._layout_key = baked, layout
-            if self._indirect is None and self.background_bake and self.settings.indirect and self.settings.final_gather:
+            s = self.settings
+            if self._indirect is None and self.background_bake and s.indirect and s.final_gather:
                 self._indirect = self._new_indirect()   # its rays traced while the GI source makes the probes
                 self._indirect.prefetch()
         lit = (self._shadow_key, self._lights, self.settings.shadow_bias)
@@ -375,7 +376,8 @@ class Renderer:
     @property
     def baking(self) -> bool:
         """The lightmap's probe weights (and final-gather rays) are being made on the background worker: the
-        picture shows the probes per fragment until they land."""
+        picture shows the probes per fragment (a new scene) or gathers with the old geometry's rays (a lamp
+        moved) until they land."""
         return self._indirect is not None and self._indirect.pending
 
     def _release_baked(self) -> None:
