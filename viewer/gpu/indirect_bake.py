@@ -152,7 +152,7 @@ class BakedIndirectLight:
         self.weights_key = None
         """lattice_key of the probe grid whose weights are installed (None: none yet)."""
         self.installs = 0
-        """Counts the weights installed (a new lattice's, or a moved geometry's in place of its stale ones)."""
+        """Counts the weights installed (a new lattice's, or a moved geometry's)."""
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="indirect-weights") if background else None
         self._job: tuple[tuple, int, Future] | None = None
         """(lattice key, geometry, future) of the weights under way on the worker."""
@@ -164,8 +164,9 @@ class BakedIndirectLight:
         """The scene and lightmap the last gather rays were traced for, and the rays (a moved lamp's job
         traces again only the rays the move can change)."""
         self.stale = False
-        """The weights and rays installed are those of the geometry before a `moved`: the updates use them
-        (the lights are new) while the worker makes the current geometry's."""
+        """The weights and rays installed are those of the geometry before a `moved`: not shown (texels the
+        moved faces covered before would stay dark: the old rays met the lamp's back there), but the
+        rays are what the worker traces the move's changes from."""
         self._last_key: tuple[ProbeGrid, tuple] | None = None
         self._kept: dict[tuple, SurfaceBake] = {}
         """The weights of the last KEPT_LATTICES lattices, newest last."""
@@ -188,7 +189,7 @@ class BakedIndirectLight:
                 self._install(key, *self.weights_of(probes))
                 return True
             self._job = (key, self._geometry, self._executor.submit(self.weights_of, probes, *self._geometry_now()))
-        return self.poll() or self.weights_key == key   # a stale lattice of ours serves meanwhile
+        return self.poll()
 
     def poll(self) -> bool:
         """Install the worker's weights if they are done (and of the current geometry); True when they were."""
@@ -203,9 +204,10 @@ class BakedIndirectLight:
 
     def moved(self, lightmap: BakedDirectLight, scene: Scene) -> None:
         """`scene` is new geometry with the same lightmap layout as the last (a lamp moved: the same
-        triangles elsewhere), baked into `lightmap`. The weights and rays of the old geometry stay in use,
-        stale, until those of the new one are made (on the worker with `background`, else on the next
-        `ready_for`): the moved light is on screen at once, its exact gather a few seconds later."""
+        triangles elsewhere), baked into `lightmap`. The old geometry's rays stay, stale, for the worker
+        to trace again only the rays the move can change (`_gather_rays`); until the new weights are in
+        (on the worker with `background`, else on the next `ready_for`) the renderer reads the probes per
+        fragment, as for a new scene."""
         self.lightmap, self.scene = lightmap, scene
         self._geometry += 1
         self._cells, self._direct, self._reflectance = None, None, None

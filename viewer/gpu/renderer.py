@@ -110,8 +110,8 @@ class Renderer:
         with the same triangles as the last (an edit of colours: albedo, emission) keeps the lightmap's
         layout and the indirect light's probe weights and final-gather rays, the seconds of work that
         depend on the geometry alone: its lightmap is baked again and the indirect light gathered again.
-        The same faces moved (a lamp dragged) keep the old weights and rays, stale, until the new ones
-        are made (`_ensure_baked`)."""
+        The same faces moved (a lamp dragged) keep the old rays, for the worker to trace again only those
+        the move can change (`_ensure_baked`)."""
         if self.mesh is not None:
             self.mesh.release()
         draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
@@ -321,7 +321,7 @@ class Renderer:
             old, indirect = self._baked, self._indirect
             baked = BakedDirectLight(self.ctx, self._draw_scene, self.settings.lightmap_texel)
             if (old is not None and indirect is not None and self._layout_key[1:] == layout[1:]
-                    and same_atlas(old, baked)):   # faces moved: the stale weights serve until the new land
+                    and same_atlas(old, baked)):   # faces moved: the old rays, to trace only what changed
                 self._indirect = None
                 self._release_baked()
                 indirect.moved(baked, self._draw_scene)
@@ -376,8 +376,7 @@ class Renderer:
     @property
     def baking(self) -> bool:
         """The lightmap's probe weights (and final-gather rays) are being made on the background worker: the
-        picture shows the probes per fragment (a new scene) or gathers with the old geometry's rays (a lamp
-        moved) until they land."""
+        picture shows the probes per fragment until they land."""
         return self._indirect is not None and self._indirect.pending
 
     def _release_baked(self) -> None:

@@ -22,8 +22,8 @@ ERROR_COLOUR = imgui.ImVec4(1.0, 0.45, 0.4, 1.0)
 NOTE_COLOUR = imgui.ImVec4(0.75, 0.75, 0.75, 1.0)
 WARNING_COLOUR = imgui.ImVec4(1.0, 0.78, 0.3, 1.0)
 BAKING_NOTE = "Lightmap: tracing the final gather for the new geometry..."
-"""Shown while Renderer.baking (seconds after a new scene or a lamp move; the picture meanwhile shows
-the probes per fragment, or the moved light gathered with the old rays)."""
+"""Shown while Renderer.baking (seconds after a new scene, one or two after a lamp move; the picture
+meanwhile shows the probes per fragment)."""
 KERNELS = ("physical", "paper")
 LIGHT_SAMPLES = (4, 8, 16, 32, 64)
 HELP = """\
