@@ -40,6 +40,15 @@ def render(ctx, scene, probes, size, views=("final",), settings=None):
     return images
 
 
+def wait_for_weights(renderer) -> None:
+    """Until the renderer's background worker has installed the lightmap's weights (polled as a frame does)."""
+    import time
+
+    while renderer.baking:
+        time.sleep(0.02)
+        renderer.bake_version()
+
+
 def test_the_baked_indirect_light_is_the_weighted_probes_at_each_pixel(gl_context, cornell):
     """The `indirect` view (baked) at pixels of the walls, the floor and a box face is albedo / pi x
     SurfaceWeights' irradiance at the surface point seen there, within the lightmap's bilinear
@@ -104,8 +113,6 @@ def test_a_new_lattice_is_read_per_fragment_until_its_weights_are_ready(gl_conte
     """The viewer computes a new scene's probe weights on a worker (Renderer.background_bake): the
     frames meanwhile read the probes per fragment (lit, not black), `bake_version` changes when the
     weights are in, and the image is then the one a synchronous renderer draws."""
-    import time
-
     expected = render(gl_context, cornell, cornell_probes, (96, 96), ("indirect",))["indirect"]
     offscreen = OffscreenRenderer((96, 96), samples=0, ctx=gl_context)
     try:
@@ -117,8 +124,7 @@ def test_a_new_lattice_is_read_per_fragment_until_its_weights_are_ready(gl_conte
         version = renderer.bake_version()
         assert version[1], "the weights are computed in the background"
         assert early.mean() > 0.5 * expected.mean()
-        while renderer.bake_version()[1]:
-            time.sleep(0.02)
+        wait_for_weights(renderer)
         assert renderer.bake_version() != version
         np.testing.assert_allclose(offscreen.render_hdr(view="indirect"), expected, rtol=1e-3, atol=1e-5)
     finally:
@@ -226,8 +232,6 @@ def test_a_moved_lamp_retraces_only_what_changed_and_shows_the_probes_meanwhile(
     traces again the gather rays the move can change, the frames read the probes per fragment (the old
     geometry's rays would leave the ceiling the lamp covered dark), and once the new weights land the
     image is the one a renderer given the moved scene draws, from the same rays a full trace gives."""
-    import time
-
     moved = lamp_moved(cornell)
     expected = render(gl_context, moved, cornell_probes, (64, 64), ("indirect",))["indirect"]
     offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
@@ -237,9 +241,7 @@ def test_a_moved_lamp_retraces_only_what_changed_and_shows_the_probes_meanwhile(
         renderer.set_scene(cornell)
         renderer.set_probes(cornell_probes)
         offscreen.render_hdr(view="indirect")
-        while renderer.baking:
-            time.sleep(0.02)
-            renderer.bake_version()
+        wait_for_weights(renderer)
         from viewer.final_gather import GatherRays
 
         full, incremental = [], []
@@ -254,9 +256,7 @@ def test_a_moved_lamp_retraces_only_what_changed_and_shows_the_probes_meanwhile(
         exact = render(gl_context, moved, cornell_probes, (64, 64), ("indirect",),
                        RenderSettings(baked=False))["indirect"]
         np.testing.assert_allclose(meanwhile, exact, rtol=1e-4, atol=1e-6)   # the probes per fragment
-        while renderer.baking:
-            time.sleep(0.02)
-            renderer.bake_version()
+        wait_for_weights(renderer)
         np.testing.assert_allclose(offscreen.render_hdr(view="indirect"), expected, rtol=1e-3, atol=1e-5)
         assert (full, incremental) == ([], [1])
         monkeypatch.undo()
@@ -295,9 +295,7 @@ def test_a_new_scenes_rays_are_traced_before_its_first_probes(gl_context, cornel
             time.sleep(0.02)
         renderer.set_probes(cornell_probes)
         offscreen.render_hdr(view="indirect")
-        while renderer.baking:
-            time.sleep(0.02)
-            renderer.bake_version()
+        wait_for_weights(renderer)
         assert traced == [1]
     finally:
         offscreen.release()

@@ -186,6 +186,10 @@ class Scene:
         v[idx] = v[idx] @ m[:3, :3].T + m[:3, 3]
         return replace(self, vertices=v)
 
+    def largest_group(self) -> str:
+        """The group whose faces have the largest total area (a room's biggest wall or floor)."""
+        return self.groups[int(np.argmax(np.bincount(self.face_group, self.face_areas, len(self.groups))))]
+
     def group_albedo(self, group: str) -> np.ndarray:
         mask = self.face_group == self.group_index(group)
         return np.average(self.albedo[mask], axis=0, weights=self.face_areas[mask] + 1e-30)

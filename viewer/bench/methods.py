@@ -156,7 +156,7 @@ class _Edit:
 
     def _edited(self, scene: Scene) -> Scene:
         if self.kind == "colour":
-            group = scene.groups[int(np.argmax(np.bincount(scene.face_group, scene.face_areas, len(scene.groups))))]
+            group = scene.largest_group()
             return scene.with_albedo(group, scene.group_albedo(group)[::-1] * 0.5)
         from viewer.ui.scene_edits import emitter_group
 
@@ -362,7 +362,7 @@ class _ScreenEdit:
         edits = self.viewer.session.edits
         if self.kind == "colour":
             base = edits.base
-            group = base.groups[int(np.argmax(np.bincount(base.face_group, base.face_areas, len(base.groups))))]
+            group = base.largest_group()
             rgb = base.group_albedo(group)
             edits.set_albedo(group, rgb[::-1] * 0.5 if away else rgb)
         else:

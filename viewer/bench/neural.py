@@ -52,7 +52,7 @@ def edits(scene: Scene) -> dict[str, Scene]:
     if group is not None:
         radiance = scene.emission[scene.face_group == scene.group_index(group)][0]
         out["lamp colour"] = scene.with_emission(group, radiance * (1.4, 0.9, 0.5))
-    largest = scene.groups[int(np.argmax(np.bincount(scene.face_group, scene.face_areas, len(scene.groups))))]
+    largest = scene.largest_group()
     out["albedo"] = scene.with_albedo(largest, scene.group_albedo(largest)[::-1] * 0.5)
     if group is not None:
         lo, hi = scene.bounds

@@ -160,6 +160,8 @@ class BakedIndirectLight:
         """Counts `moved` calls: work started for an earlier geometry is dropped."""
         self._made: tuple[int, dda.Cells, tuple | None] | None = None
         """(geometry, cells, gather or None) the last weights were made with: what the next job reuses."""
+        self._points: tuple[BakedDirectLight, tuple] | None = None
+        """The lightmap `_sample_points` last read, and what it made of it."""
         self._traced: tuple[Scene, BakedDirectLight, GatherRays] | None = None
         """The scene and lightmap the last gather rays were traced for, and the rays (a moved lamp's job
         traces again only the rays the move can change)."""
@@ -181,7 +183,7 @@ class BakedIndirectLight:
         key = self._last_key[1]
         if self.weights_key == key and not self.stale:
             return True
-        if key in self._kept and not self.stale:   # a lattice met before (the viewer toggling GI sources)
+        if key in self._kept:   # a lattice met before (the viewer toggling GI sources; `moved` forgets them)
             self._install(key, self._kept[key])
             return True
         if self._job is None or self._job[:2] != (key, self._geometry):
@@ -264,7 +266,10 @@ class BakedIndirectLight:
 
     def _sample_points(self, lightmap: BakedDirectLight) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(points (S, 3), normals (N, 3), normal_id (S,)): the samples of both sides, the distinct normals
-        (the back sides' negated) and each sample's."""
+        (the back sides' negated) and each sample's; once per lightmap (the rays and the weights read them)."""
+        cached = self._points
+        if cached is not None and cached[0] is lightmap:
+            return cached[1]
         faces = lightmap.texel_faces
         face_normal = np.zeros((int(faces.max()) + 1 if len(faces) else 0, 3))
         face_normal[faces] = lightmap.texel_normals
@@ -272,7 +277,9 @@ class BakedIndirectLight:
                                  return_inverse=True)
         faces = faces[self._samples]
         normal_id = np.concatenate([ids[faces], ids[len(face_normal) + faces]])
-        return np.concatenate([lightmap.texel_points[self._samples]] * 2), normals, normal_id
+        points = (np.concatenate([lightmap.texel_points[self._samples]] * 2), normals, normal_id)
+        self._points = (lightmap, points)
+        return points
 
     def _gather_rays(self, scene: Scene, lightmap: BakedDirectLight, cells: dda.Cells, points: np.ndarray,
                      normals: np.ndarray) -> GatherRays:
