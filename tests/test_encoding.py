@@ -145,3 +145,31 @@ def test_both_sides_of_a_thin_wall_reflect_apart():
     one_sided, two_sided = bounce(lit_side), bounce(faces)
     assert one_sided.min() > 0
     np.testing.assert_allclose(two_sided, one_sided, rtol=0.02)
+
+
+def test_a_kept_bounce_gathers_only_the_patches_whose_light_changed():
+    """`Bounce` kept across albedo edits: the same numbers as a fresh `bounce_sh` after each, while
+    gathering only the recoloured group's patches; a change of the direct light gathers them all, and a
+    pass left out of `channels` keeps its earlier values."""
+    scene = load("cornell")
+    lo, hi = scene.bounds
+    voxels = voxelize(scene, 16)
+    bands = np.array([1.0, 0.1, 0.1, 0.1, 0.05, 0.05, 0.05, 0.05, 0.05])   # a positive DC, small wiggles
+    direct = np.random.default_rng(3).random((12 ** 3, 9, 3)) * bands[None, :, None]
+    kept = encoding.Bounce(voxels, lo, hi, 12)
+    np.testing.assert_allclose(kept.sh(voxels.albedo, direct), encoding.bounce_sh(voxels, direct, lo, hi, 12), rtol=1e-6)
+    everything = kept.gathered_patches
+    for albedo in [(0.9, 0.1, 0.3), (0.2, 0.7, 0.3), (0.05, 0.05, 0.05)]:
+        edited = voxelize(scene.with_albedo("red-wall", albedo), 16)
+        assert kept.fits(edited)
+        fresh = encoding.bounce_sh(edited, direct, lo, hi, 12)
+        np.testing.assert_allclose(kept.sh(edited.albedo, direct), fresh, rtol=1e-5, atol=1e-6 * np.abs(fresh).max())
+        assert 0 < kept.gathered_patches < everything / 4
+    brighter = 2.0 * direct
+    np.testing.assert_allclose(kept.sh(edited.albedo, brighter), 2.0 * fresh, rtol=1e-5, atol=1e-6 * np.abs(fresh).max())
+    assert kept.gathered_patches == everything
+    only_red = kept.sh(voxels.albedo, brighter, channels=np.array([True, False, False]))
+    np.testing.assert_allclose(only_red[..., 0], 2.0 * encoding.bounce_sh(voxels, direct, lo, hi, 12)[..., 0], rtol=1e-5,
+                               atol=1e-6 * np.abs(fresh).max())
+    np.testing.assert_allclose(only_red[..., 1:], 2.0 * fresh[..., 1:], rtol=1e-5, atol=1e-6 * np.abs(fresh).max())
+    assert not kept.fits(voxelize(scene.transformed_group("small-box", np.diag([1.0, 0.5, 1.0, 1.0])), 16))

@@ -15,8 +15,11 @@ on splatting the voxels onto the lattice. An `Encoder` keeps, for the voxel geom
   emitted radiance, so a lamp's colour or intensity is its basis times a new RGB;
 - the sun's visibility for the last direction (`encoding.sun_visibility`): its irradiance is a factor.
 
+- the one-bounce feature's patches and their last light (`encoding.Bounce`): the bounce is linear in
+  the patches' radiance, so an albedo edit gathers only the patches of the recoloured surfaces.
+
 So an emission colour or intensity edit is a few products over the cached bases, and an albedo edit
-recomputes the albedo feature; neither traces a ray. New occluders (a moved lamp or object: the
+recomputes the albedo feature and gathers the changed patches' bounce; neither traces a ray. New occluders (a moved lamp or object: the
 triangles cast other shadows) recompute every basis and the sun's visibility. With the same occluders,
 patches that start emitting or change cluster get new bases, traced for their clusters alone (the
 other emitters keep theirs), and a new geometry recomputes the splat.
@@ -169,6 +172,7 @@ class Encoder:
         self._albedo_feature = None                 # (3, cells) float32
         self._emitted = None                        # (cells, 3) splatted emitted radiance x area
         self._sun = (None, np.zeros(3))             # (direction or None, irradiance)
+        self._bounce: encoding.Bounce | None = None   # the bounce's patches and their last light
         self._last: Encoding | None = None
         self._last_voxels: VoxelGrid | None = None
 
@@ -233,11 +237,13 @@ class Encoder:
                   unchanged: np.ndarray) -> np.ndarray:
         """(3, CHANNELS, M, M, M) float32, as `encode` lays it out; passes in `unchanged` keep the
         previous encoding's values (equal to round-off), so the network's output for them still holds.
-        The bounce (`encoding.bounce_sh`) is gathered for the other passes only."""
+        The bounce (`encoding.Bounce`) is brought up to date for the other passes only, and after an
+        albedo edit gathers only the patches whose light changed."""
         g, m = self._geometry, self.resolution
         redo = np.ones(3, bool) if self._last is None else ~unchanged
-        lit = np.where(redo[:, None, None], direct, np.float32(0.0)).transpose(2, 1, 0)
-        bounce = encoding.bounce_sh(voxels, lit, self.lo, self.hi, m)  # (P, 9, 3)
+        if self._bounce is None or not self._bounce.fits(voxels):
+            self._bounce = encoding.Bounce(voxels, self.lo, self.hi, m)
+        bounce = self._bounce.sh(voxels.albedo, direct.transpose(2, 1, 0), redo)  # (P, 9, 3)
         inv = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1.0), 0.0)
         inputs = np.empty((3, CHANNELS, m ** 3), np.float32)
         previous = None if self._last is None else self._last.inputs.reshape(3, CHANNELS, -1)

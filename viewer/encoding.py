@@ -35,10 +35,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import math
-
 import numba
 import numpy as np
+from scipy import sparse
 
 from viewer import dda, sh
 from viewer.voxels import VoxelGrid
@@ -270,18 +269,20 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
     count = points.shape[1]
     w = np.empty(SH_BLOCK, np.float32)
     b = np.empty((9, SH_BLOCK), np.float32)
+    one, tiny, zero = np.float32(1.0), np.float32(1e-12), np.float32(0.0)
     for start in range(0, count, SH_BLOCK):
         n = min(SH_BLOCK, count - start)
+        px, py, pz = points[0, start:start + n], points[1, start:start + n], points[2, start:start + n]
         for e in range(source.shape[0]):
             sx, sy, sz = source[e, 0], source[e, 1], source[e, 2]
             mx, my, mz = normal[e, 0], normal[e, 1], normal[e, 2]
             flux, clamp = area[e], area[e] * near_field
             for i in range(n):
-                x, y, z = sx - points[0, start + i], sy - points[1, start + i], sz - points[2, start + i]
+                x, y, z = sx - px[i], sy - py[i], sz - pz[i]
                 r2 = x * x + y * y + z * z
-                inv = np.float32(1.0) / math.sqrt(max(r2, np.float32(1e-12)))
+                inv = one / np.sqrt(max(r2, tiny))
                 x, y, z = x * inv, y * inv, z * inv
-                weight = max(-(x * mx + y * my + z * mz), np.float32(0.0)) * flux / (r2 + clamp)
+                weight = max(-(x * mx + y * my + z * mz), zero) * flux / (r2 + clamp)
                 if shadowed:
                     weight *= visible[e, start + i]
                 w[i] = weight
@@ -291,7 +292,7 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
                 b[3, i] = np.float32(0.488603) * x
                 b[4, i] = np.float32(1.092548) * x * y
                 b[5, i] = np.float32(1.092548) * y * z
-                b[6, i] = np.float32(0.315392) * (np.float32(3.0) * z * z - np.float32(1.0))
+                b[6, i] = np.float32(0.315392) * (np.float32(3.0) * z * z - one)
                 b[7, i] = np.float32(1.092548) * x * z
                 b[8, i] = np.float32(0.546274) * (x * x - y * y)
             for c in range(radiance.shape[1]):
@@ -299,8 +300,9 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
                 if rc == 0:
                     continue
                 for k in range(9):
+                    row, basis = out[c, k, start:start + n], b[k]   # contiguous views: the loop vectorizes
                     for i in range(n):
-                        out[c, k, start + i] += rc * w[i] * b[k, i]
+                        row[i] += rc * w[i] * basis[i]
 
 
 BOUNCE_PATCH = 2
@@ -321,31 +323,85 @@ def bounce_sh(voxels: VoxelGrid, direct: np.ndarray, lo: np.ndarray, hi: np.ndar
     as the emitters do (`emitter_sh`), and the coarse SH is splatted back onto the probes. The light
     reflected many times, and the shadows of this light, are the network's to learn; this term gives it
     the shape: which walls are lit, their colour, how far they are."""
-    spacing = (hi - lo) / m
     if voxels.count == 0:
         return np.zeros((m ** 3, sh.SH_COUNT, 3))
-    front = voxels.position + 0.5 * voxels.voxel_size * voxels.normal
-    incident = sum(w[:, None, None] * direct[index] for index, w in _splat(front, lo, spacing, m))  # (K, 9, 3)
-    leaving = voxels.albedo * np.maximum(sh.irradiance(incident, voxels.normal), 0.0) / np.pi  # (K, 3)
-    facing = facings(voxels.normal)
-    block = np.floor((voxels.position - lo) / (spacing * BOUNCE_PATCH)).astype(np.int64)
-    _, patch = np.unique(np.column_stack([block, facing]), axis=0, return_inverse=True)
-    patch = patch.ravel()
-    count = patch.max() + 1
-    a = voxels.area
-    area = np.bincount(patch, a, minlength=count)
+    return Bounce(voxels, lo, hi, m).sh(voxels.albedo, direct)
 
-    def mean(values):
-        return np.stack([np.bincount(patch, a * values[:, k], minlength=count) for k in range(3)], 1) / area[:, None]
 
-    normal = mean(voxels.normal)
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
-    coarse = max(m // BOUNCE_LATTICE, 2)
-    step = (hi - lo) / coarse
-    points = lo + (np.stack(np.meshgrid(*[np.arange(coarse)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) * step
-    gathered = emitter_sh((mean(voxels.position), normal, area, mean(leaving)), points)  # (p, 9, 3)
-    fine = lo + (np.stack(np.meshgrid(*[np.arange(m)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) * spacing
-    return sum(w[:, None, None] * gathered[index] for index, w in _splat(fine, lo, step, coarse))
+class Bounce:
+    """`bounce_sh` for one voxel geometry on one lattice, kept across edits (viewer.encoder).
+
+    The gathered SH is linear in the patches' radiance, so a call whose patches mostly shine as they did
+    on the previous call (an albedo edit: the direct light is the same, a group's voxels change colour)
+    gathers only the difference of the patches that changed and adds it to the kept coarse SH. The
+    voxels' irradiance is kept while the direct light stays equal. A call where more than half the
+    patches change gathers everything again, which also drops the round-off the sums carried."""
+
+    def __init__(self, voxels: VoxelGrid, lo: np.ndarray, hi: np.ndarray, m: int):
+        lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        self.position, self.normal, self.area = voxels.position, voxels.normal, voxels.area
+        self.m, spacing = m, (hi - lo) / m
+        front = voxels.position + 0.5 * voxels.voxel_size * voxels.normal
+        self._front = _splat(front, lo, spacing, m)
+        facing = facings(voxels.normal)
+        block = np.floor((voxels.position - lo) / (spacing * BOUNCE_PATCH)).astype(np.int64)
+        _, patch = np.unique(np.column_stack([block, facing]), axis=0, return_inverse=True)
+        self._patch = patch.ravel()
+        self._count = int(self._patch.max()) + 1 if len(self._patch) else 0
+        self._patch_area = np.bincount(self._patch, voxels.area, minlength=self._count)
+        normal = self._mean(voxels.normal)
+        self._patch_normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+        self._patch_position = self._mean(voxels.position)
+        coarse = max(m // BOUNCE_LATTICE, 2)
+        step = (hi - lo) / coarse
+        self._points = lo + (np.stack(np.meshgrid(*[np.arange(coarse)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) * step
+        fine = lo + (np.stack(np.meshgrid(*[np.arange(m)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) * spacing
+        rows = np.arange(m ** 3)
+        corners = _splat(fine, lo, step, coarse)
+        self._spread = sparse.csr_matrix(
+            (np.concatenate([w for _, w in corners]), (np.tile(rows, 8), np.concatenate([i for i, _ in corners]))),
+            shape=(m ** 3, coarse ** 3))
+        self._direct = self._leaving_per_albedo = None
+        self._radiance = self._gathered = None
+        self.gathered_patches = 0
+        """How many patches the last `sh` gathered (all of them, or the ones whose light changed)."""
+
+    def fits(self, voxels: VoxelGrid) -> bool:
+        return all(a is b or np.array_equal(a, b) for a, b in
+                   ((self.position, voxels.position), (self.normal, voxels.normal), (self.area, voxels.area)))
+
+    def _mean(self, values: np.ndarray) -> np.ndarray:
+        """(patches, 3) the voxels' (K, 3) `values` averaged over each patch by area."""
+        return np.stack([np.bincount(self._patch, self.area * values[:, k], minlength=self._count)
+                         for k in range(3)], 1) / self._patch_area[:, None]
+
+    def sh(self, albedo: np.ndarray, direct: np.ndarray, channels: np.ndarray | None = None) -> np.ndarray:
+        """(P, 9, 3) `bounce_sh` for the voxels' `albedo` (K, 3) under `direct` (P, 9, 3). Only the colour
+        `channels` (3,) bool (default all) are brought up to date; the others hold an earlier call's
+        values."""
+        channels = np.ones(3, bool) if channels is None else np.asarray(channels, bool)
+        if self._count == 0:
+            return np.zeros((self.m ** 3, sh.SH_COUNT, 3))
+        if self._direct is None or not np.array_equal(direct, self._direct):
+            incident = sum(w[:, None, None] * direct[index] for index, w in self._front)  # (K, 9, 3)
+            self._leaving_per_albedo = np.maximum(sh.irradiance(incident, self.normal), 0.0) / np.pi
+            self._direct = np.array(direct, copy=True)
+        radiance = self._mean(albedo * self._leaving_per_albedo)  # (patches, 3)
+        if self._gathered is None:
+            change, rows = np.where(channels, radiance, 0.0), np.arange(self._count)
+            self._gathered, self._radiance = np.zeros((len(self._points), sh.SH_COUNT, 3)), np.zeros_like(radiance)
+        else:
+            change = np.where(channels, radiance - self._radiance, 0.0)
+            rows = np.flatnonzero(np.any(change != 0.0, axis=1))
+            if 2 * len(rows) > self._count:   # most patches changed: gather them all again
+                self._gathered[..., channels] = 0.0
+                change, rows = np.where(channels, radiance, 0.0), np.arange(self._count)
+        if len(rows):
+            lights = (self._patch_position[rows], self._patch_normal[rows], self._patch_area[rows], change[rows])
+            self._gathered += emitter_sh(lights, self._points)
+        self._radiance[:, channels] = radiance[:, channels]
+        self.gathered_patches = len(rows)
+        return (self._spread @ self._gathered.reshape(len(self._points), -1)).reshape(-1, sh.SH_COUNT, 3)
 
 
 def sun_sh(sun, blockers: dda.Cells | None, points: np.ndarray) -> np.ndarray:
