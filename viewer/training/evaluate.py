@@ -10,7 +10,11 @@ and ranges: never trained on) and `--dark` rooms whose every surface is 0.01-0.0
 surface, as docs/ACCURACY.md): relative RMSE of the probes' SH against Mitsuba, for all the incident light
 and for its reflected part (the indirect light the renderer shades), and the ratio of the predicted to
 the true mean indirect radiance (DC). `--physical` adds the physical solver at the same probe lattice as
-the yardstick. Mitsuba's answers are cached on disk (~/.cache/gi-viewer/reference).
+the yardstick; `--perfect` adds Mitsuba's own probes on that lattice (`--perfect-directions` each, the
+probes inside solids filled from their neighbours as the solver's are), interpolated like any other: the
+floor the lattice sets for every method. `--noise` measures the truth's own noise (a second Mitsuba run
+with another seed): an error of the order of that noise is the truth's, not the method's. Mitsuba's
+answers at the points are cached on disk (~/.cache/gi-viewer/reference).
 """
 
 from __future__ import annotations
@@ -59,12 +63,18 @@ def evaluation_scenes(val: int, dark: int, seed: int, preset: str) -> list[tuple
     return out
 
 
-def measure_scene(scene: scenes.Scene, methods: dict, points_count: int, directions: int) -> dict:
-    """{method: {all, indirect, indirect_ratio, ms}} against Mitsuba at free-space points."""
+def measure_scene(scene: scenes.Scene, methods: dict, points_count: int, directions: int,
+                  noise: bool = False) -> dict:
+    """{method: {all, indirect, indirect_ratio, seconds}} against Mitsuba at free-space points, and with
+    `noise` the truth's own relative noise ({all, indirect}: a second run's difference / sqrt 2)."""
     points = free_space_points(scene, points_count, margin=0.06, seed=1)
     truth_all = truth_sh(scene, points, directions, include_emitted=True)
     truth_indirect = truth_sh(scene, points, directions, include_emitted=False)
     row = {}
+    if noise:
+        again = [truth_sh(scene, points, directions, include_emitted=part, seed=1) for part in (True, False)]
+        row["truth_noise"] = {key: relative_rmse(b, a) / np.sqrt(2.0)
+                              for key, a, b in (("all", truth_all, again[0]), ("indirect", truth_indirect, again[1]))}
     for name, solve in methods.items():
         start = time.perf_counter()
         every, reflected = solve(scene)
@@ -102,6 +112,24 @@ def physical_method(probes: int):
     return solve
 
 
+def perfect_method(probes: int, directions: int):
+    """Mitsuba's probes on the lattice: (all the light, its reflected part) as probe grids, the probes the
+    physical solver finds inside solids filled from their neighbours (`probes.fill_invalid`)."""
+    from viewer import gi, reference
+    from viewer.probes import ProbeGrid, fill_invalid
+
+    def solve(scene):
+        lo, hi = scene.bounds
+        valid = gi.solve_parts(scene, replace(gi.GISettings(), voxels=32, probes=probes), (True,))[0].valid
+        points = ProbeGrid.positions_for(lo, hi, probes).reshape(-1, 3)
+        reflected, emitted = reference.probe_sh_parts(scene, points, directions, seed=5)
+        shape = (probes,) * 3 + (9, 3)
+        return tuple(ProbeGrid(lo, hi, fill_invalid(c.reshape(shape), valid), valid)
+                     for c in (reflected + emitted, reflected))
+
+    return solve
+
+
 def summary(rows: list[dict], method: str) -> dict:
     """Worst and median per kind of scene, and how many scenes pass the bars."""
     out = {}
@@ -128,22 +156,33 @@ def main(argv=None) -> int:
     parser.add_argument("--points", type=int, default=POINTS)
     parser.add_argument("--directions", type=int, default=DIRECTIONS)
     parser.add_argument("--physical", action="store_true", help="the physical solver too, as the yardstick")
+    parser.add_argument("--perfect", action="store_true",
+                        help="Mitsuba's own probes on the lattice too: the floor the lattice sets")
+    parser.add_argument("--perfect-directions", type=int, default=4096)
+    parser.add_argument("--noise", action="store_true", help="measure the truth's own noise (a second seed)")
     parser.add_argument("--out", type=Path, help="write the rows and the summary as JSON")
     args = parser.parse_args(argv)
     field, neural = neural_method(args.model)
     methods = {"neural": neural}
     if args.physical:
         methods["physical"] = physical_method(field.resolution)
+    if args.perfect:
+        methods["perfect"] = perfect_method(field.resolution, args.perfect_directions)
     rows = []
     for kind, scene in evaluation_scenes(args.val, args.dark, args.seed, args.ranges):
-        row = {"scene": scene.name, "kind": kind, **measure_scene(scene, methods, args.points, args.directions)}
+        row = {"scene": scene.name, "kind": kind, **measure_scene(scene, methods, args.points, args.directions, args.noise)}
         rows.append(row)
         print(f"{scene.name:24s} " + "  ".join(
             f"{m}: all {100 * row[m]['all']:5.1f}%  indirect {100 * row[m]['indirect']:5.1f}%  "
-            f"x{row[m]['indirect_ratio']:.2f}" for m in methods), file=sys.stderr)
+            f"x{row[m]['indirect_ratio']:.2f}" for m in methods)
+              + ("  truth noise: all {all:.1%} indirect {indirect:.1%}".format(**row["truth_noise"]) if args.noise else ""),
+              file=sys.stderr)
     result = {"model": str(args.model), "card": field.card.data.get("training", {}), "limits": LIMITS,
               "points": args.points, "directions": args.directions,
               "summary": {m: summary(rows, m) for m in methods}, "rows": rows}
+    if args.noise:
+        result["truth_noise"] = {kind: {key: float(np.median([r["truth_noise"][key] for r in rows if r["kind"] == kind]))
+                                        for key in ("all", "indirect")} for kind in sorted({r["kind"] for r in rows})}
     print(json.dumps(result["summary"], indent=1))
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
