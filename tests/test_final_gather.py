@@ -114,3 +114,30 @@ def test_ray_counts_must_fill_the_grid_of_strata():
     """A truncated grid of strata leans towards the normal (2% more cos theta at 64 rays): refused."""
     with pytest.raises(ValueError, match="2 r"):
         gather(box(inward=True), *floor_points(2), rays=64)
+
+
+@pytest.mark.parametrize("where", [(0.0, 0.9, 0.0), (0.7, -0.2, 0.4), (0.0, -0.99, 0.0)])
+def test_the_moved_faces_sphere_skips_only_rays_that_cannot_meet_them(where):
+    """`_affected` skips rays (and rows of strata) that cannot meet the moved triangles' bounding sphere;
+    what it marks is exactly what it marks with a sphere that skips nothing, for samples all around the
+    triangles (near them, under them, on their plane)."""
+    from viewer import final_gather
+
+    rng = np.random.default_rng(5)
+    count = 400
+    points = rng.uniform(-1.0, 1.0, (count, 3))
+    normals = rng.normal(size=(count, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    corners = np.array(where) + np.array([[[-0.1, 0, -0.1], [0.1, 0, -0.1], [0.1, 0, 0.1]],
+                                          [[-0.1, 0, -0.1], [0.1, 0, 0.1], [-0.1, 0.05, 0.1]]])
+    points[:10] = corners[0, 0] + rng.uniform(-0.02, 0.02, (10, 3))      # a few right next to them
+    frame = final_gather._Frame.of(points, normals, 72, 0)
+    hits = rng.integers(-1, 50, (count, 72)).astype(np.int32)
+    pixel_points = rng.uniform(-1.0, 1.0, (50, 3))
+    v0, e1, e2 = corners[:, 0].copy(), corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    args = (*frame.args(0.0), hits, np.zeros(count, bool), np.zeros(50, bool), pixel_points, v0, e1, e2, 0.01)
+    sphere = final_gather._bounding_sphere(v0, e1, e2)
+    culled = final_gather._affected(*args, sphere)
+    everything = final_gather._affected(*args, (0.0, 0.0, 0.0, 1e6))
+    assert 0 < culled.sum() < culled.size
+    np.testing.assert_array_equal(culled, everything)

@@ -75,7 +75,8 @@ class GatherRays:
         corners = np.ascontiguousarray(moved, np.float64).reshape(-1, 3, 3)
         todo = _affected(*frame.args(0.0), self.hits, np.ascontiguousarray(sample_moved, np.bool_),
                          np.ascontiguousarray(pixel_moved, np.bool_), np.ascontiguousarray(pixel_points, np.float64),
-                         corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], float(slack))
+                         corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], float(slack),
+                         _bounding_sphere(corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
         hits = self.hits.copy()
         rows = np.argwhere(todo).astype(np.int64)
         hits[todo] = ESCAPED
@@ -191,21 +192,41 @@ def _retrace(points, normals, tangents, bitangents, rows, columns, shift, lift, 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _affected(points, normals, tangents, bitangents, rows, columns, shift, lift, hits, sample_moved, pixel_moved,
-              pixel_points, v0, e1, e2, slack):
-    """(S, K) bool: the rays that a move of the triangles (v0, e1, e2) (their places now) may change."""
+              pixel_points, v0, e1, e2, slack, sphere):
+    """(S, K) bool: the rays that a move of the triangles (v0, e1, e2) (their places now) may change.
+
+    The triangles lie in `sphere` (centre x, y, z, radius: `_bounding_sphere`); a ray whose line passes outside it cannot meet them, and a sample far
+    from it skips whole rows of strata whose angle from the normal is too far from the sphere's (the
+    sphere is widened past the edges' tolerance, so the rays skipped are only ones the exact test below
+    would not mark)."""
     count, rays = hits.shape
     todo = np.zeros((count, rays), np.bool_)
     tolerance = 1e-4
+    cx, cy, cz, radius = sphere
     for s in numba.prange(count):
         if sample_moved[s]:
             todo[s, :] = True
             continue
+        ox, oy, oz = cx - points[s, 0], cy - points[s, 1], cz - points[s, 2]   # to the sphere's centre
+        distance = np.sqrt(ox * ox + oy * oy + oz * oz)
+        far_away = distance > radius + slack   # no ray can meet it behind its origin (t > -slack)
+        polar = half = 0.0
+        if far_away:
+            polar = np.arccos(min(max((ox * normals[s, 0] + oy * normals[s, 1] + oz * normals[s, 2]) / distance, -1.0), 1.0))
+            half = np.arcsin(min(radius / distance, 1.0))
         for k in range(rays):
             p = hits[s, k]
             if p >= 0 and pixel_moved[p]:
                 todo[s, k] = True
                 continue
+            if far_away:   # the ray's angle from the normal: asin(sqrt(u1)) (_direction)
+                u1 = (k // columns + shift[s, 0]) / rows
+                if abs(np.arcsin(min(np.sqrt(u1), 1.0)) - polar) > half + 1e-9:
+                    continue
             dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
+            along = ox * dx + oy * dy + oz * dz
+            if distance * distance - along * along > radius * radius:
+                continue   # the ray's line passes outside the sphere
             far = np.inf
             if p >= 0:
                 far = np.sqrt((pixel_points[p, 0] - points[s, 0]) ** 2 + (pixel_points[p, 1] - points[s, 1]) ** 2
@@ -233,6 +254,30 @@ def _affected(points, normals, tangents, bitangents, rows, columns, shift, lift,
                     todo[s, k] = True
                     break
     return todo
+
+
+@numba.njit(cache=True, nogil=True)
+def _bounding_sphere(v0, e1, e2):
+    """(centre x, y, z, radius) of a sphere around the triangles (v0, e1, e2) and a margin past their
+    edges: the box's centre, the farthest corner, plus 1% (the test's edge tolerance is 1e-4 of an edge)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for f in range(v0.shape[0]):
+        for a in range(3):
+            for corner in (v0[f, a], v0[f, a] + e1[f, a], v0[f, a] + e2[f, a]):
+                lo[a], hi[a] = min(lo[a], corner), max(hi[a], corner)
+    if v0.shape[0] == 0:
+        return 0.0, 0.0, 0.0, -1.0
+    c = 0.5 * (lo + hi)
+    radius = 0.0
+    for f in range(v0.shape[0]):
+        for j in range(3):
+            x, y, z = v0[f, 0] - c[0], v0[f, 1] - c[1], v0[f, 2] - c[2]
+            if j == 1:
+                x, y, z = x + e1[f, 0], y + e1[f, 1], z + e1[f, 2]
+            elif j == 2:
+                x, y, z = x + e2[f, 0], y + e2[f, 1], z + e2[f, 2]
+            radius = max(radius, np.sqrt(x * x + y * y + z * z))
+    return c[0], c[1], c[2], 1.01 * radius + 1e-12
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
