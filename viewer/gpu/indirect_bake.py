@@ -103,6 +103,27 @@ def _gather(values, rows, weights, pixels, image):
         image[p, 0], image[p, 1], image[p, 2] = r, g, b
 
 
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _coplanar_tent(points, normals, distance, near, radius):
+    """(S, K) float32 tent weights 1 - distance / radius of the neighbours `near` (S, K) that share a
+    sample's plane (normals within 0.999, off its plane by under 5% of the radius), 0 for the others;
+    `near` is set to 0 where the query found none (numbered len(points))."""
+    count = points.shape[0]
+    tent = np.zeros(near.shape, np.float32)
+    for s in numba.prange(count):
+        for k in range(near.shape[1]):
+            j = near[s, k]
+            if j >= count:
+                near[s, k] = 0
+                continue
+            facing = normals[j, 0] * normals[s, 0] + normals[j, 1] * normals[s, 1] + normals[j, 2] * normals[s, 2]
+            off = ((points[j, 0] - points[s, 0]) * normals[s, 0] + (points[j, 1] - points[s, 1]) * normals[s, 1]
+                   + (points[j, 2] - points[s, 2]) * normals[s, 2])
+            if facing > 0.999 and abs(off) < 0.05 * radius:
+                tent[s, k] = 1.0 - distance[s, k] / radius
+    return tent
+
+
 def lattice_key(probes: ProbeGrid) -> tuple:
     """What the weights depend on, of a probe grid: its box, resolution and validity."""
     return (tuple(np.round(probes.lo, 9)), tuple(np.round(probes.hi, 9)), probes.resolution,
@@ -378,12 +399,8 @@ class BakedIndirectLight:
         points = lightmap.texel_points[self._samples].astype(np.float64)     # the front sides'; the back
         normals = lightmap.texel_normals[self._samples].astype(np.float64)   # sides' are the same again
         radius = FILTER_RADIUS * SAMPLE_STRIDE * lightmap.texel
-        distance, near = cKDTree(points).query(points, FILTER_MAX, distance_upper_bound=radius)
-        found = near < len(points)                   # the missing are numbered len(points)
-        near = np.where(found, near, 0)
-        coplanar = found & (np.einsum("skc,sc->sk", normals[near], normals) > 0.999) \
-            & (np.abs(np.einsum("skc,sc->sk", points[near] - points[:, None], normals)) < 0.05 * radius)
-        tent = np.where(coplanar, 1.0 - distance / radius, 0.0).astype(np.float32)
+        distance, near = cKDTree(points).query(points, FILTER_MAX, distance_upper_bound=radius, workers=-1)
+        tent = _coplanar_tent(points, normals, distance, near, radius)   # and the missing (len(points)) -> 0
         near, tent = np.concatenate([near, near + len(points)]), np.concatenate([tent, tent])
         own = near == np.arange(len(near))[:, None]
         tent[rays.inside(lightmap.covered.shape[1])[near] & ~own] = 0.0
