@@ -2,7 +2,7 @@
 on the boxes of the Cornell scenes, and steps along silhouettes.
 
     python -m viewer.bench.blotches [--scenes cornell paper-test] [--size 256] [--spp 256]
-                                    [--points 4000]
+                                    [--points 4000] [--gather-rays 72 ...] [--gather-only]
 
 For the default renderer (`gather`: the indirect light baked per lightmap texel by the final gather of
 viewer/final_gather.py, the probes lighting the second bounce on), the probes alone baked per texel with
@@ -142,7 +142,7 @@ def relative_rms(ours: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt(np.mean(((o - t) / np.maximum(t, 0.2 * np.median(t))) ** 2)))
 
 
-def measure(ctx, name: str, size: int, spp: int, points: int) -> list[dict]:
+def measure(ctx, name: str, size: int, spp: int, points: int, gather_rays=(72,), others: bool = True) -> list[dict]:
     from viewer import dda, reference
     from viewer import scene as scenes
     from viewer.geometry import voxelize_with_faces
@@ -163,8 +163,11 @@ def measure(ctx, name: str, size: int, spp: int, points: int) -> list[dict]:
     tilted = off_axis(n)
     cells = dda.Cells.of(voxelize_with_faces(scene, 32), scene)
     rows = []
-    for path, settings in (("gather", RenderSettings()), ("baked", RenderSettings(final_gather=0)),
-                           ("exact", RenderSettings(baked=False))):
+    paths = [("gather" if rays == RenderSettings().final_gather else f"gather, {rays} rays",
+              RenderSettings(final_gather=rays)) for rays in gather_rays]
+    if others:
+        paths += [("baked", RenderSettings(final_gather=0)), ("exact", RenderSettings(baked=False))]
+    for path, settings in paths:
         images = {}
         for image_size, views in (((size, size), ("final", "normals")), ((640, 360), ("final", "direct", "normals"))):
             offscreen = OffscreenRenderer(image_size, settings, samples=0, ctx=ctx)
@@ -223,12 +226,15 @@ def main(argv=None) -> int:
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--spp", type=int, default=256)
     parser.add_argument("--points", type=int, default=4000)
+    parser.add_argument("--gather-rays", type=int, nargs="+", default=[72],
+                        help="final-gather rays per sample (RenderSettings.final_gather), one row each")
+    parser.add_argument("--gather-only", action="store_true", help="leave out the probes-only and exact paths")
     args = parser.parse_args(argv)
     ctx = create_context()
     print(HEADER)
     try:
         for name in args.scenes:
-            measure(ctx, name, args.size, args.spp, args.points)
+            measure(ctx, name, args.size, args.spp, args.points, args.gather_rays, not args.gather_only)
     finally:
         ctx.release()
     return 0
