@@ -9,6 +9,7 @@ viewer/final_gather.py, the probes lighting the second bounce on), the probes al
 the weights of viewer/probe_weights.py (`baked`, RenderSettings.final_gather = 0) and the exact path
 (the probes interpolated per fragment, shaders/probe_grid.glsl), per scene:
 
+- **PSNR** of the final image (8-bit sRGB, no MSAA) against Mitsuba's, as the gallery measures it.
 - **streaks** (`face_blocks`): the final view (no MSAA, linear HDR) against Mitsuba's render, on
   16x16-pixel blocks lying wholly on one face: ours / Mitsuba of the blocks' mean luminance, the worst
   block on the faces off the room's axes (the boxes' sides) and on all faces, and the RMS distance
@@ -145,6 +146,7 @@ def relative_rms(ours: np.ndarray, truth: np.ndarray) -> float:
 def measure(ctx, name: str, size: int, spp: int, points: int, gather_rays=(72,), others: bool = True) -> list[dict]:
     from viewer import dda, reference
     from viewer import scene as scenes
+    from viewer.bench.gallery import psnr, to_srgb8
     from viewer.geometry import voxelize_with_faces
     from viewer.gi import GISettings
     from viewer.gpu.compute_relight import solve_probes
@@ -188,7 +190,8 @@ def measure(ctx, name: str, size: int, spp: int, points: int, gather_rays=(72,),
             lookup = SurfaceWeights.of(p, n, probes, cells).irradiance(probes, n)
         else:
             lookup = probes.surface_irradiance(p, n, settings.probe_normal_offset, settings.probe_plane_falloff)
-        rows.append(dict(scene=name, path=path, worst_tilted=_worst(ratios[on_tilted]), worst=_worst(ratios),
+        rows.append(dict(scene=name, path=path, psnr=psnr(to_srgb8(images[(size, size), "final"]), to_srgb8(truth)),
+                         worst_tilted=_worst(ratios[on_tilted]), worst=_worst(ratios),
                          rms=float(np.sqrt(np.mean((ratios - 1.0) ** 2))), step_max=float(steps.max()),
                          step_p99=float(np.percentile(steps, 99)),
                          tilted=relative_rms(lookup[tilted], indirect[tilted]),
@@ -208,13 +211,13 @@ def _srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
-HEADER = ("| scene | path | worst 16-px block, boxes' faces | worst block, all faces | RMS off 1 | "
+HEADER = ("| scene | path | PSNR (dB) | worst 16-px block, boxes' faces | worst block, all faces | RMS off 1 | "
           "silhouette steps: largest, 99% | points: faces off the axes | points: walls |\n"
-          "|---|---|---|---|---|---|---|---|")
+          "|---|---|---|---|---|---|---|---|---|")
 
 
 def line(r: dict) -> str:
-    return (f"| {r['scene']} | {r['path']} | {r['worst_tilted']:.3f} | {r['worst']:.3f} | {r['rms']:.3f} | "
+    return (f"| {r['scene']} | {r['path']} | {r['psnr']:.2f} | {r['worst_tilted']:.3f} | {r['worst']:.3f} | {r['rms']:.3f} | "
             f"{r['step_max']:.3f}, {r['step_p99']:.3f} | {r['tilted']:.3f} | {r['aligned']:.3f} |")
 
 
