@@ -86,8 +86,7 @@ class GatherRays:
     def inside(self, width: int) -> np.ndarray:
         """(S,) bool: the samples most of whose rays meet the backs of faces (inside a solid); `width`:
         lightmap texels a side (the back sides' pixels are the columns from `width` to 2 `width`)."""
-        back = (self.hits >= 0) & (self.hits % (2 * width) >= width)
-        return back.sum(axis=1) > 0.5 * self.hits.shape[1]
+        return _inside(self.hits, int(width))
 
     def irradiance(self, reflected: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """(S, 3) float32: each sample's irradiance from what the lightmap pixels reflect, `reflected`
@@ -278,6 +277,20 @@ def _bounding_sphere(v0, e1, e2):
                 x, y, z = x + e2[f, 0], y + e2[f, 1], z + e2[f, 2]
             radius = max(radius, np.sqrt(x * x + y * y + z * z))
     return c[0], c[1], c[2], 1.01 * radius + 1e-12
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _inside(hits, width):
+    count, rays = hits.shape
+    out = np.zeros(count, np.bool_)
+    for s in numba.prange(count):
+        back = 0
+        for k in range(rays):
+            p = hits[s, k]
+            if p >= 0 and p % (2 * width) >= width:
+                back += 1
+        out[s] = back > 0.5 * rays
+    return out
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
