@@ -135,3 +135,13 @@ def test_one_line_warning():
     assert warning([]) is None
     line = warning(["'back' albedo 0.99 is above the trained 0.90"])
     assert "\n" not in line and "outside" in line and "physical solver" in line
+
+
+def test_a_closed_room_is_outside_rooms_open_at_the_front():
+    """Every training room was open at the front; in a closed one (the white furnace) the light bounces
+    on instead of leaving, and the network gave it half its light (docs/STABILITY.md)."""
+    from viewer.bench.stability.scenes import furnace
+
+    for closed in (furnace(0.8), Scene.concatenate("lit", [box(inward=True, albedo=0.5, name="room"), ceiling_lamp()])):
+        assert measure(closed).open_sides == 0
+        assert "the scene is open on 0 sides of its box; every training room was open on 1" in outside(closed, V2)

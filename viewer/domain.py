@@ -67,7 +67,8 @@ class Domain:
     sun: bool
     """Whether rooms had a sun (through a window)."""
     open_sides: int
-    """Most sides of the room's box left open (the procedural rooms are open at the front)."""
+    """Sides of the room's box left open: the procedural rooms are all open at the front, so a scene
+    open on more sides, or closed all round (where the light bounces on instead of leaving), is outside."""
 
     @staticmethod
     def from_ranges(ranges, name: str) -> "Domain":
@@ -252,6 +253,9 @@ def outside(scene: Scene, domain: Domain, quantities: Quantities | None = None) 
     if q.open_sides > domain.open_sides:
         reasons.append(f"the scene is open on {q.open_sides} sides of its box; trained on rooms open on "
                        f"{domain.open_sides}")
+    elif q.open_sides < domain.open_sides:   # light that cannot leave bounces on: more than it ever saw
+        reasons.append(f"the scene is open on {q.open_sides} sides of its box; every training room was "
+                       f"open on {domain.open_sides}")
     lights = q.lights
     if len(lights) > domain.lights[1]:
         reasons.append(f"{len(lights)} lights; trained with at most {domain.lights[1]}")
