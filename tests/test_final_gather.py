@@ -135,9 +135,11 @@ def test_the_moved_faces_sphere_skips_only_rays_that_cannot_meet_them(where):
     hits = rng.integers(-1, 50, (count, 72)).astype(np.int32)
     pixel_points = rng.uniform(-1.0, 1.0, (50, 3))
     v0, e1, e2 = corners[:, 0].copy(), corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    args = (*frame.args(0.0), hits, np.zeros(count, bool), np.zeros(50, bool), pixel_points, v0, e1, e2, 0.01)
+    sample_moved, pixel_moved = rng.random(count) < 0.02, rng.random(50) < 0.1   # some rays marked anyway
+    args = (*frame.args(0.0), hits, sample_moved, pixel_moved, pixel_points, v0, e1, e2, 0.01)
     sphere = final_gather._bounding_sphere(v0, e1, e2)
     culled = final_gather._affected(*args, sphere)
     everything = final_gather._affected(*args, (0.0, 0.0, 0.0, 1e6))
     assert 0 < culled.sum() < culled.size
     np.testing.assert_array_equal(culled, everything)
+    assert culled[sample_moved].all() and culled[np.isin(hits, np.flatnonzero(pixel_moved))].all()

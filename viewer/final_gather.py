@@ -210,18 +210,20 @@ def _affected(points, normals, tangents, bitangents, rows, columns, shift, lift,
         distance = np.sqrt(ox * ox + oy * oy + oz * oz)
         far_away = distance > radius + slack   # no ray can meet it behind its origin (t > -slack)
         polar = half = 0.0
+        row_misses = False
         if far_away:
             polar = np.arccos(min(max((ox * normals[s, 0] + oy * normals[s, 1] + oz * normals[s, 2]) / distance, -1.0), 1.0))
             half = np.arcsin(min(radius / distance, 1.0))
         for k in range(rays):
+            if far_away and k % columns == 0:   # a new row of strata: its angle from the normal, asin(sqrt(u1))
+                u1 = (k // columns + shift[s, 0]) / rows
+                row_misses = abs(np.arcsin(min(np.sqrt(u1), 1.0)) - polar) > half + 1e-9
             p = hits[s, k]
             if p >= 0 and pixel_moved[p]:
                 todo[s, k] = True
                 continue
-            if far_away:   # the ray's angle from the normal: asin(sqrt(u1)) (_direction)
-                u1 = (k // columns + shift[s, 0]) / rows
-                if abs(np.arcsin(min(np.sqrt(u1), 1.0)) - polar) > half + 1e-9:
-                    continue
+            if far_away and row_misses:
+                continue
             dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
             along = ox * dx + oy * dy + oz * dz
             if distance * distance - along * along > radius * radius:
