@@ -177,6 +177,8 @@ class BakedIndirectLight:
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="indirect-weights") if background else None
         self._job: tuple[tuple, int, Future] | None = None
         """(lattice key, geometry, future) of the weights under way on the worker."""
+        self._prefetching: Future | None = None
+        """The geometry's work started by `prefetch`, while it runs."""
         self._geometry = 0
         """Counts `moved` calls: work started for an earlier geometry is dropped."""
         self._made: tuple[int, dda.Cells, tuple | None] | None = None
@@ -247,11 +249,15 @@ class BakedIndirectLight:
         return self._geometry, self.scene, self.lightmap, self.stale or self._gather is None
 
     def prefetch(self) -> None:
-        """Start the geometry's work (the triangle cells, the final gather's rays and neighbours: seconds)
-        on the worker before any probes exist, while the GI source computes its first ones: the weights
-        that follow then take a tenth of a second. Only with `background`."""
-        if self._executor is not None and self._made is None and self._job is None:
-            self._executor.submit(self._geometry_work, *self._geometry_now())
+        """Start the geometry's work (the triangle cells, the final gather's rays and neighbours: seconds
+        for a new scene, a few tenths after a lamp moved) on the worker before the new probes exist, while
+        the GI source computes them: the weights that follow then take a tenth of a second. Only with
+        `background`, and one at a time (a lamp dragged asks every frame: the work of the geometry the
+        drag stops at is started by the weights that follow, if not here)."""
+        if self._executor is None or self._job is not None or (self._made is not None and self._made[0] == self._geometry):
+            return
+        if self._prefetching is None or self._prefetching.done():
+            self._prefetching = self._executor.submit(self._geometry_work, *self._geometry_now())
 
     def weights_of(self, probes: ProbeGrid, geometry: int | None = None, scene: Scene | None = None,
                    lightmap: BakedDirectLight | None = None, rays: bool | None = None,

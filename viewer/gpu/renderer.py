@@ -326,6 +326,7 @@ class Renderer:
                 self._release_baked()
                 indirect.moved(baked, self._draw_scene)
                 self._indirect, self._indirect_fresh = indirect, False
+                indirect.prefetch()   # the rays the move changes, traced while the GI source answers
             else:
                 self._release_baked()
             self._baked, self._layout_key = baked, layout
