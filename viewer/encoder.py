@@ -13,16 +13,16 @@ on splatting the voxels onto the lattice. An `Encoder` keeps, for the voxel geom
   (`emitter_basis`): each patch's terms times its visibility, traced as `encode` traces it (one ray
   per probe and cluster of patches, `encoding.shadow_targets`). The direct light is linear in the
   emitted radiance, so a lamp's colour or intensity is its basis times a new RGB;
-- the sun's visibility for the last direction (`encoding.sun_visibility`): its irradiance is a factor.
-
+- the sun's visibility for the last direction (`encoding.sun_visibility`): its irradiance is a factor;
 - the one-bounce feature's patches and their last light (`encoding.Bounce`): the bounce is linear in
   the patches' radiance, so an albedo edit gathers only the patches of the recoloured surfaces.
 
 So an emission colour or intensity edit is a few products over the cached bases, and an albedo edit
-recomputes the albedo feature and gathers the changed patches' bounce; neither traces a ray. New occluders (a moved lamp or object: the
-triangles cast other shadows) recompute every basis and the sun's visibility. With the same occluders,
-patches that start emitting or change cluster get new bases, traced for their clusters alone (the
-other emitters keep theirs), and a new geometry recomputes the splat.
+recomputes the albedo feature and gathers the changed patches' bounce; neither traces a ray. New
+occluders (a moved lamp or object: the triangles cast other shadows) recompute every basis and the
+sun's visibility. With the same occluders, patches that start emitting or change cluster get new bases,
+traced for their clusters alone (the other emitters keep theirs), and a new geometry recomputes the
+splat.
 
 A colour pass whose inputs an edit leaves unchanged is noted in `revisions`, so that the network's
 output for it can be reused: the scale-out normalization divides each pass's light by its own scale,

@@ -40,6 +40,7 @@ import numpy as np
 from scipy import sparse
 
 from viewer import dda, sh
+from viewer.probes import ProbeGrid
 from viewer.voxels import VoxelGrid
 
 VERSION = 4
@@ -353,11 +354,9 @@ class Bounce:
         self._patch_normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
         self._patch_position = self._mean(voxels.position)
         coarse = max(m // BOUNCE_LATTICE, 2)
-        step = (hi - lo) / coarse
-        self._points = lo + (np.stack(np.meshgrid(*[np.arange(coarse)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) * step
-        fine = lo + (np.stack(np.meshgrid(*[np.arange(m)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) * spacing
+        self._points = ProbeGrid.positions_for(lo, hi, coarse).reshape(-1, 3)
         rows = np.arange(m ** 3)
-        corners = _splat(fine, lo, step, coarse)
+        corners = _splat(ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3), lo, (hi - lo) / coarse, coarse)
         self._spread = sparse.csr_matrix(
             (np.concatenate([w for _, w in corners]), (np.tile(rows, 8), np.concatenate([i for i, _ in corners]))),
             shape=(m ** 3, coarse ** 3))

@@ -73,10 +73,10 @@ class GatherRays:
         rays = self.hits.shape[1]
         frame = _Frame.of(points, normals, rays, seed)
         corners = np.ascontiguousarray(moved, np.float64).reshape(-1, 3, 3)
+        edges = (corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])   # v0, e1, e2
         todo = _affected(*frame.args(0.0), self.hits, np.ascontiguousarray(sample_moved, np.bool_),
                          np.ascontiguousarray(pixel_moved, np.bool_), np.ascontiguousarray(pixel_points, np.float64),
-                         corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], float(slack),
-                         _bounding_sphere(corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+                         *edges, float(slack), _bounding_sphere(*edges))
         hits = self.hits.copy()
         rows = np.argwhere(todo).astype(np.int64)
         hits[todo] = ESCAPED
@@ -194,10 +194,10 @@ def _affected(points, normals, tangents, bitangents, rows, columns, shift, lift,
               pixel_points, v0, e1, e2, slack, sphere):
     """(S, K) bool: the rays that a move of the triangles (v0, e1, e2) (their places now) may change.
 
-    The triangles lie in `sphere` (centre x, y, z, radius: `_bounding_sphere`); a ray whose line passes outside it cannot meet them, and a sample far
-    from it skips whole rows of strata whose angle from the normal is too far from the sphere's (the
-    sphere is widened past the edges' tolerance, so the rays skipped are only ones the exact test below
-    would not mark)."""
+    The triangles lie in `sphere` (centre x, y, z, radius: `_bounding_sphere`): a ray whose line passes
+    outside it cannot meet them, and a sample far from it skips whole rows of strata whose angle from
+    the normal is too far from the sphere's (the sphere is widened past the edges' tolerance, so the rays
+    skipped are only ones the exact test below would not mark)."""
     count, rays = hits.shape
     todo = np.zeros((count, rays), np.bool_)
     tolerance = 1e-4
@@ -212,7 +212,8 @@ def _affected(points, normals, tangents, bitangents, rows, columns, shift, lift,
         polar = half = 0.0
         row_misses = False
         if far_away:
-            polar = np.arccos(min(max((ox * normals[s, 0] + oy * normals[s, 1] + oz * normals[s, 2]) / distance, -1.0), 1.0))
+            cosine = (ox * normals[s, 0] + oy * normals[s, 1] + oz * normals[s, 2]) / distance
+            polar = np.arccos(min(max(cosine, -1.0), 1.0))
             half = np.arcsin(min(radius / distance, 1.0))
         for k in range(rays):
             if far_away and k % columns == 0:   # a new row of strata: its angle from the normal, asin(sqrt(u1))
@@ -257,28 +258,16 @@ def _affected(points, normals, tangents, bitangents, rows, columns, shift, lift,
     return todo
 
 
-@numba.njit(cache=True, nogil=True)
-def _bounding_sphere(v0, e1, e2):
+def _bounding_sphere(v0: np.ndarray, e1: np.ndarray, e2: np.ndarray) -> tuple[float, float, float, float]:
     """(centre x, y, z, radius) of a sphere around the triangles (v0, e1, e2) and a margin past their
-    edges: the box's centre, the farthest corner, plus 1% (the test's edge tolerance is 1e-4 of an edge)."""
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    for f in range(v0.shape[0]):
-        for a in range(3):
-            for corner in (v0[f, a], v0[f, a] + e1[f, a], v0[f, a] + e2[f, a]):
-                lo[a], hi[a] = min(lo[a], corner), max(hi[a], corner)
-    if v0.shape[0] == 0:
+    edges: the box's centre, the farthest corner, plus 1% (the test's edge tolerance is 1e-4 of an edge).
+    A radius of -1 for no triangles: every ray misses."""
+    if len(v0) == 0:
         return 0.0, 0.0, 0.0, -1.0
-    c = 0.5 * (lo + hi)
-    radius = 0.0
-    for f in range(v0.shape[0]):
-        for j in range(3):
-            x, y, z = v0[f, 0] - c[0], v0[f, 1] - c[1], v0[f, 2] - c[2]
-            if j == 1:
-                x, y, z = x + e1[f, 0], y + e1[f, 1], z + e1[f, 2]
-            elif j == 2:
-                x, y, z = x + e2[f, 0], y + e2[f, 1], z + e2[f, 2]
-            radius = max(radius, np.sqrt(x * x + y * y + z * z))
-    return c[0], c[1], c[2], 1.01 * radius + 1e-12
+    points = np.concatenate([v0, v0 + e1, v0 + e2])
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    radius = float(np.linalg.norm(points - centre, axis=1).max())
+    return float(centre[0]), float(centre[1]), float(centre[2]), 1.01 * radius + 1e-12
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

@@ -143,7 +143,8 @@ def relative_rms(ours: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt(np.mean(((o - t) / np.maximum(t, 0.2 * np.median(t))) ** 2)))
 
 
-def measure(ctx, name: str, size: int, spp: int, points: int, gather_rays=(72,), others: bool = True) -> list[dict]:
+def measure(ctx, name: str, size: int, spp: int, points: int, gather_rays=(72,),
+            others: bool = True) -> list[dict]:
     from viewer import dda, reference
     from viewer import scene as scenes
     from viewer.bench.gallery import psnr, to_srgb8
@@ -190,7 +191,8 @@ def measure(ctx, name: str, size: int, spp: int, points: int, gather_rays=(72,),
             lookup = SurfaceWeights.of(p, n, probes, cells).irradiance(probes, n)
         else:
             lookup = probes.surface_irradiance(p, n, settings.probe_normal_offset, settings.probe_plane_falloff)
-        rows.append(dict(scene=name, path=path, psnr=psnr(to_srgb8(images[(size, size), "final"]), to_srgb8(truth)),
+        final8 = to_srgb8(images[(size, size), "final"])
+        rows.append(dict(scene=name, path=path, psnr=psnr(final8, to_srgb8(truth)),
                          worst_tilted=_worst(ratios[on_tilted]), worst=_worst(ratios),
                          rms=float(np.sqrt(np.mean((ratios - 1.0) ** 2))), step_max=float(steps.max()),
                          step_p99=float(np.percentile(steps, 99)),
@@ -217,8 +219,8 @@ HEADER = ("| scene | path | PSNR (dB) | worst 16-px block, boxes' faces | worst 
 
 
 def line(r: dict) -> str:
-    return (f"| {r['scene']} | {r['path']} | {r['psnr']:.2f} | {r['worst_tilted']:.3f} | {r['worst']:.3f} | {r['rms']:.3f} | "
-            f"{r['step_max']:.3f}, {r['step_p99']:.3f} | {r['tilted']:.3f} | {r['aligned']:.3f} |")
+    return (f"| {r['scene']} | {r['path']} | {r['psnr']:.2f} | {r['worst_tilted']:.3f} | {r['worst']:.3f} | "
+            f"{r['rms']:.3f} | {r['step_max']:.3f}, {r['step_p99']:.3f} | {r['tilted']:.3f} | {r['aligned']:.3f} |")
 
 
 def main(argv=None) -> int:

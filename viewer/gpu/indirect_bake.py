@@ -254,7 +254,8 @@ class BakedIndirectLight:
         the GI source computes them: the weights that follow then take a tenth of a second. Only with
         `background`, and one at a time (a lamp dragged asks every frame: the work of the geometry the
         drag stops at is started by the weights that follow, if not here)."""
-        if self._executor is None or self._job is not None or (self._made is not None and self._made[0] == self._geometry):
+        made = self._made is not None and self._made[0] == self._geometry
+        if self._executor is None or self._job is not None or made:
             return
         if self._prefetching is None or self._prefetching.done():
             self._prefetching = self._executor.submit(self._geometry_work, *self._geometry_now())

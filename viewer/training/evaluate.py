@@ -117,12 +117,14 @@ def physical_method(probes: int):
 def perfect_method(probes: int, directions: int):
     """Mitsuba's probes on the lattice: (all the light, its reflected part) as probe grids, the probes the
     physical solver finds inside solids filled from their neighbours (`probes.fill_invalid`)."""
-    from viewer import gi, reference
+    from viewer import geometry, gi, reference
     from viewer.probes import ProbeGrid, fill_invalid
+
+    settings = gi.geometry_settings(replace(gi.GISettings(), voxels=32, probes=probes))
 
     def solve(scene):
         lo, hi = scene.bounds
-        valid = gi.solve_parts(scene, replace(gi.GISettings(), voxels=32, probes=probes), (True,))[0].valid
+        valid = geometry.build(scene, settings).valid   # the solver's inside-solid rule, without its solve
         points = ProbeGrid.positions_for(lo, hi, probes).reshape(-1, 3)
         reflected, emitted = reference.probe_sh_parts(scene, points, directions, seed=5)
         shape = (probes,) * 3 + (9, 3)
@@ -176,19 +178,23 @@ def main(argv=None) -> int:
     for kind, scene in evaluation_scenes(args.val, args.dark, args.seed, args.ranges):
         if args.only and scene.name not in args.only:
             continue
-        row = {"scene": scene.name, "kind": kind, **measure_scene(scene, methods, args.points, args.directions, args.noise)}
+        row = {"scene": scene.name, "kind": kind,
+               **measure_scene(scene, methods, args.points, args.directions, args.noise)}
         rows.append(row)
         print(f"{scene.name:24s} " + "  ".join(
             f"{m}: all {100 * row[m]['all']:5.1f}%  indirect {100 * row[m]['indirect']:5.1f}%  "
             f"x{row[m]['indirect_ratio']:.2f}" for m in methods)
-              + ("  truth noise: all {all:.1%} indirect {indirect:.1%}".format(**row["truth_noise"]) if args.noise else ""),
+              + ("  truth noise: all {all:.1%} indirect {indirect:.1%}".format(**row["truth_noise"])
+                 if args.noise else ""),
               file=sys.stderr)
     result = {"model": str(args.model), "card": field.card.data.get("training", {}), "limits": LIMITS,
               "points": args.points, "directions": args.directions,
               "summary": {m: summary(rows, m) for m in methods}, "rows": rows}
     if args.noise:
-        result["truth_noise"] = {kind: {key: float(np.median([r["truth_noise"][key] for r in rows if r["kind"] == kind]))
-                                        for key in ("all", "indirect")} for kind in sorted({r["kind"] for r in rows})}
+        kinds = sorted({r["kind"] for r in rows})
+        noise = {kind: [r["truth_noise"] for r in rows if r["kind"] == kind] for kind in kinds}
+        result["truth_noise"] = {kind: {key: float(np.median([n[key] for n in mine])) for key in ("all", "indirect")}
+                                 for kind, mine in noise.items()}
     print(json.dumps(result["summary"], indent=1))
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
