@@ -92,13 +92,14 @@ def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t, np.cross(n, t)
 
 
-def gather_directions(normals: np.ndarray, count: int) -> np.ndarray:
+def gather_directions(normals: np.ndarray, count: int, index: np.ndarray | None = None) -> np.ndarray:
     """(K, count, 3) world directions of each voxel's gather rays: `cosine_directions` around its
     normal, turned about it by an angle fixed per voxel (its index times the golden angle), so that
-    neighbouring voxels do not share the pattern's gaps, and the same every time (nothing flickers)."""
+    neighbouring voxels do not share the pattern's gaps, and the same every time (nothing flickers).
+    `index`: the voxels' indices when `normals` are some of a grid's (by default 0..K-1)."""
     n = np.asarray(normals, np.float64)
     t, b = tangent_frames(n)
-    angle = np.arange(len(n)) * (np.pi * (3.0 - np.sqrt(5.0)))
+    angle = (np.arange(len(n)) if index is None else np.asarray(index)) * (np.pi * (3.0 - np.sqrt(5.0)))
     c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
     t, b = c * t + s * b, c * b - s * t
     local = cosine_directions(count)
@@ -134,6 +135,13 @@ class Geometry:
     fill_waves: np.ndarray
     """(M^3,) int32 the wave of viewer.probes.fill_invalid in which each invalid probe gets its value
     (0: valid; -1 everywhere: no valid probe)."""
+    probe_backface: np.ndarray
+    """(P, D) bool: the probe direction sees the back of a surface (what `valid` counts)."""
+    voxel_keys: np.ndarray
+    """(K,) int64 each voxel's key, cell x 6 + facing (viewer.voxels.Voxelization.keys)."""
+    gather_hits: np.ndarray
+    """(K, gather_rays) int32 the voxel each gather ray hits, dda.MISS or dda.BACKFACE (the transport
+    matrix's entries before they are summed: what viewer.retrace keeps when faces move)."""
 
     @property
     def probe_resolution(self) -> int:
@@ -152,17 +160,25 @@ def trace(scene: Scene, voxelization: Voxelization, settings: GeometrySettings) 
     k, h = grid.count, grid.voxel_size
     # voxel -> voxel: cosine-weighted gather rays, one matrix entry per (receiver, voxel hit)
     origins = grid.position + SURFACE_OFFSET * h * grid.normal
-    hits = dda.bundle_hits(cells, origins, gather_directions(grid.normal, settings.gather_rays)).astype(np.int64)
-    receiver = np.repeat(np.arange(k), settings.gather_rays)
-    seen = hits.reshape(-1) >= 0
-    transport = sparse.csr_matrix(
-        (np.full(int(seen.sum()), 1.0 / settings.gather_rays, np.float32),
-         (receiver[seen], hits.reshape(-1)[seen])), shape=(k, k))
-    transport.sum_duplicates()
+    hits = dda.bundle_hits(cells, origins, gather_directions(grid.normal, settings.gather_rays))
     lo, hi = scene.bounds
     probe_part = _probe_rays(cells, k, np.asarray(lo, np.float64), np.asarray(hi, np.float64), settings)
-    return Geometry(scene_key(scene, settings), settings, grid, cells, faces, lamp_faces(scene), transport,
-                    *probe_part)
+    return Geometry(scene_key(scene, settings), settings, grid, cells, faces, lamp_faces(scene),
+                    transport_matrix(hits), *probe_part, voxel_keys=np.asarray(voxelization.keys, np.int64),
+                    gather_hits=hits)
+
+
+def transport_matrix(hits: np.ndarray) -> sparse.csr_matrix:
+    """(K, K) the transport matrix of the gather rays' hits (K, R): each ray that hits a voxel from the
+    front carries 1 / R of its receiver's hemisphere."""
+    k, rays = hits.shape
+    flat = hits.reshape(-1).astype(np.int64)
+    seen = flat >= 0
+    receiver = np.repeat(np.arange(k), rays)
+    transport = sparse.csr_matrix((np.full(int(seen.sum()), 1.0 / rays, np.float32),
+                                   (receiver[seen], flat[seen])), shape=(k, k))
+    transport.sum_duplicates()
+    return transport
 
 
 def with_probes(geometry: Geometry, probes: int) -> Geometry:
@@ -175,7 +191,8 @@ def with_probes(geometry: Geometry, probes: int) -> Geometry:
     return replace(geometry, key=key, settings=settings, **dict(zip(_PROBE_FIELDS, fields)))
 
 
-_PROBE_FIELDS = ("probe_points", "probe_hits", "probe_basis", "probe_basis_t", "valid", "fill_waves")
+_PROBE_FIELDS = ("probe_points", "probe_hits", "probe_basis", "probe_basis_t", "valid", "fill_waves",
+                 "probe_backface")
 
 
 def _probe_rays(cells: dda.Cells, k: int, lo: np.ndarray, hi: np.ndarray, settings: GeometrySettings) -> tuple:
@@ -183,12 +200,19 @@ def _probe_rays(cells: dda.Cells, k: int, lo: np.ndarray, hi: np.ndarray, settin
     m = settings.probes
     points = ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3)
     directions, weights = sh.sphere_directions(settings.directions)
-    probe_hits = dda.bundle_hits(cells, points, directions)
-    backface = (probe_hits == dda.BACKFACE).mean(axis=1)
-    probe_hits[probe_hits < 0] = k
     basis = (weights[:, None] * sh.basis(directions)).astype(np.float32)
-    valid = (backface <= settings.invalid_backface_fraction).reshape(m, m, m)
-    return lo, hi, points, probe_hits, basis, np.ascontiguousarray(basis.T), valid, fill_waves(valid).reshape(-1)
+    hits, valid, waves, backface = probe_fields(dda.bundle_hits(cells, points, directions), k, m,
+                                                settings.invalid_backface_fraction)
+    return lo, hi, points, hits, basis, np.ascontiguousarray(basis.T), valid, waves, backface
+
+
+def probe_fields(raw_hits: np.ndarray, k: int, m: int, invalid_backface_fraction: float) -> tuple:
+    """From the probe rays' hits (P, D) as traced (MISS, BACKFACE or a voxel): (hits with K for no voxel,
+    valid (M, M, M), fill waves (M^3,), backface (P, D))."""
+    backface = raw_hits == dda.BACKFACE
+    hits = np.where(raw_hits < 0, k, raw_hits).astype(np.int32)
+    valid = (backface.mean(axis=1) <= invalid_backface_fraction).reshape(m, m, m)
+    return hits, valid, fill_waves(valid).reshape(-1), backface
 
 
 # ---- the sun ------------------------------------------------------------------------------------------------

@@ -17,9 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from viewer import geometry, lightpaths, probes, relight, transport, voxels
+from viewer import geometry, lightpaths, probes, relight, retrace, transport, voxels
 from viewer.raymarch import Tracer
 from viewer.scene import Scene
+from viewer.voxel_faces import FaceVoxels
 
 
 @dataclass(frozen=True)
@@ -120,6 +121,8 @@ class PhysicalGI:
         self.settings = settings
         self.relighter = relighter
         self.geometry: geometry.Geometry | None = None
+        self.face_voxels: FaceVoxels | None = None
+        """The geometry's voxels per (voxel, face) pair: a move of some faces is voxelized from them alone."""
         self.lights: lightpaths.LightPaths | None = None
         self.sun: geometry.SunPaths | None = None
         self.materials: relight.Materials | None = None
@@ -146,12 +149,11 @@ class PhysicalGI:
         clock = time.perf_counter()
         wanted = geometry_settings(self.settings)
         found, lights, sun, ran = self.geometry, self.lights, self.sun, []
+        face_voxels, retraced = self.face_voxels, None
         if not self.geometry_fits(scene, stale_geometry):
-            voxelization = voxels.voxelize_with_faces(scene, wanted.voxels, wanted.normal_mode)
-            now = time.perf_counter()
-            timings.stages["voxelize"] = timings.stages.get("voxelize", 0.0) + now - clock
-            clock = now
-            found, lights, sun = geometry.trace(scene, voxelization, wanted), None, None
+            found, face_voxels, retraced = self._traced(scene, wanted, timings)
+            lights, sun = None, None
+            clock = time.perf_counter()
             ran.append("geometry")
         if lights is None or lights.key != lightpaths.lights_key(scene, found):
             lights = lightpaths.build(scene, found)
@@ -161,7 +163,31 @@ class PhysicalGI:
             ran.append("sun")
         if ran:
             timings.stages["geometry"] = timings.stages.get("geometry", 0.0) + time.perf_counter() - clock
-        return Prepared(found, lights, sun, ran)
+        return Prepared(found, lights, sun, ran, face_voxels, retraced)
+
+    def _traced(self, scene: Scene, wanted: geometry.GeometrySettings,
+                timings: Timings) -> tuple[geometry.Geometry, FaceVoxels | None, dict | None]:
+        """(the geometry of `scene`, its voxels per face, what viewer.retrace traced again or None): when
+        only some faces moved since the installed geometry (a lamp dragged), voxelized from the moved
+        faces and traced again only where they can change a ray (the same hits); else voxelized and
+        traced afresh."""
+        clock = time.perf_counter()
+        before, moved = self.geometry, None
+        if before is not None and before.settings == wanted and self.face_voxels is not None:
+            moved = self.face_voxels.moved(scene)
+        if wanted.normal_mode == "area":
+            face_voxels = moved or FaceVoxels.of(scene, wanted.voxels)
+            voxelization = face_voxels.voxelization(scene)
+        else:
+            face_voxels, voxelization = None, voxels.voxelize_with_faces(scene, wanted.voxels, wanted.normal_mode)
+        now = time.perf_counter()
+        timings.stages["voxelize"] = timings.stages.get("voxelize", 0.0) + now - clock
+        stats: dict | None = {}
+        found = retrace.after_moving(before, scene, voxelization, stats) if moved is not None else None
+        if found is None:
+            found, stats = geometry.trace(scene, voxelization, wanted), None
+        timings.stages["geometry"] = timings.stages.get("geometry", 0.0) + time.perf_counter() - now
+        return found, face_voxels, stats
 
     def needs_tracing(self, scene: Scene, stale_geometry: bool = False) -> bool:
         """Whether `scene` needs more than a relight (cheap to ask: it hashes the triangles)."""
@@ -184,6 +210,7 @@ class PhysicalGI:
         if prepared.geometry is not self.geometry:
             self.lighting = None
         self.geometry, self.lights, self.sun = prepared.geometry, prepared.lights, prepared.sun
+        self.face_voxels = prepared.face_voxels
 
     def relight(self, scene: Scene, timings: Timings | None = None, bounces: int | None = None) -> relight.Lighting:
         """The relight stage: the scene's colours and lights on the installed geometry."""
@@ -220,6 +247,9 @@ class Prepared:
     lights: lightpaths.LightPaths
     sun: geometry.SunPaths
     ran: list[str]
+    face_voxels: FaceVoxels | None = None
+    retraced: dict | None = None
+    """viewer.retrace's counts when the geometry came from the one before (faces moved), else None."""
 
 
 def _same_direction(a, b) -> bool:
