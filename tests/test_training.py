@@ -114,6 +114,10 @@ def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
     # with the solver's rooms weighted 0, matching Mitsuba's probes costs nothing, the solver's a lot
     assert float(loss_terms(Constant(2.0), batch, settings)[0]) == pytest.approx(0.0, abs=1e-9)
     assert float(loss_terms(Constant(1.0), batch, settings)[0]) == pytest.approx(0.5)  # 1^2 / (1 + 1)
+    # without Mitsuba's probes every room is scored against the solver's
+    solver_only = TrainSettings(reflected_weight=1.0, solver_weight=1.0, mitsuba=False)
+    assert float(loss_terms(Constant(1.0), batch, solver_only)[0]) == pytest.approx(0.0, abs=1e-9)
+    assert float(loss_terms(Constant(2.0), batch, solver_only)[0]) == pytest.approx(0.5)
 
 
 def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():

@@ -66,6 +66,9 @@ class TrainSettings:
     deterministic but biased (16% on v2 rooms, docs/TRAINING.md); Mitsuba's are unbiased but noisy."""
     steps: int = 0
     """Stop an epoch after this many steps (0: the whole split): a pass over thousands of rooms."""
+    mitsuba: bool = True
+    """Score the reflected light against Mitsuba's probes in the rooms that have them; False: against the
+    solver's in every room (deterministic and biased; `solver_weight` then weighs every room)."""
     direct_input: str = "encoded"
     """What the direct-light features hold: `encoded` (the encoding's, `viewer.encoding`: shadows traced
     on a coarse grid) or `traced` (the truth's own direct light: the experiment of a network whose
@@ -181,6 +184,8 @@ def loss_terms(model, batch: Batch, settings: "TrainSettings"):
       against Mitsuba's unbiased probes where the room has them, else against the truth's (biased), the
       latter rooms weighted by `solver_weight`."""
     out = model(batch.x)
+    if not settings.mitsuba:
+        batch = Batch(batch.pick, batch.x, batch.y, batch.valid, batch.unbiased, torch.zeros_like(batch.has_unbiased))
     w = probe_weights(batch)
     direct = out[:, TOTAL] - out[:, REFLECTED]
     direct_loss = (w * (direct - (batch.y[:, TOTAL] - batch.y[:, REFLECTED])) ** 2).mean()
@@ -340,6 +345,9 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=0, help="steps per epoch (0: the whole split)")
     parser.add_argument("--reflected-weight", type=float, default=TrainSettings.reflected_weight)
     parser.add_argument("--solver-weight", type=float, default=TrainSettings.solver_weight)
+    parser.add_argument("--no-mitsuba", action="store_true",
+                        help="reflected light against the solver's probes in every room, never Mitsuba's")
+    parser.add_argument("--init", type=Path, help="start from this checkpoint's weights (a fine-tune)")
     parser.add_argument("--threads", type=int, default=TrainSettings.threads)
     parser.add_argument("--direct-input", choices=("encoded", "traced"), default="encoded")
     parser.add_argument("--encoded-only", action="store_true",
@@ -355,12 +363,14 @@ def main(argv=None) -> int:
                 " ".join(["python -m viewer.training.train", *(sys.argv[1:] if argv is None else argv)]))
     config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels)
     model = ProbeNet(config)
+    if args.init and not (args.out / "checkpoint.pt").exists():
+        model.load_state_dict(torch.load(args.init, weights_only=False)["model"])
     print(f"ProbeNet {config}: {parameter_count(model)} parameters, {len(train_set)} training scenes",
           file=sys.stderr)
     settings = TrainSettings(epochs=args.epochs, batch=args.batch, learning_rate=args.lr,
                              weight_decay=args.weight_decay, steps=args.steps, threads=args.threads,
                              reflected_weight=args.reflected_weight, solver_weight=args.solver_weight,
-                             direct_input=args.direct_input)
+                             mitsuba=not args.no_mitsuba, direct_input=args.direct_input)
     train(model, train_set, val_set, settings, run=args.out)
     return 0
 
