@@ -52,9 +52,8 @@ class GatherRays:
         (tiles, 2) and tile_n (tiles,): the atlas layout (viewer.gpu.direct_bake.lightmap_layout),
         `width` texels a side; lift: how far off the surface the rays start."""
         frame = _Frame.of(points, normals, rays, seed)
-        hits = np.full((frame.count, rays), ESCAPED, np.int32)
-        everything = np.stack(np.divmod(np.arange(frame.count * rays, dtype=np.int64), rays), axis=1)
-        _retrace(*frame.args(lift), *_tracing_args(cells, face_tile, tile_origin, tile_n, width), everything, hits)
+        hits = np.empty((frame.count, rays), np.int32)
+        _trace(*frame.args(lift), *_tracing_args(cells, face_tile, tile_origin, tile_n, width), hits)
         return GatherRays(hits)
 
     def after_moving(self, sample_moved: np.ndarray, pixel_moved: np.ndarray, pixel_points: np.ndarray,
@@ -152,41 +151,60 @@ def _direction(s, k, normals, tangents, bitangents, rows, columns, shift):
     return dx, dy, dz
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _landing(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile,
+             tile_origin, tile_n, width, none):
+    """The pixel ray k of sample s lands on, ESCAPED if none."""
+    v0, e1, e2 = cells[6], cells[7], cells[8]
+    ox = points[s, 0] + lift * normals[s, 0]
+    oy = points[s, 1] + lift * normals[s, 1]
+    oz = points[s, 2] + lift * normals[s, 2]
+    dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
+    face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, cells, none)
+    side = 0
+    if face == dda.BACKFACE:
+        face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, flipped, none)
+        side = 1
+    if face < 0 or face_tile[face] < 0:
+        return ESCAPED
+    wx, wy, wz = ox + t * dx - v0[face, 0], oy + t * dy - v0[face, 1], oz + t * dz - v0[face, 2]
+    aa = e1[face, 0] ** 2 + e1[face, 1] ** 2 + e1[face, 2] ** 2
+    ab = e1[face, 0] * e2[face, 0] + e1[face, 1] * e2[face, 1] + e1[face, 2] * e2[face, 2]
+    bb = e2[face, 0] ** 2 + e2[face, 1] ** 2 + e2[face, 2] ** 2
+    wa = wx * e1[face, 0] + wy * e1[face, 1] + wz * e1[face, 2]
+    wb = wx * e2[face, 0] + wy * e2[face, 1] + wz * e2[face, 2]
+    det = aa * bb - ab * ab
+    if det <= 0.0:
+        return ESCAPED
+    u, v = (bb * wa - ab * wb) / det, (aa * wb - ab * wa) / det
+    tile = face_tile[face]
+    m = tile_n[tile]
+    # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
+    ku = min(max(int(np.floor(u * m + 1.0)), 0), m + 1)
+    kv = min(max(int(np.floor(v * m + 1.0)), 0), m + 1)
+    return (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side * width
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _trace(points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile, tile_origin,
+           tile_n, width, hits):
+    """Trace every ray of every sample into hits (S, K)."""
+    none = np.zeros(0, np.int64)
+    for s in numba.prange(hits.shape[0]):
+        for k in range(hits.shape[1]):
+            hits[s, k] = _landing(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, cells,
+                                  flipped, face_tile, tile_origin, tile_n, width, none)
+
+
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _retrace(points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile, tile_origin,
              tile_n, width, todo, hits):
-    """Trace the rays todo (N, 2) = (sample, ray) into hits (ESCAPED where they leave)."""
+    """Trace the rays todo (N, 2) = (sample, ray) into hits."""
     none = np.zeros(0, np.int64)
-    v0, e1, e2 = cells[6], cells[7], cells[8]
     for i in numba.prange(todo.shape[0]):
         s, k = todo[i, 0], todo[i, 1]
-        ox = points[s, 0] + lift * normals[s, 0]
-        oy = points[s, 1] + lift * normals[s, 1]
-        oz = points[s, 2] + lift * normals[s, 2]
-        dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
-        face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, cells, none)
-        side = 0
-        if face == dda.BACKFACE:
-            face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, flipped, none)
-            side = 1
-        if face < 0 or face_tile[face] < 0:
-            continue
-        wx, wy, wz = ox + t * dx - v0[face, 0], oy + t * dy - v0[face, 1], oz + t * dz - v0[face, 2]
-        aa = e1[face, 0] ** 2 + e1[face, 1] ** 2 + e1[face, 2] ** 2
-        ab = e1[face, 0] * e2[face, 0] + e1[face, 1] * e2[face, 1] + e1[face, 2] * e2[face, 2]
-        bb = e2[face, 0] ** 2 + e2[face, 1] ** 2 + e2[face, 2] ** 2
-        wa = wx * e1[face, 0] + wy * e1[face, 1] + wz * e1[face, 2]
-        wb = wx * e2[face, 0] + wy * e2[face, 1] + wz * e2[face, 2]
-        det = aa * bb - ab * ab
-        if det <= 0.0:
-            continue
-        u, v = (bb * wa - ab * wb) / det, (aa * wb - ab * wa) / det
-        tile = face_tile[face]
-        m = tile_n[tile]
-        # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
-        ku = min(max(int(np.floor(u * m + 1.0)), 0), m + 1)
-        kv = min(max(int(np.floor(v * m + 1.0)), 0), m + 1)
-        hits[s, k] = (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side * width
+        hits[s, k] = _landing(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, cells,
+                              flipped, face_tile, tile_origin, tile_n, width, none)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
