@@ -29,11 +29,11 @@ from scipy.spatial import cKDTree
 
 from viewer import dda
 from viewer.final_gather import GatherRays
-from viewer.geometry import voxelize_with_faces
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.probe_weights import SurfaceBake, SurfaceWeights
 from viewer.probes import ProbeGrid
 from viewer.scene import Scene
+from viewer.voxels import grid_frame
 
 VISIBILITY_VOXELS = 32
 """Cells per axis of the triangle grid that the probes' visibility is traced in."""
@@ -282,7 +282,7 @@ class BakedIndirectLight:
         if made is not None and made[0] == geometry:
             return made[1], made[2]
         cells = self._cells if self._cells is not None and not rays else \
-            dda.Cells.of(voxelize_with_faces(scene, VISIBILITY_VOXELS), scene)
+            dda.Cells.blocking(scene, *grid_frame(scene, VISIBILITY_VOXELS), VISIBILITY_VOXELS)
         gather = None
         if self.gather_rays and rays:
             points, normals, normal_id = self._sample_points(lightmap)
