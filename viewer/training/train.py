@@ -69,6 +69,10 @@ class TrainSettings:
     mitsuba: bool = True
     """Score the reflected light against Mitsuba's probes in the rooms that have them; False: against the
     solver's in every room (deterministic and biased; `solver_weight` then weighs every room)."""
+    reflected_loss: str = "local"
+    """How a probe's reflected-light error is weighed: `local` (`probe_weights`: relative to the light
+    around it, every probe alike) or `room` (each room's squared error over its reflected light's
+    energy: the relative RMSE the validation reports, where the bright probes count most)."""
     direct_input: str = "encoded"
     """What the direct-light features hold: `encoded` (the encoding's, `viewer.encoding`: shadows traced
     on a coarse grid) or `traced` (the truth's own direct light: the experiment of a network whose
@@ -190,7 +194,12 @@ def loss_terms(model, batch: Batch, settings: "TrainSettings"):
     direct = out[:, TOTAL] - out[:, REFLECTED]
     direct_loss = (w * (direct - (batch.y[:, TOTAL] - batch.y[:, REFLECTED])) ** 2).mean()
     room = batch.has_unbiased + (1 - batch.has_unbiased) * settings.solver_weight
-    per_row = (w * (out[:, REFLECTED] - reflected_target(batch)) ** 2).mean(dim=(1, 2, 3, 4))
+    target = reflected_target(batch)
+    if settings.reflected_loss == "room":
+        per_row = ((out[:, REFLECTED] - target) ** 2).mean(dim=(1, 2, 3, 4)) \
+            / (target ** 2).mean(dim=(1, 2, 3, 4)).clamp_min(1e-12)
+    else:
+        per_row = (w * (out[:, REFLECTED] - target) ** 2).mean(dim=(1, 2, 3, 4))
     reflected_loss = (room * per_row).sum() / room.sum().clamp_min(1e-6) * (room.mean() > 0)
     valid_loss = F.binary_cross_entropy_with_logits(out[:, VALIDITY], batch.valid)
     return direct_loss + settings.reflected_weight * reflected_loss, valid_loss, out
@@ -347,6 +356,7 @@ def main(argv=None) -> int:
     parser.add_argument("--solver-weight", type=float, default=TrainSettings.solver_weight)
     parser.add_argument("--no-mitsuba", action="store_true",
                         help="reflected light against the solver's probes in every room, never Mitsuba's")
+    parser.add_argument("--reflected-loss", choices=("local", "room"), default=TrainSettings.reflected_loss)
     parser.add_argument("--init", type=Path, help="start from this checkpoint's weights (a fine-tune)")
     parser.add_argument("--threads", type=int, default=TrainSettings.threads)
     parser.add_argument("--direct-input", choices=("encoded", "traced"), default="encoded")
@@ -370,7 +380,7 @@ def main(argv=None) -> int:
     settings = TrainSettings(epochs=args.epochs, batch=args.batch, learning_rate=args.lr,
                              weight_decay=args.weight_decay, steps=args.steps, threads=args.threads,
                              reflected_weight=args.reflected_weight, solver_weight=args.solver_weight,
-                             mitsuba=not args.no_mitsuba, direct_input=args.direct_input)
+                             mitsuba=not args.no_mitsuba, reflected_loss=args.reflected_loss, direct_input=args.direct_input)
     train(model, train_set, val_set, settings, run=args.out)
     return 0
 
