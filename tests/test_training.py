@@ -118,6 +118,9 @@ def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
     solver_only = TrainSettings(reflected_weight=1.0, solver_weight=1.0, mitsuba=False)
     assert float(loss_terms(Constant(1.0), batch, solver_only)[0]) == pytest.approx(0.0, abs=1e-9)
     assert float(loss_terms(Constant(2.0), batch, solver_only)[0]) == pytest.approx(0.5)
+    # the room-relative loss: each room's squared error over its reflected light's energy
+    relative = TrainSettings(reflected_weight=1.0, solver_weight=1.0, mitsuba=False, reflected_loss="room")
+    assert float(loss_terms(Constant(3.0), batch, relative)[0]) == pytest.approx(4.0)   # (3 - 1)^2 / 1^2
 
 
 def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():

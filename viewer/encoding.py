@@ -338,14 +338,15 @@ class Bounce:
     voxels' irradiance is kept while the direct light stays equal. A call where more than half the
     patches change gathers everything again, which also drops the round-off the sums carried."""
 
-    def __init__(self, voxels: VoxelGrid, lo: np.ndarray, hi: np.ndarray, m: int):
+    def __init__(self, voxels: VoxelGrid, lo: np.ndarray, hi: np.ndarray, m: int, patch: int = BOUNCE_PATCH,
+                 lattice: int = BOUNCE_LATTICE):
         lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         self.position, self.normal, self.area = voxels.position, voxels.normal, voxels.area
         self.m, spacing = m, (hi - lo) / m
         front = voxels.position + 0.5 * voxels.voxel_size * voxels.normal
         self._front = _splat(front, lo, spacing, m)
         facing = facings(voxels.normal)
-        block = np.floor((voxels.position - lo) / (spacing * BOUNCE_PATCH)).astype(np.int64)
+        block = np.floor((voxels.position - lo) / (spacing * patch)).astype(np.int64)
         _, patch = np.unique(np.column_stack([block, facing]), axis=0, return_inverse=True)
         self._patch = patch.ravel()
         self._count = int(self._patch.max()) + 1 if len(self._patch) else 0
@@ -353,7 +354,7 @@ class Bounce:
         normal = self._mean(voxels.normal)
         self._patch_normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
         self._patch_position = self._mean(voxels.position)
-        coarse = max(m // BOUNCE_LATTICE, 2)
+        coarse = max(m // lattice, 2)
         self._points = ProbeGrid.positions_for(lo, hi, coarse).reshape(-1, 3)
         rows = np.arange(m ** 3)
         corners = _splat(ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3), lo, (hi - lo) / coarse, coarse)
@@ -373,6 +374,16 @@ class Bounce:
         """(patches, 3) the voxels' (K, 3) `values` averaged over each patch by area."""
         return np.stack([np.bincount(self._patch, self.area * values[:, k], minlength=self._count)
                          for k in range(3)], 1) / self._patch_area[:, None]
+
+    def gathered(self, radiance: np.ndarray) -> np.ndarray:
+        """(P, 9, 3) the light of the voxels leaving with `radiance` (K, 3), gathered at the probes as `sh`
+        gathers the bounce (patches as points, no shadows): what this gather makes of any surface light
+        (`viewer.training.bounce_floor` gives it the solver's)."""
+        if self._count == 0:
+            return np.zeros((self.m ** 3, sh.SH_COUNT, 3))
+        lights = (self._patch_position, self._patch_normal, self._patch_area, self._mean(radiance))
+        coarse = emitter_sh(lights, self._points)
+        return (self._spread @ coarse.reshape(len(self._points), -1)).reshape(-1, sh.SH_COUNT, 3)
 
     def sh(self, albedo: np.ndarray, direct: np.ndarray, channels: np.ndarray | None = None) -> np.ndarray:
         """(P, 9, 3) `bounce_sh` for the voxels' `albedo` (K, 3) under `direct` (P, 9, 3). Only the colour

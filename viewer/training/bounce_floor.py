@@ -1,0 +1,96 @@
+"""How far the encoding's bounce gather can carry the reflected light, whatever light the surfaces have.
+
+    python -m viewer.training.bounce_floor --data data/gi-v2 --rooms 20 [--out docs/data/bounce_floor.json]
+
+For validation rooms of a dataset, the reflected light at the probes (the solver's, the network's
+target) against three gathers of surface light the way `encoding.Bounce` gathers the one-bounce input
+(patches as points, no shadows): the input itself (its direct light from the encoding's shadowed SH),
+the same gather of the solver's exact direct irradiance of every voxel (one bounce), and of the
+solver's converged light of every voxel (every bounce). Each is scaled by its best gain for the room
+(the network learns a gain for free) and scored on the probes outside solids, relative RMSE per room.
+If even the converged surface light gathered this way is far off, the error is in the gather (the
+surfaces' transport to the probes), not in the surfaces' light: what the network cannot learn from
+a lattice of densities. `--full` gathers 1-cell patches on the probes' own lattice.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from viewer import encoding
+from viewer.gi import GISettings, PhysicalGI
+from viewer.voxels import voxelize
+
+GATHERS = ("bounce input", "exact one bounce", "converged surface light")
+
+
+def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, voxels: int, full: bool) -> dict:
+    """Best-gain relative RMSE of each gather in GATHERS against `target` (3, 9, M, M, M) radiance."""
+    scene = example.scene
+    grid = voxelize(scene, voxels)
+    enc = encoding.encode(grid, scene.sun, example.lo, example.hi, probes, encoding.occluders(scene, grid))
+    solver = PhysicalGI(GISettings(voxels=voxels, probes=probes))
+    solver.update(scene)
+    if solver.geometry.voxels.count != grid.count:
+        raise RuntimeError(f"{example.path}: the solver's voxels are not the encoding's")
+    size = dict(patch=1, lattice=1) if full else {}
+    bounce = encoding.Bounce(grid, example.lo, example.hi, probes, **size)
+
+    def lattice(sh):  # (P, 9, 3) -> (3, 9, M, M, M)
+        return sh.reshape(probes, probes, probes, 9, 3).transpose(4, 3, 0, 1, 2)
+
+    scale = enc.scale[:, None, None, None, None]
+    if full:   # the input's own gather again, on the finer patches: from the encoding's direct light
+        direct_sh = (enc.inputs[:, encoding.DIRECT] * scale).transpose(2, 3, 4, 1, 0).reshape(-1, 9, 3)
+        bounce_input = lattice(bounce.sh(grid.albedo, direct_sh))
+    else:
+        bounce_input = enc.inputs[:, encoding.BOUNCE].astype(np.float64) * scale
+    estimates = (bounce_input, lattice(bounce.gathered(grid.albedo * solver.lighting.direct / np.pi)),
+                 lattice(bounce.gathered(solver.lighting.reflected.astype(np.float64))))
+    out = {}
+    for name, estimate in zip(GATHERS, estimates):
+        e, t = estimate[..., valid], target[..., valid]
+        gain = float((e * t).sum() / max(float((e * e).sum()), 1e-30))
+        out[name] = float(np.sqrt(((gain * e - t) ** 2).sum() / max(float((t ** 2).sum()), 1e-30)))
+    return out
+
+
+def main(argv=None) -> int:
+    from viewer.training.dataset import load_example, room_refs
+    from viewer.training.samples import ENCODING_VOXELS, load_split
+
+    parser = argparse.ArgumentParser(prog="python -m viewer.training.bounce_floor", description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
+    parser.add_argument("--rooms", type=int, default=20)
+    parser.add_argument("--probes", type=int, default=24)
+    parser.add_argument("--full", action="store_true", help="1-cell patches on the probes' own lattice")
+    parser.add_argument("--out", type=Path, help="JSON file for the per-room errors")
+    args = parser.parse_args(argv)
+    split = load_split(args.data, "val", args.probes)
+    refs = room_refs(args.data, "val")
+    rows = []
+    for i in range(min(args.rooms, len(split))):
+        example = load_example(refs[i])
+        target = split.targets[i].astype(np.float64)[:, 9:18] * split.scale[i][:, None, None, None, None]
+        errors = room_errors(example, target, np.asarray(split.valid[i], bool), args.probes, ENCODING_VOXELS,
+                             args.full)
+        rows.append({"room": split.names[i], **errors})
+        print(f"{split.names[i]}  " + "  ".join(f"{k} {100 * v:.1f}%" for k, v in errors.items()), file=sys.stderr)
+    medians = {k: float(np.median([r[k] for r in rows])) for k in GATHERS}
+    print("| gather of the surface light (best gain a room) | median rel. RMSE | worst |\n|---|---|---|")
+    for k in GATHERS:
+        print(f"| {k} | {100 * medians[k]:.1f}% | {100 * max(r[k] for r in rows):.1f}% |")
+    if args.out:
+        args.out.write_text(json.dumps({"command": " ".join(["python -m viewer.training.bounce_floor",
+                                                             *(sys.argv[1:] if argv is None else argv)]),
+                                        "rooms": rows, "median": medians}, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
