@@ -1,6 +1,7 @@
 """How far the encoding's bounce gather can carry the reflected light, whatever light the surfaces have.
 
-    python -m viewer.training.bounce_floor --data data/gi-v2 --rooms 20 [--out docs/data/bounce_floor.json]
+    python -m viewer.training.bounce_floor --data data/gi-v2 --rooms 20 [--model models/probenet.onnx]
+                                           [--full] [--out docs/data/bounce_floor.json]
 
 For validation rooms of a dataset, the reflected light at the probes (the solver's, the network's
 target) against three gathers of surface light the way `encoding.Bounce` gathers the one-bounce input
@@ -10,7 +11,8 @@ solver's converged light of every voxel (every bounce). Each is scaled by its be
 (the network learns a gain for free) and scored on the probes outside solids, relative RMSE per room.
 If even the converged surface light gathered this way is far off, the error is in the gather (the
 surfaces' transport to the probes), not in the surfaces' light: what the network cannot learn from
-a lattice of densities. `--full` gathers 1-cell patches on the probes' own lattice.
+a lattice of densities. `--full` gathers 1-cell patches on the probes' own lattice; `--model` adds the
+network's own reflected light (as it answers, no gain) beside.
 """
 
 from __future__ import annotations
@@ -27,10 +29,13 @@ from viewer.gi import GISettings, PhysicalGI
 from viewer.voxels import voxelize
 
 GATHERS = ("bounce input", "exact one bounce", "converged surface light")
+NETWORK = "network (as it is)"
 
 
-def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, voxels: int, full: bool) -> dict:
-    """Best-gain relative RMSE of each gather in GATHERS against `target` (3, 9, M, M, M) radiance."""
+def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, voxels: int, full: bool,
+                field=None) -> dict:
+    """Best-gain relative RMSE of each gather in GATHERS against `target` (3, 9, M, M, M) radiance, and
+    the network's (`field`, a viewer.neural.NeuralField) as it answers, without a gain."""
     scene = example.scene
     grid = voxelize(scene, voxels)
     enc = encoding.encode(grid, scene.sun, example.lo, example.hi, probes, encoding.occluders(scene, grid))
@@ -53,10 +58,14 @@ def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, vox
     estimates = (bounce_input, lattice(bounce.gathered(grid.albedo * solver.lighting.direct / np.pi)),
                  lattice(bounce.gathered(solver.lighting.reflected.astype(np.float64))))
     out = {}
+    t = target[..., valid]
     for name, estimate in zip(GATHERS, estimates):
-        e, t = estimate[..., valid], target[..., valid]
+        e = estimate[..., valid]
         gain = float((e * t).sum() / max(float((e * e).sum()), 1e-30))
         out[name] = float(np.sqrt(((gain * e - t) ** 2).sum() / max(float((t ** 2).sum()), 1e-30)))
+    if field is not None:
+        reflected = field._run(enc.inputs.astype(np.float32))[:, 9:18] * scale
+        out[NETWORK] = float(np.sqrt(((reflected[..., valid] - t) ** 2).sum() / max(float((t ** 2).sum()), 1e-30)))
     return out
 
 
@@ -69,8 +78,14 @@ def main(argv=None) -> int:
     parser.add_argument("--rooms", type=int, default=20)
     parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--full", action="store_true", help="1-cell patches on the probes' own lattice")
+    parser.add_argument("--model", type=Path, help="also the network's reflected light (an .onnx with its card)")
     parser.add_argument("--out", type=Path, help="JSON file for the per-room errors")
     args = parser.parse_args(argv)
+    field = None
+    if args.model:
+        from viewer.neural import NeuralField
+
+        field = NeuralField(args.model)
     split = load_split(args.data, "val", args.probes)
     refs = room_refs(args.data, "val")
     rows = []
@@ -78,12 +93,13 @@ def main(argv=None) -> int:
         example = load_example(refs[i])
         target = split.targets[i].astype(np.float64)[:, 9:18] * split.scale[i][:, None, None, None, None]
         errors = room_errors(example, target, np.asarray(split.valid[i], bool), args.probes, ENCODING_VOXELS,
-                             args.full)
+                             args.full, field)
         rows.append({"room": split.names[i], **errors})
         print(f"{split.names[i]}  " + "  ".join(f"{k} {100 * v:.1f}%" for k, v in errors.items()), file=sys.stderr)
-    medians = {k: float(np.median([r[k] for r in rows])) for k in GATHERS}
+    names = GATHERS + ((NETWORK,) if field is not None else ())
+    medians = {k: float(np.median([r[k] for r in rows])) for k in names}
     print("| gather of the surface light (best gain a room) | median rel. RMSE | worst |\n|---|---|---|")
-    for k in GATHERS:
+    for k in names:
         print(f"| {k} | {100 * medians[k]:.1f}% | {100 * max(r[k] for r in rows):.1f}% |")
     if args.out:
         args.out.write_text(json.dumps({"command": " ".join(["python -m viewer.training.bounce_floor",
