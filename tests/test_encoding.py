@@ -193,3 +193,25 @@ def test_the_bounce_gather_of_any_surface_light():
     fine = encoding.Bounce(voxels, lo, hi, 12, patch=1, lattice=1).gathered(leaving)
     # the same light in all: the DC summed over the probes agrees to a few percent
     assert abs(fine[:, 0].sum() / expected[:, 0].sum() - 1.0) < 0.1
+
+
+def test_the_bounce_floor_scores_each_gather_by_its_best_gain():
+    """viewer.training.bounce_floor: a target that is the gather of the solver's converged surface light
+    scores 0 for that gather, any gain of it too, and no gather scores above 100% (a gain of 0 does)."""
+    from types import SimpleNamespace
+
+    from viewer.gi import GISettings, PhysicalGI
+    from viewer.training import bounce_floor
+
+    scene = load("cornell")
+    lo, hi = scene.bounds
+    solver = PhysicalGI(GISettings(voxels=16, probes=8))
+    solver.update(scene)
+    grid = voxelize(scene, 16)
+    gathered = encoding.Bounce(grid, lo, hi, 8).gathered(solver.lighting.reflected.astype(np.float64))
+    target = 2.5 * gathered.reshape(8, 8, 8, 9, 3).transpose(4, 3, 0, 1, 2)
+    example = SimpleNamespace(scene=scene, lo=np.asarray(lo), hi=np.asarray(hi), path="cornell")
+    errors = bounce_floor.room_errors(example, target, np.ones((8, 8, 8), bool), 8, 16, full=False)
+    assert errors["converged surface light"] < 1e-6
+    assert all(0.0 <= e <= 1.0 + 1e-9 for e in errors.values())
+    assert errors["bounce input"] > 0.01
