@@ -176,9 +176,9 @@ def _keep(origins, directions, hits, backface, positions, new_index, slack, boxe
             near = False
             for s in range(boxes.shape[0]):
                 t0, t1 = 0.0, end
-                t0, t1 = _slab(ox, dx, boxes[s, 0], boxes[s, 3], t0, t1)
-                t0, t1 = _slab(oy, dy, boxes[s, 1], boxes[s, 4], t0, t1)
-                t0, t1 = _slab(oz, dz, boxes[s, 2], boxes[s, 5], t0, t1)
+                t0, t1 = dda._slab(ox, dx, boxes[s, 0], boxes[s, 3], t0, t1)
+                t0, t1 = dda._slab(oy, dy, boxes[s, 1], boxes[s, 4], t0, t1)
+                t0, t1 = dda._slab(oz, dz, boxes[s, 2], boxes[s, 5], t0, t1)
                 if t0 <= t1:
                     near = True
                     break
@@ -189,16 +189,3 @@ def _keep(origins, directions, hits, backface, positions, new_index, slack, boxe
             else:
                 out[a, r] = moved_to
     return out, redo
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _slab(o, d, lo, hi, t0, t1):
-    """[t0, t1] clipped to where o + t d lies in [lo, hi] (empty: t0 > t1)."""
-    if d == 0.0:
-        if o < lo or o > hi:
-            return 1.0, 0.0
-        return t0, t1
-    a, b = (lo - o) / d, (hi - o) / d
-    if a > b:
-        a, b = b, a
-    return max(t0, a), min(t1, b)
