@@ -299,3 +299,47 @@ def test_a_new_scenes_rays_are_traced_before_its_first_probes(gl_context, cornel
         assert traced == [1]
     finally:
         offscreen.release()
+
+
+def test_a_new_scenes_rays_wait_for_the_probes_of_a_source_that_traces_on_every_core(gl_context, cornell,
+                                                                                      cornell_probes, monkeypatch):
+    """Beside a physical solver (its trace keeps every core busy) the renderer starts a new scene's rays when
+    the first probes arrive instead of at once (`Renderer.prefetch_new_scene`): they would halve the
+    solver's pace. They are still traced once, and the image is the same."""
+    import time
+
+    from viewer.final_gather import GatherRays
+
+    traced = []
+    original = GatherRays.of
+    monkeypatch.setattr(GatherRays, "of", staticmethod(lambda *a, **k: traced.append(1) or original(*a, **k)))
+    offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
+    try:
+        renderer = offscreen.renderer
+        renderer.background_bake = True
+        renderer.prefetch_new_scene = False
+        renderer.set_scene(cornell)
+        offscreen.render_hdr(view="final")          # no probes yet: direct light only
+        time.sleep(0.5)
+        offscreen.render_hdr(view="final")
+        assert traced == [] and not renderer._indirect.pending
+        renderer.set_probes(cornell_probes)
+        offscreen.render_hdr(view="indirect")
+        wait_for_weights(renderer)
+        assert traced == [1]
+        expected = render(gl_context, cornell, cornell_probes, (64, 64), ("indirect",))["indirect"]
+        np.testing.assert_allclose(offscreen.render_hdr(view="indirect"), expected, rtol=1e-3, atol=1e-5)
+    finally:
+        offscreen.release()
+
+
+def test_only_the_physical_sources_hold_the_renderers_rays_back():
+    """The session tells the renderer whether to trace a new scene's rays beside the GI source: not beside
+    the physical solvers (compute, solver), which trace on every core; beside the network and the rest."""
+    from types import SimpleNamespace
+
+    from viewer.ui.gi_sources import GIController
+
+    for source, every_core in (("compute", True), ("solver", True), ("neural", False), ("baked", False),
+                               ("off", False)):
+        assert GIController.traces_on_every_core.fget(SimpleNamespace(source=source)) == every_core

@@ -84,6 +84,11 @@ class Renderer:
         self.background_bake = False
         """New texel weights on a worker, the probes read per fragment meanwhile (the viewer), instead of in
         the frame that needs them (captures and tests: the same image every time)."""
+        self.prefetch_new_scene = True
+        """With `background_bake`, a new scene's lightmap rays start on the worker at once, beside the GI
+        source's work (the network leaves a core free), instead of when its first probes arrive (the
+        physical solvers trace on every core: the rays beside them halve their pace, and the first frame
+        with GI comes a second later for a settled frame no sooner)."""
         self._baked: BakedDirectLight | None = None
         self._geometry = 0
         """Counts the scenes whose triangles differ from the one before (a colour edit keeps them)."""
@@ -333,7 +338,8 @@ class Renderer:
             s = self.settings
             if self._indirect is None and self.background_bake and s.indirect and s.final_gather:
                 self._indirect = self._new_indirect()   # its rays traced while the GI source makes the probes
-                self._indirect.prefetch()
+                if self.prefetch_new_scene:
+                    self._indirect.prefetch()
         lit = (self._shadow_key, self._lights, self.settings.shadow_bias)
         if lit != self._lit_key:
             program = self.programs.get("direct_bake")

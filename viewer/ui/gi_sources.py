@@ -248,6 +248,12 @@ class GIController:
         self._outgoing: list[ProbeGrid | None] = []   # grids for the render loop to show, oldest first
         self.ready_seconds: float | None = None        # how long the last finished solve took
 
+    @property
+    def traces_on_every_core(self) -> bool:
+        """Whether the source's work on a new scene keeps every core busy (the physical solvers' traces),
+        so that the renderer's own work beside it would delay its first probes."""
+        return self.source in ("compute", "solver")
+
     # ---- inputs -----------------------------------------------------------------------------------------
     def set_scene(self, scene: Scene, version: int, new_scene: bool = False) -> None:
         """The scene changed (an edit, or a new file: then the old probes no longer fit and go at once)."""

@@ -97,6 +97,7 @@ class Session:
     def update(self, view: str) -> None:
         self._finish_loading()
         self._apply_edits()
+        self.renderer.prefetch_new_scene = not self.gi.traces_on_every_core
         changed, grid = self.gi.update()
         if changed:
             self.renderer.set_probes(grid)
