@@ -272,17 +272,23 @@ def test_a_moved_lamp_retraces_only_what_changed_and_shows_the_probes_meanwhile(
         offscreen.release()
 
 
+def count_full_traces(monkeypatch) -> list:
+    """A list that gets an entry each time a geometry's final-gather rays are all traced (GatherRays.of)."""
+    from viewer.final_gather import GatherRays
+
+    traced = []
+    original = GatherRays.of
+    monkeypatch.setattr(GatherRays, "of", staticmethod(lambda *a, **k: traced.append(1) or original(*a, **k)))
+    return traced
+
+
 def test_a_new_scenes_rays_are_traced_before_its_first_probes(gl_context, cornell, cornell_probes, monkeypatch):
     """In the viewer the final gather's rays of a new scene are traced on the worker from its first frame,
     while the GI source computes the probes (they need none), and once: the weights that follow the
     probes reuse them."""
     import time
 
-    from viewer.final_gather import GatherRays
-
-    traced = []
-    original = GatherRays.of
-    monkeypatch.setattr(GatherRays, "of", staticmethod(lambda *a, **k: traced.append(1) or original(*a, **k)))
+    traced = count_full_traces(monkeypatch)
     offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
     try:
         renderer = offscreen.renderer
@@ -308,11 +314,7 @@ def test_a_new_scenes_rays_wait_for_the_probes_of_a_source_that_traces_on_every_
     solver's pace. They are still traced once, and the image is the same."""
     import time
 
-    from viewer.final_gather import GatherRays
-
-    traced = []
-    original = GatherRays.of
-    monkeypatch.setattr(GatherRays, "of", staticmethod(lambda *a, **k: traced.append(1) or original(*a, **k)))
+    traced = count_full_traces(monkeypatch)
     offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
     try:
         renderer = offscreen.renderer
