@@ -3,7 +3,7 @@
     python assets/make_scenes.py
 
 Every number of every scene is in this file; the generated files are never edited by hand. The mesh
-primitives and transforms come from `viewer/meshes.py` (shared with the procedural training scenes).
+primitives and transforms come from `viewer/scene/meshes.py` (shared with the procedural training scenes).
 
 Conventions (shared/DESIGN.md): y up, Lambertian, MTL `Kd` = albedo, `Ke` = emitted radiance, emitters
 one-sided from the counter-clockwise front face. Every object is its own `usemtl` group with its own
@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run as a script from anywhere
-from viewer.meshes import (X_AXIS, Y_AXIS, Mesh, cube, cylinder, overlap, rectangle,  # noqa: E402
+from viewer.scene.meshes import (X_AXIS, Y_AXIS, Mesh, cube, cylinder, overlap, rectangle,  # noqa: E402
                            rotate, scale, transformed, translate, uv_sphere)
 
 OUT = Path(__file__).resolve().parent / "scenes"

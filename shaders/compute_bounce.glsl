@@ -1,5 +1,5 @@
 // One bounce of the compute solver (eq. 23-30): B_k+1 = albedo / pi * s_i * sum_j G_ij B_k,j, with
-// the kernel G of viewer/transport.py and the row clamp s_i = min(1, pi / sum_j G_ij) (a receiver
+// the kernel G of viewer/physical/transport.py and the row clamp s_i = min(1, pi / sum_j G_ij) (a receiver
 // gathers at most its hemisphere), the row sum taken in the same loop. Receivers first_item..end_item-1,
 // senders first_sender..end_sender-1: llvmpipe gives all loops of an invocation one budget of 65535
 // iterations (LP_MAX_TGSI_LOOP_ITERATIONS) and silently drops the rest, so the senders come in chunks

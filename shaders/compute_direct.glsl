@@ -1,5 +1,5 @@
 // First bounce of the compute solver: irradiance straight from the emitters and the sun, per voxel
-// (viewer/transport.py direct_irradiance and sun_irradiance), and the light it reflects, over the fine
+// (viewer/physical/transport.py direct_irradiance and sun_irradiance), and the light it reflects, over the fine
 // light samples with the bounces' kernel:
 //   physical (KERNEL_PAPER 0): E_i = sum_s Le_s cos_i cos_s A_s / (r^2 + A_s / pi) V(i, voxel of s),
 //       visibility traced once per (receiver, emitting voxel) and shared by that voxel's samples;

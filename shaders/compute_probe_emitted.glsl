@@ -1,4 +1,4 @@
-// Light arriving at each probe straight from the emitters and the sun (viewer/probes.py _emitter_sh and
+// Light arriving at each probe straight from the emitters and the sun (viewer/probes/grid.py _emitter_sh and
 // _sun_sh): every fine light sample is a patch of solid angle omega_s = cos_s A_s / (r^2 + A_s / pi)
 // in direction w_s, seen unless its emitting voxel is occluded (traced once per probe and voxel);
 // the sun is a delta, c_lm = E_sun Y_lm(l), where it is not shadowed. One invocation per probe;

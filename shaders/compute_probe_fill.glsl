@@ -1,4 +1,4 @@
-// One wave of viewer/probes.py fill_invalid: every invalid probe first reached in iteration `wave`
+// One wave of viewer/probes/grid.py fill_invalid: every invalid probe first reached in iteration `wave`
 // takes the mean of its 6-neighbours known before it (wave number below this one; valid probes are 0).
 // Wave numbers come from the probes' validity (geometry only), so each wave is one dispatch that reads
 // earlier waves and writes only its own probes. Probe p = (x M + y) M + z, as ProbeGrid.positions.

@@ -1,6 +1,6 @@
 // Probe projection, light part: the SH of the reflected radiance each probe sees,
 //   c_lm = sum_k w_k Y_lm(d_k) B_reflected(first hit along d_k)
-// (viewer/probes.py project with the quadrature of viewer.sh.sphere_directions). The first hits come
+// (viewer/probes/grid.py project with the quadrature of viewer.sh.sphere_directions). The first hits come
 // from compute_probe_rays (STORED_HITS 1) or are marched again here (0, when storing them would take
 // too much memory). One invocation per probe; probes first_probe.. and directions
 // first_direction..end_direction-1 in this dispatch (marching, all directions do not fit llvmpipe's

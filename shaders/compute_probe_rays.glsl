@@ -1,5 +1,5 @@
 // Probe projection, geometry part: the voxel each probe sees first along each direction of the
-// Fibonacci set (viewer/probes.py project, Tracer.first_hits), and how many directions meet the back
+// Fibonacci set (viewer/probes/grid.py project, Tracer.first_hits), and how many directions meet the back
 // of a surface (a probe inside solid geometry). Depends on geometry only, so it runs once per scene.
 // One invocation per (direction, probe); probes first_probe.. in this dispatch.
 

@@ -1,6 +1,6 @@
 // The voxel grid on the GPU for the compute-shader solver, and the two questions it asks of it: is a
 // segment blocked (visibility), and which voxel does a ray hit first (probes). A line-by-line port of
-// viewer/raymarch.py's Tracer, so that the GPU and numpy solvers agree to float precision:
+// viewer/rays/raymarch.py's Tracer, so that the GPU and numpy solvers agree to float precision:
 // - a ray advances by the cell's distance-field step (at least half a voxel), at most 8 N steps;
 // - a segment is blocked where it crosses a voxel's surface: its plane, clipped to its cell and to a
 //   patch of squared radius `reach` around its centroid;

@@ -1,4 +1,4 @@
-// The relight's probe projection (viewer/relight.py probe_coefficients): each probe sums, over its
+// The relight's probe projection (viewer/physical/relight.py probe_coefficients): each probe sums, over its
 // directions, the SH basis x quadrature weight of the direction times the radiance of the voxel the
 // geometry stage found there (index K: nothing, a zero row). Two results: the reflected light (what the
 // renderer shades) and the emitted light (the gathered emitters, plus the lamps' and the sun's direct SH

@@ -1,4 +1,4 @@
-// One sweep of the relight (viewer/relight.py): R_out = R_0 + albedo * T R_in for every voxel, with T the
+// One sweep of the relight (viewer/physical/relight.py): R_out = R_0 + albedo * T R_in for every voxel, with T the
 // geometry stage's sparse transport matrix in CSR form (row = receiver: the share of its gather rays that
 // reach each voxel). One invocation per receiver; the sweep is the paper's bounce (eq. 30).
 

@@ -37,3 +37,26 @@ def gl_context():
         missing(str(exc))
     yield context
     context.release()
+
+
+# ---- an X server for the window tests (Xvfb), shared by tests/ui and tests/bench ----------------------
+
+@pytest.fixture(scope="module")
+def display():
+    from viewer.bench.x11 import start_xvfb, xvfb_available
+
+    if not xvfb_available():
+        missing("Xvfb is not installed (apt-get install xvfb): the window tests need an X server")
+    process, name = start_xvfb()
+    yield name
+    process.terminate()
+    process.wait(timeout=10)
+
+
+@pytest.fixture
+def x11(display):
+    from viewer.bench.x11 import X11
+
+    connection = X11(display)
+    yield connection
+    connection.close()

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from viewer.scene import SceneError, load
-from viewer.voxels import voxelize
+from viewer.rays.voxels import voxelize
 
 ROOT = Path(__file__).resolve().parents[1]
 HOSTILE = settings(max_examples=100, deadline=timedelta(seconds=5), derandomize=True, database=None,

@@ -24,7 +24,7 @@ from types import SimpleNamespace
 import moderngl_window as mglw
 
 from viewer.errors import exit_status
-from viewer.gi import GISettings
+from viewer.physical.gi import GISettings
 from viewer.ui.options import add_arguments, options_from, parse_size
 
 
@@ -39,7 +39,7 @@ def run(args) -> int:
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         log(f"no display found (DISPLAY and WAYLAND_DISPLAY are unset); rendering {options.scene} headless")
         return render_headless(options)
-    from viewer import baked as baked_files
+    from viewer.bake import grid as baked_files
     from viewer.scene import load
 
     baked = None   # a baked grid (`gi-viewer FILE.npz`): its scene, lit by its probes

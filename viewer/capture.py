@@ -27,7 +27,7 @@ def baked_probe_source(args):
     """For `capture FILE.npz` (and the headless `gi-viewer FILE.npz`): point args at the scene the grid was
     baked from, with its sun, and return a probe source that hands over the baked indirect light whatever
     `--gi` names (`--gi off` still shows direct light only). None when args.scene is not a baked file."""
-    from viewer import baked
+    from viewer.bake import grid as baked
 
     if not baked.is_baked_file(args.scene):
         return None

@@ -15,7 +15,7 @@ import numpy as np
 from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
 from viewer.capture import run_capture
 from viewer.errors import ArgumentParser, InputError, exit_status
-from viewer.gi import GISettings, Timings
+from viewer.physical.gi import GISettings, Timings
 from viewer.ui.options import add_arguments as view_arguments  # no GL or imgui import
 
 
@@ -133,8 +133,8 @@ def _load_scene(args):
 
 
 def run_sample(args) -> int:
-    from viewer import gi
-    from viewer.domain import print_warning
+    from viewer.physical import gi
+    from viewer.neural.domain import print_warning
 
     settings = gi_settings(args)
     points = load_points(args.points)
@@ -169,7 +169,7 @@ def run_sample(args) -> int:
 
 def neural_field(args):
     """The model of `--model` (or the shipped one); a missing or broken model is bad input (exit 2)."""
-    from viewer.neural import DEFAULT_MODEL, ModelError, NeuralField
+    from viewer.neural.field import DEFAULT_MODEL, ModelError, NeuralField
 
     try:
         return NeuralField(getattr(args, "model", None) or DEFAULT_MODEL)
@@ -191,7 +191,8 @@ def run_view(args) -> int:
 
 def run_bake(args) -> int:
     """`bake SCENE --out FILE.npz [--dds FILE.dds]`: the numpy solver's converged grid, for other tools."""
-    from viewer import baked, dds
+    from viewer.bake import grid as baked
+    from viewer.bake import dds
 
     settings = gi_settings(args)
     outputs = [(args.out, ".npz")] + ([(args.dds, ".dds")] if args.dds else [])

@@ -1,7 +1,7 @@
 """Bad input, and the exit status a command gives for it (../shared/DESIGN.md, "Command line").
 
-Each stage raises its own error for the bad input it finds (`viewer.scene_types.SceneError` for a scene
-file, `viewer.baked.BakedError` for a baked grid); `InputError` is for a bad command-line value. Every
+Each stage raises its own error for the bad input it finds (`viewer.scene.types.SceneError` for a scene
+file, `viewer.bake.grid.BakedError` for a baked grid); `InputError` is for a bad command-line value. Every
 command that runs on its own (`python -m viewer`, `python -m viewer.app`, `python -m viewer.bench.run`)
 reports them through `exit_status`: one line on stderr, no traceback, exit status 2.
 
@@ -16,8 +16,8 @@ import os
 import sys
 from typing import Callable
 
-from viewer.baked import BakedError
-from viewer.scene_types import SceneError
+from viewer.bake.grid import BakedError
+from viewer.scene.types import SceneError
 
 
 class InputError(Exception):

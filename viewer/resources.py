@@ -32,7 +32,7 @@ def data_folder(name: str) -> Path:
 SHADERS = data_folder("shaders")
 """One .glsl file per program, and the shared includes (viewer.gpu.programs)."""
 MODELS = data_folder("models")
-"""The shipped networks: NAME.onnx with its card NAME.json (viewer.neural)."""
+"""The shipped networks: NAME.onnx with its card NAME.json (viewer.neural.field)."""
 SCENES = data_folder("scenes")
 """The built-in scenes: NAME.obj with NAME.mtl and an optional sidecar NAME.json (viewer.scene)."""
 DEFAULT_MODEL = MODELS / "probenet.onnx"

@@ -7,13 +7,13 @@ free-space points, for both kernels and a few voxel and probe resolutions.
 from __future__ import annotations
 
 import argparse
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
 
-from viewer import gi, reference
+from viewer.physical import gi
+from viewer.reference import mitsuba as reference
 from viewer import scene as scenes
 from viewer.bench.points import free_space_points
 from viewer.bench.report import replace_block

@@ -5,8 +5,8 @@ on the boxes of the Cornell scenes, and steps along silhouettes.
                                     [--points 4000] [--gather-rays 72 ...] [--gather-only]
 
 For the default renderer (`gather`: the indirect light baked per lightmap texel by the final gather of
-viewer/final_gather.py, the probes lighting the second bounce on), the probes alone baked per texel with
-the weights of viewer/probe_weights.py (`baked`, RenderSettings.final_gather = 0) and the exact path
+viewer/gpu/final_gather.py, the probes lighting the second bounce on), the probes alone baked per texel with
+the weights of viewer/probes/weights.py (`baked`, RenderSettings.final_gather = 0) and the exact path
 (the probes interpolated per fragment, shaders/probe_grid.glsl), per scene:
 
 - **PSNR** of the final image (8-bit sRGB, no MSAA) against Mitsuba's, as the gallery measures it.
@@ -145,15 +145,16 @@ def relative_rms(ours: np.ndarray, truth: np.ndarray) -> float:
 
 def measure(ctx, name: str, size: int, spp: int, points: int, gather_rays=(72,),
             others: bool = True) -> list[dict]:
-    from viewer import dda, reference
+    from viewer.rays import dda
+    from viewer.reference import mitsuba as reference
     from viewer import scene as scenes
     from viewer.bench.gallery import psnr, to_srgb8
-    from viewer.geometry import voxelize_with_faces
-    from viewer.gi import GISettings
+    from viewer.physical.geometry import voxelize_with_faces
+    from viewer.physical.gi import GISettings
     from viewer.gpu.compute_relight import solve_probes
     from viewer.gpu.offscreen import OffscreenRenderer
     from viewer.gpu.renderer import RenderSettings
-    from viewer.probe_weights import SurfaceWeights
+    from viewer.probes.weights import SurfaceWeights
 
     scene = scenes.load(name)
     probes = solve_probes(ctx, scene, GISettings(), include_emitted=False)

@@ -20,11 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from viewer import scene as scenes
-from viewer.gi import GISettings
+from viewer.physical.gi import GISettings
 from viewer.gpu.compute_solver import ComputeSettings, ComputeSolver
 from viewer.gpu.context import create_context, describe
 from viewer.gpu.programs import ProgramLibrary
-from viewer.voxels import voxelize
+from viewer.rays.voxels import voxelize
 
 ROOT = Path(__file__).resolve().parents[2]
 COLUMNS = ("voxels", "kernel", "K", "bitset MiB", "first light ms", "visibility ms", "ms / bounce",

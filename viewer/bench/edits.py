@@ -81,7 +81,7 @@ def settle(viewer, start: float) -> tuple[float, float]:
 
 def time_edits(source: str, scene: str, other: str, repeats: int, edits=EDITS) -> dict[str, list[tuple]]:
     from viewer.bench.headless import HeadlessViewer
-    from viewer.gi import GISettings
+    from viewer.physical.gi import GISettings
     from viewer.scene import scene_file
 
     viewer = HeadlessViewer(source, GISettings(), scene)

@@ -30,7 +30,7 @@ import numpy as np
 
 from viewer import scene as scenes
 from viewer.bench.report import replace_block
-from viewer.gi import GISettings
+from viewer.physical.gi import GISettings
 from viewer.gpu.compute_relight import solve_probes
 from viewer.gpu.context import create_context, describe
 from viewer.gpu.offscreen import OffscreenRenderer, parse_size

@@ -57,10 +57,10 @@ def side_by_side(left: np.ndarray, right: np.ndarray, gap: int = 4) -> np.ndarra
 def solve(ctx, scene, source: str):
     """The indirect-light probes the viewer's GI source `source` (SOURCES) gives the scene."""
     if source == "neural":
-        from viewer.neural import NeuralField
+        from viewer.neural.field import NeuralField
 
         return NeuralField().solve(scene, include_emitted=False)
-    from viewer.gi import GISettings
+    from viewer.physical.gi import GISettings
     from viewer.gpu.compute_relight import solve_probes
 
     return solve_probes(ctx, scene, GISettings(), include_emitted=False)
@@ -93,7 +93,7 @@ def image_stem(name: str, source: str) -> str:
 def run_scene(ctx, name: str, size: int, spp: int, images: Path, sources=SOURCES) -> list[dict]:
     from PIL import Image
 
-    from viewer import reference
+    from viewer.reference import mitsuba as reference
     from viewer import scene as scenes
 
     scene = scenes.load(name)
@@ -120,7 +120,7 @@ def run_scene(ctx, name: str, size: int, spp: int, images: Path, sources=SOURCES
 
 
 def machine(ctx) -> str:
-    from viewer import reference
+    from viewer.reference import mitsuba as reference
     from viewer.gpu.context import describe
 
     return (f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPU cores, {describe(ctx)}; "

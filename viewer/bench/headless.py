@@ -8,7 +8,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from viewer.gi import GISettings
+from viewer.physical.gi import GISettings
 from viewer.gpu.context import create_context
 from viewer.gpu.gl_objects import watch
 from viewer.gpu.renderer import RenderSettings, Renderer

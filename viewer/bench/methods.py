@@ -26,10 +26,10 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from viewer import reference
+from viewer.reference import mitsuba as reference
 from viewer.bench.points import free_space_points
-from viewer.gi import GISettings, solve
-from viewer.probes import ProbeGrid
+from viewer.physical.gi import GISettings, solve
+from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -97,7 +97,7 @@ def solver_grid(defaults: GISettings = DEFAULT) -> list[GISettings]:
 def numpy_method(settings: GISettings) -> Method:
     family = "numpy" if settings.kernel == "physical" else f"numpy-{settings.kernel}"
     return Method(family, _grid_label(settings), lambda: lambda scene, points: solve(scene, settings),
-                  texture_bytes(settings.probes), about=f"numpy solver, {settings.kernel} kernel (viewer.gi.solve)")
+                  texture_bytes(settings.probes), about=f"numpy solver, {settings.kernel} kernel (viewer.physical.gi.solve)")
 
 
 _context = None
@@ -169,7 +169,7 @@ class _Edit:
         return scene.transformed_group(group, move)
 
     def before(self, scene: Scene) -> None:
-        from viewer.gi import PhysicalGI
+        from viewer.physical.gi import PhysicalGI
 
         if scene.name not in self.solvers:
             relighter = self.relighter_factory() if self.relighter_factory else None
@@ -272,7 +272,7 @@ def model_files(root: Path = ROOT) -> list[Path]:
 
 
 def neural_method(path: Path, root: Path = ROOT) -> Method:
-    from viewer.neural import ModelCard, ModelError, NeuralField
+    from viewer.neural.field import ModelCard, ModelError, NeuralField
 
     card = ModelCard.read(path)  # ModelError for a model without a readable card: the caller skips it
 
@@ -292,7 +292,7 @@ def neural_method(path: Path, root: Path = ROOT) -> Method:
 
 
 def neural_methods(quick: bool = False) -> Iterable[Method]:
-    from viewer.neural import ModelError
+    from viewer.neural.field import ModelError
 
     for path in model_files()[:1] if quick else model_files():
         try:
@@ -352,7 +352,7 @@ class _ScreenEdit:
         if self.viewer.session.edits.light.group is None and self.kind == "lamp":
             raise MethodUnavailable("the scene has no lamp to move")
         if self.source == "neural":
-            from viewer.neural import NeuralField
+            from viewer.neural.field import NeuralField
 
             self.field = NeuralField().solve(scene, include_emitted=True)
         else:
@@ -385,7 +385,7 @@ class _ScreenEdit:
 def screen_edit_method(source: str, kind: str) -> Method:
     def prepare() -> Produce:
         if source == "neural":
-            from viewer.neural import DEFAULT_MODEL
+            from viewer.neural.field import DEFAULT_MODEL
 
             if not DEFAULT_MODEL.exists():
                 raise MethodUnavailable(f"no model at {DEFAULT_MODEL}")

@@ -4,7 +4,7 @@
                                   [--configs | --configs-only] [--write]
 
 For each scene and probe lattice, with models/probenet.onnx (a convolutional network: it runs on any
-lattice divisible by 2^levels) and the viewer's path (`viewer.neural.NeuralGI`): a lamp's colour and
+lattice divisible by 2^levels) and the viewer's path (`viewer.neural.field.NeuralGI`): a lamp's colour and
 intensity edit, an albedo edit (the largest group's, as viewer.bench.methods), the lamp moved by a
 tenth of the scene, and a new scene; and `before`, what any edit cost before the incremental encoder
 (voxelize, `encoding.encode`, the network on all three colour passes, a multiply and a transpose).
@@ -26,10 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer import encoding, neural
+from viewer.neural import encoding
+from viewer.neural import field as neural
 from viewer import scene as scenes
 from viewer.bench.report import replace_block
-from viewer.neural import DEFAULT_MODEL, NeuralField, NeuralGI, open_session
+from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI, open_session
 from viewer.scene import Scene
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -111,8 +112,8 @@ def measure(scene: Scene, field: NeuralField, probes: int, voxels: int, repeats:
 
 def _before(scene: Scene, field: NeuralField, probes: int, voxels: int) -> dict[str, float]:
     """One update as the neural source ran before the incremental encoder: everything from scratch."""
-    from viewer.neural import _one_blas_thread, clock_now
-    from viewer.voxels import voxelize
+    from viewer.neural.field import _one_blas_thread, clock_now
+    from viewer.rays.voxels import voxelize
 
     wall = time.perf_counter()
     clock = clock_now()

@@ -15,7 +15,7 @@ from typing import Iterable
 import numpy as np
 
 from viewer.bench.methods import ROOT, Method, MethodUnavailable, texture_bytes
-from viewer.probes import ProbeGrid
+from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 from viewer.training.paper_inputs import PAPER_PROBES, PAPER_VOXELS, adaptive_pool, voxel_list
 
@@ -27,7 +27,7 @@ class PaperFamily:
     """One exported family: `solve(scene)` -> the 8^3 probe grid of all the light (emitted included)."""
 
     def __init__(self, path: Path):
-        from viewer.neural import ModelError, open_session
+        from viewer.neural.field import ModelError, open_session
 
         stats = path.with_suffix(".npz")
         if not stats.is_file():
@@ -41,7 +41,7 @@ class PaperFamily:
             raise MethodUnavailable(str(exc)) from None
 
     def inputs(self, scene: Scene) -> np.ndarray:
-        from viewer.voxels import voxelize
+        from viewer.rays.voxels import voxelize
 
         pooled = adaptive_pool(voxel_list(voxelize(scene, PAPER_VOXELS)), self.pooled)
         span = np.where(self.hi > self.lo, self.hi - self.lo, 1.0)

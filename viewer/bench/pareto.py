@@ -40,7 +40,7 @@ the settled frame in the viewer, the renderer's lightmap included): drawn on the
 fronts (they are not a way to light a scene from nothing), and set against the Mitsuba bake of the same
 error in their own table."""
 DEFAULTS = {"compute": "N32 M24 conv", "numpy": "N32 M24 conv", "neural": "models/probenet.onnx"}
-"""The product's GI sources at their shipped defaults (viewer.gi.GISettings, the shipped model)."""
+"""The product's GI sources at their shipped defaults (viewer.physical.gi.GISettings, the shipped model)."""
 
 
 @dataclass(frozen=True)
@@ -309,7 +309,7 @@ def machine(rows: list[dict]) -> str:
     except OSError:
         pass
     try:
-        from viewer import reference
+        from viewer.reference import mitsuba as reference
 
         variant = f"Mitsuba 3 `{reference.variant()}`"
     except Exception as exc:  # noqa: BLE001 - the report says what is missing instead of failing

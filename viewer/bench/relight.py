@@ -21,10 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer import dda, gi, sh
+from viewer.rays import dda
+from viewer.physical import gi
+from viewer.probes import sh
 from viewer import scene as scenes
 from viewer.bench.report import replace_block
-from viewer.probes import ProbeGrid
+from viewer.probes.grid import ProbeGrid
 
 ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- bench-relight -->"
@@ -84,11 +86,11 @@ def measure_scene(scene, relighter_factory, repeats: int) -> dict[str, tuple[flo
 
 def tracer_speed(scene, repeats: int) -> dict[str, float]:
     """Million rays per second, the probe rays of the defaults: the numba DDA (all cores, and one) and
-    the numpy ray march it replaced (viewer.raymarch.Tracer, on a tenth of the rays)."""
+    the numpy ray march it replaced (viewer.rays.raymarch.Tracer, on a tenth of the rays)."""
     import numba
 
-    from viewer.raymarch import Tracer
-    from viewer.voxels import voxelize_with_faces
+    from viewer.rays.raymarch import Tracer
+    from viewer.rays.voxels import voxelize_with_faces
 
     voxelization = voxelize_with_faces(scene, 32)
     cells = dda.Cells.of(voxelization, scene)
@@ -116,7 +118,7 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--write", action="store_true", help="write the tables into docs/PERFORMANCE.md")
     args = parser.parse_args(argv)
-    from viewer import relight
+    from viewer.physical import relight
     from viewer.gpu.compute_relight import ComputeRelight
     from viewer.gpu.context import create_context
 

@@ -160,7 +160,7 @@ def measure(produce, scene, points, truth) -> tuple[float, float, int, float]:
     """Median wall and CPU milliseconds, repeats, and mean relative RMSE (Mitsuba's estimates differ from
     run to run)."""
     from viewer.bench.accuracy import relative_rmse
-    from viewer.probes import ProbeGrid
+    from viewer.probes.grid import ProbeGrid
 
     seconds, cpu, errors = [], [], []
     before = getattr(produce, "before", None)   # untimed set-up before each run (an edit's other side)
@@ -193,7 +193,7 @@ class Progress:
 
 def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
     """Measure every (scene, method) not yet in the CSV; returns notes (skipped methods)."""
-    from viewer import reference
+    from viewer.reference import mitsuba as reference
     from viewer import scene as scenes
     from viewer.bench.methods import MethodUnavailable
     from viewer.bench.points import free_space_points

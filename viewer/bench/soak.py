@@ -16,7 +16,7 @@ CornellBox-Original. A part's growth is its last step against its step `--warmup
 caches fill during the first steps). Memory is read after glibc has handed its free heap memory back
 (viewer/memory.py): what something still holds, which is what a leak grows; `--resident` reads it as
 it is, what a user sees, allocator wobble of tens of MB included. `--write` puts the table into
-docs/STABILITY.md; tests/test_soak.py holds what must hold.
+docs/STABILITY.md; tests/bench/test_soak.py holds what must hold.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from viewer.bench.report import replace_block
-from viewer.gi import GISettings
+from viewer.physical.gi import GISettings
 from viewer.memory import Usage, children_mb
 from viewer.scene import ASSETS
 
@@ -97,8 +97,8 @@ def soak_scenes(soak: Soak, source: str) -> None:
     s, files = soak.settings, scene_files()
     viewer = HeadlessViewer(source, s.gi)
     try:
-        if viewer.gi.source != source:
-            print(f"scenes  {source}: not available here ({viewer.gi.unavailable.get(source, '')})", flush=True)
+        if viewer.physical.gi.source != source:
+            print(f"scenes  {source}: not available here ({viewer.physical.gi.unavailable.get(source, '')})", flush=True)
             return
         viewer.settle()
         for step in range(1, s.steps + 1):

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Iterator
 
 from viewer.bench.x11 import X11, Viewer, start_xvfb, xvfb_available
-from viewer.gi import GISettings
+from viewer.physical.gi import GISettings
 from viewer.memory import Usage
 
 BAD_FILES = {

@@ -14,12 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer import probes, transport
+from viewer.physical import projection
+from viewer.physical import transport
 from viewer import scene as scenes
 from viewer.bench.report import replace_block
-from viewer.gi import GISettings
-from viewer.raymarch import Tracer
-from viewer.voxels import voxelize
+from viewer.physical.gi import GISettings
+from viewer.rays.raymarch import Tracer
+from viewer.rays.voxels import voxelize
 
 ROOT = Path(__file__).resolve().parents[2]
 STAGES = ("voxelize", "direct light", "transition matrix", "bounces", "probe projection", "total")
@@ -47,7 +48,7 @@ def one_run(scene, n: int, m: int) -> dict[str, float]:
     # solve() recomputes the direct light; count only its bounces here
     lap("bounces")
     times["bounces"] = max(times["bounces"] - times["direct light"], 0.0)
-    probes.project(grid, light, scene.sun, scene.bounds, probes.ProbeSettings(resolution=m), tracer)
+    projection.project(grid, light, scene.sun, scene.bounds, projection.ProbeSettings(resolution=m), tracer)
     lap("probe projection")
     times["total"] = sum(times[s] for s in STAGES[:-1])
     return times

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer.probes import ProbeGrid
+from viewer.probes.grid import ProbeGrid
 from viewer.training import dataset, truth
 
 
@@ -38,7 +38,7 @@ def relative_rmse(estimate: np.ndarray, reference: np.ndarray, valid: np.ndarray
 
 def mitsuba_parts(scene, resolution: int, directions: int, seed: int):
     """(total, reflected) (M, M, M, 9, 3) and seconds."""
-    from viewer import reference
+    from viewer.reference import mitsuba as reference
 
     lo, hi = scene.bounds
     points = ProbeGrid.positions_for(lo, hi, resolution).reshape(-1, 3)

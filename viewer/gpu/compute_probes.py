@@ -1,7 +1,7 @@
-"""Probe projection for the compute solver: viewer/probes.py `project` as four GPU passes.
+"""Probe projection for the compute solver: viewer/probes/grid.py `project` as four GPU passes.
 
 1. rays (geometry only, once per scene): the voxel each probe sees first along each direction of the
-   same Fibonacci set as the numpy solver (viewer.sh.sphere_directions with ProbeSettings' seed), and the
+   same Fibonacci set as the numpy solver (viewer.probes.sh.sphere_directions with ProbeSettings' seed), and the
    fraction of directions that meet a surface's back (probes inside solids are invalid);
 2. emitted (once per lighting): the SH of the light straight from the fine light samples and the sun;
 3. gather (after every bounce): the SH of the reflected radiance along the stored first hits;
@@ -17,11 +17,12 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from viewer import sh
+from viewer.probes import sh
 from viewer.gpu.compute_scene import ComputeScene, even_ranges, vec4s
 from viewer.gpu.probe_textures import ProbeTextures
 from viewer.gpu.programs import ProgramLibrary
-from viewer.probes import INVALID_WEIGHT, ProbeGrid, ProbeSettings, fill_waves
+from viewer.physical.projection import ProbeSettings
+from viewer.probes.grid import INVALID_WEIGHT, ProbeGrid, fill_waves
 
 HIT_MEMORY_LIMIT = 64 << 20
 """Bytes of stored first hits (4 per probe and direction) above which the gather pass marches again."""

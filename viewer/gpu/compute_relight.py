@@ -1,10 +1,10 @@
-"""The relight stage (viewer.relight) in compute shaders: the relighter of gi.PhysicalGI on the GPU.
+"""The relight stage (viewer.physical.relight) in compute shaders: the relighter of gi.PhysicalGI on the GPU.
 
 The geometry stage's results go to the GPU once per geometry: the transport matrix in CSR form and the
 probes' hit lists, the same arrays the CPU relight reads. A relight then runs one dispatch per sweep
 (shaders/relight_sweep.glsl: the paper's bounce, eq. 30) and one for the probe projection
 (shaders/relight_probes.glsl). The convergence test and the Aitken tail stay on the CPU
-(viewer.relight.iterate), which reads each sweep back (K x 16 bytes): the GPU and the CPU relight then
+(viewer.physical.relight.iterate), which reads each sweep back (K x 16 bytes): the GPU and the CPU relight then
 take the same sweeps and agree to float rounding.
 """
 
@@ -13,10 +13,10 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from viewer import relight
-from viewer.geometry import Geometry, SunPaths
+from viewer.physical import relight
+from viewer.physical.geometry import Geometry, SunPaths
 from viewer.gpu.programs import ProgramLibrary, set_uniforms, shared_library
-from viewer.lightpaths import LightPaths
+from viewer.physical.lightpaths import LightPaths
 
 
 def _vec4(rows: np.ndarray, extra_zero_row: bool = False) -> bytes:
@@ -95,7 +95,7 @@ class ComputeRelight:
 
     def probe_coefficients(self, geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: relight.Materials,
                            lighting: relight.Lighting, include_emitted: bool = True) -> np.ndarray:
-        """(P, 9, 3) as viewer.relight.probe_coefficients, projected on the GPU and read back."""
+        """(P, 9, 3) as viewer.physical.relight.probe_coefficients, projected on the GPU and read back."""
         self._upload(geometry)
         p, d = geometry.probe_hits.shape
         self.buffers[self._current].write(_vec4(lighting.reflected))
@@ -125,13 +125,13 @@ def solve_probes(ctx: moderngl.Context, scene, settings=None, include_emitted: b
                  programs: ProgramLibrary | None = None):
     """gi.solve on the GPU, in one blocking call: the physical kernel through gi.PhysicalGI with this
     relighter (the geometry stage on the CPU), the paper's kernel through the all-pairs ComputeSolver."""
-    from viewer.gi import GISettings, PhysicalGI, Timings
+    from viewer.physical.gi import GISettings, PhysicalGI, Timings
 
     settings = settings or GISettings()
     timings = timings if timings is not None else Timings()
     if settings.kernel != "physical":
         from viewer.gpu.compute_solver import ComputeSolver
-        from viewer.voxels import voxelize
+        from viewer.rays.voxels import voxelize
 
         solver = ComputeSolver(ctx, voxelize(scene, settings.voxels, settings.normal_mode), scene.sun, settings,
                                scene.bounds, programs=programs)

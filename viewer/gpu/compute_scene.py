@@ -1,6 +1,6 @@
 """A VoxelGrid on the GPU for the compute solver: voxels, cells, clusters and light samples as SSBOs.
 
-The tables are the numpy Tracer's (viewer/raymarch.py), built by it and uploaded as they are: the
+The tables are the numpy Tracer's (viewer/rays/raymarch.py), built by it and uploaded as they are: the
 voxel arrays, and per cell (hash id order, `x + y N + z N^2`) its range of voxels and its
 distance-field step. The clusters are transport._Visibility's: at 32^3 voxels and above, far voxel
 pairs without an emitter share the visibility of their clusters. Bindings 0..6 (5 unused) are fixed
@@ -14,10 +14,10 @@ import moderngl
 import numpy as np
 
 from viewer.gpu.programs import set_uniforms
-from viewer.raymarch import Tracer
+from viewer.rays.raymarch import Tracer
 from viewer.scene import DirectionalLight
-from viewer.transport import SURFACE_OFFSET, clusters_of
-from viewer.voxels import VoxelGrid
+from viewer.physical.transport import SURFACE_OFFSET, clusters_of
+from viewer.rays.voxels import VoxelGrid
 
 LOOP_BUDGET = 60000
 """Loop iterations one shader invocation may run. llvmpipe gives all loops of a shader invocation batch

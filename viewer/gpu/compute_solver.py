@@ -1,7 +1,7 @@
-"""The compute-shader bounce solver: viewer.transport + viewer.probes on the GPU, a slice at a time.
+"""The compute-shader bounce solver: viewer.physical.transport + viewer.probes.grid on the GPU, a slice at a time.
 
 The same light transport as the numpy solver (eq. 23-30), with the same quadrature, so that the two
-agree to float precision (tests/test_gpu_compute.py):
+agree to float precision (tests/gpu/test_compute_solver.py):
 
     B1 = albedo / pi * E_direct                          (fine light samples + sun, compute_direct)
     B_k+1 = albedo / pi * s_i * sum_j G_ij B_k,j          (one dispatch over receivers, compute_bounce)
@@ -30,15 +30,16 @@ from dataclasses import dataclass, replace
 import moderngl
 import numpy as np
 
-from viewer.gi import GISettings, Timings
+from viewer.physical.gi import GISettings, Timings
 from viewer.gpu.compute_probes import ComputeProbes
 from viewer.gpu.compute_scene import ComputeScene, same_geometry
 from viewer.gpu.compute_transport import MAX_GROUPS, RECEIVERS, VISIBILITY_MODES, ComputeTransport, rows_per_dispatch
 from viewer.gpu.programs import ProgramLibrary, shared_library
-from viewer.probes import ProbeGrid, ProbeSettings
+from viewer.physical.projection import ProbeSettings
+from viewer.probes.grid import ProbeGrid
 from viewer.scene import DirectionalLight, Scene
-from viewer.transport import KERNELS, TransportSettings
-from viewer.voxels import VoxelGrid, voxelize
+from viewer.physical.transport import KERNELS, TransportSettings
+from viewer.rays.voxels import VoxelGrid, voxelize
 
 _KEEP = object()
 SLICE_SHARE = 0.7
@@ -185,7 +186,7 @@ class ComputeSolver:
 
     @property
     def valid(self) -> np.ndarray:
-        """(M, M, M) bool: probes outside solid geometry (see viewer.probes.ProbeGrid.valid)."""
+        """(M, M, M) bool: probes outside solid geometry (see viewer.probes.grid.ProbeGrid.valid)."""
         return self.probes.valid
 
     @property
@@ -195,7 +196,7 @@ class ComputeSolver:
 
     def probe_grid(self, include_emitted: bool = True) -> ProbeGrid:
         """The probe grid as last projected (read back; while stepping, call it between updates, i.e.
-        when step() returned True); include_emitted as in viewer.probes."""
+        when step() returned True); include_emitted as in viewer.probes.grid."""
         if include_emitted and not self._emitted_ready:
             raise RuntimeError("the emitted light is not projected yet; step() further first")
         return self.probes.grid(include_emitted)

@@ -1,4 +1,4 @@
-"""The voxels' light on the GPU: viewer/transport.py's direct light, visibility and bounces as passes.
+"""The voxels' light on the GPU: viewer/physical/transport.py's direct light, visibility and bounces as passes.
 
 Each pass takes a range of receivers (or of bitset rows) so that the solver can slice it to a frame
 budget, and cuts its long loops into chunks within llvmpipe's loop budget (compute_scene.LOOP_BUDGET).

@@ -10,9 +10,9 @@ import numpy as np
 from viewer.gpu.camera import clip_range, gl_bytes, perspective, view_matrix
 from viewer.gpu.mesh import cube
 from viewer.gpu.programs import ProgramLibrary, set_uniforms
-from viewer.probes import ProbeGrid
+from viewer.probes.grid import ProbeGrid
 from viewer.scene import Camera
-from viewer.voxels import VoxelGrid
+from viewer.rays.voxels import VoxelGrid
 
 
 class DebugViews:

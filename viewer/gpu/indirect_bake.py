@@ -1,9 +1,9 @@
 """Baked indirect light: the indirect irradiance at every texel of the lightmap atlas
 (viewer/gpu/direct_bake.py), so that the per-frame surface pass reads it with one bilinear fetch beside
 the direct light. Two steps per GI update: the probe grid's irradiance, weighted per texel as
-viewer/probe_weights.py says (trilinear, validity, back-face and exact visibility: a face never mixes
+viewer/probes/weights.py says (trilinear, validity, back-face and exact visibility: a face never mixes
 in a probe it cannot see); then, with `gather_rays` (RenderSettings.final_gather, the default), a final
-gather (viewer/final_gather.py): each sample sums what the texels its rays land on reflect, albedo x
+gather (viewer/gpu/final_gather.py): each sample sums what the texels its rays land on reflect, albedo x
 (direct + that probe light), and a tent over its coplanar neighbours takes the noise out. The probes
 then light only the second bounce on, and light they cannot resolve (a face looking out of an open
 side, contacts) comes from the surfaces themselves.
@@ -27,13 +27,13 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
-from viewer import dda
-from viewer.final_gather import GatherRays
+from viewer.rays import dda
+from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
-from viewer.probe_weights import SurfaceBake, SurfaceWeights
-from viewer.probes import ProbeGrid
+from viewer.probes.weights import SurfaceBake, SurfaceWeights
+from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
-from viewer.voxels import grid_frame
+from viewer.rays.voxels import grid_frame
 
 VISIBILITY_VOXELS = 32
 """Cells per axis of the triangle grid that the probes' visibility is traced in."""
@@ -158,7 +158,7 @@ class BakedIndirectLight:
         """(pixels, their samples' pixels, weights) of every texel, both sides."""
         self._cells: dda.Cells | None = None
         self.gather_rays = gather_rays
-        """Final-gather rays per sample (viewer/final_gather.py); 0: the probes' light alone."""
+        """Final-gather rays per sample (viewer/gpu/final_gather.py); 0: the probes' light alone."""
         self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None
         """The final gather's rays and each sample's neighbours (`_neighbours`), once per geometry."""
         self._sample_rows = np.arange(len(self._pixels))

@@ -23,7 +23,7 @@ from viewer.gpu.context import create_context
 from viewer.gpu.renderer import VIEWS, RenderSettings, Renderer
 from viewer.gpu.shadows import MAX_LIGHT_SAMPLES
 from viewer.gpu.targets import DisplayTarget, HdrTarget
-from viewer.probes import ProbeGrid
+from viewer.probes.grid import ProbeGrid
 from viewer.scene import Camera, Scene
 
 GI_MODES = ("off", "compute", "solver", "neural")
@@ -122,7 +122,7 @@ def capture(scene: Scene, probes: ProbeGrid | None, out_path: str | Path | None 
     if out_path is not None and not hdr_out and Path(out_path).suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise CaptureError(f"{out_path}: the output must be a .png (or .jpg, or .npy for linear HDR)")
     if view == "voxels" and voxels is None:
-        from viewer.voxels import voxelize
+        from viewer.rays.voxels import voxelize
         voxels = voxelize(scene, 32)
     offscreen = OffscreenRenderer((width, height), settings, samples, ctx)
     try:
@@ -164,11 +164,11 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def solver_probes(args) -> ProbeSource:
-    """The probe source for `--gi solver` (the numpy transport solver, viewer.gi.solve) and `--gi compute`
+    """The probe source for `--gi solver` (the numpy transport solver, viewer.physical.gi.solve) and `--gi compute`
     (the compute-shader solver on the capture's own context), with the GI settings found on args
     (voxels, probes, kernel, bounces, directions, dering; defaults otherwise), indirect light only."""
     def source(scene: Scene, gi: str, ctx) -> ProbeGrid | None:
-        from viewer import gi as solver
+        from viewer.physical import gi as solver
 
         names = ("voxels", "probes", "kernel", "bounces", "directions", "dering")
         settings = solver.GISettings(**{name: getattr(args, name) for name in names
@@ -180,13 +180,13 @@ def solver_probes(args) -> ProbeSource:
 
             return solve_probes(ctx, scene, settings, include_emitted=False)
         if gi == "neural":
-            from viewer.neural import DEFAULT_MODEL, ModelError, NeuralField
+            from viewer.neural.field import DEFAULT_MODEL, ModelError, NeuralField
 
             try:
                 field = NeuralField(getattr(args, "model", None) or DEFAULT_MODEL)
             except ModelError as exc:
                 raise CaptureError(f"--gi neural: {exc}") from None
-            from viewer.domain import print_warning
+            from viewer.neural.domain import print_warning
 
             print_warning(scene, field.card.domain)
             return field.solve(scene, include_emitted=False)
@@ -274,11 +274,11 @@ def _debug_voxels(scene: Scene, view: str, settings: RenderSettings, resolution:
     """Voxels (and their solved radiance, when the view colours by it) for the `voxels` view."""
     if view != "voxels":
         return None, None
-    from viewer.voxels import voxelize
+    from viewer.rays.voxels import voxelize
 
     voxels = voxelize(scene, int(resolution))
     if settings.voxel_color != "radiance":
         return voxels, None
-    from viewer import transport
+    from viewer.physical import transport
 
     return voxels, transport.solve(voxels, scene.sun).radiance

@@ -20,7 +20,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from viewer.probes import ProbeGrid
+from viewer.probes.grid import ProbeGrid
 
 TEXTURE_COUNT = 7
 HALF_TARGET = 2.0 ** 14

@@ -59,13 +59,13 @@ class RenderSettings:
     per fragment. The direct light is baked once per scene and light setting (viewer/gpu/direct_bake.py:
     the same shadows and penumbrae, linear between texels `lightmap_texel` apart), the probe grid once
     per GI update (viewer/gpu/indirect_bake.py) with per-texel probe weights that add the probes'
-    visibility to validity and back-face weights (viewer/probe_weights.py). False: the exact per-fragment
+    visibility to validity and back-face weights (viewer/probes/weights.py). False: the exact per-fragment
     path (direct light summed per fragment, probes interpolated with `probe_normal_offset` and
     `probe_plane_falloff`)."""
     lightmap_texel: float = 0.02
     """Lightmap texel spacing of the baked light, in scene units (metres for the Cornell box)."""
     final_gather: int = 72
-    """With `baked`: rays per lightmap sample of the final gather (viewer/final_gather.py), which takes each
+    """With `baked`: rays per lightmap sample of the final gather (viewer/gpu/final_gather.py), which takes each
     sample's indirect light from the direct and probe-lit light that its surroundings reflect, so that
     light the probes cannot resolve (contacts, corners, a face half open to the outside) is right. 2 r^2
     (a full grid of strata: 32, 72, 128, ...); 0: the probes' light alone."""

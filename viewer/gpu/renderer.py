@@ -5,7 +5,7 @@ default (RenderSettings.baked) both irradiances are read from lightmaps, one fet
 baked once per scene and light setting (viewer/gpu/direct_bake.py: emitter samples and the sun, with
 shadow maps, viewer/gpu/shadows.py), the probe grid's indirect light once per GI update
 (viewer/gpu/indirect_bake.py, with DDGI-style per-texel probe weights and exact probe visibility,
-viewer/probe_weights.py). The exact path (baked=False, for comparisons with the reference) sums the
+viewer/probes/weights.py). The exact path (baked=False, for comparisons with the reference) sums the
 emitter samples per fragment, interleaved over 2x2 pixel blocks without multisampling
 (shaders/interleave_resolve.glsl), and interpolates the probes per fragment (shaders/probe_grid.glsl).
 Exposure, a tone curve and the sRGB encoding are applied in the surface pass when drawing into a
@@ -34,9 +34,9 @@ from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
 from viewer.gpu.render_settings import TONEMAPS, VIEWS, VOXEL_COLORS, RenderSettings  # noqa: F401 (re-exported)
 from viewer.gpu.shadows import EmitterShadows, SunShadow
 from viewer.gpu.targets import DisplayTarget, HdrTarget, InterleaveBuffers
-from viewer.probes import ProbeGrid
+from viewer.probes.grid import ProbeGrid
 from viewer.scene import Camera, Scene
-from viewer.voxels import VoxelGrid
+from viewer.rays.voxels import VoxelGrid
 
 SURFACE_VIEWS = {"final": 0, "direct": 1, "indirect": 2, "albedo": 3, "normals": 4, "probes": 0}
 PROBE_UNIT, ATLAS_UNIT, SUN_UNIT, HDR_UNIT, INTERLEAVE_UNIT, BAKED_UNIT, INDIRECT_UNIT = 0, 7, 8, 9, 10, 14, 15

@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer import encoding
-from viewer.gi import GISettings, PhysicalGI
-from viewer.voxels import voxelize
+from viewer.neural import encoding
+from viewer.physical.gi import GISettings, PhysicalGI
+from viewer.rays.voxels import voxelize
 
 GATHERS = ("bounce input", "exact one bounce", "converged surface light")
 NETWORK = "network (as it is)"
@@ -35,7 +35,7 @@ NETWORK = "network (as it is)"
 def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, voxels: int, full: bool,
                 field=None) -> dict:
     """Best-gain relative RMSE of each gather in GATHERS against `target` (3, 9, M, M, M) radiance, and
-    the network's (`field`, a viewer.neural.NeuralField) as it answers, without a gain."""
+    the network's (`field`, a viewer.neural.field.NeuralField) as it answers, without a gain."""
     scene = example.scene
     grid = voxelize(scene, voxels)
     enc = encoding.encode(grid, scene.sun, example.lo, example.hi, probes, encoding.occluders(scene, grid))
@@ -83,7 +83,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     field = None
     if args.model:
-        from viewer.neural import NeuralField
+        from viewer.neural.field import NeuralField
 
         field = NeuralField(args.model)
     split = load_split(args.data, "val", args.probes)

@@ -16,13 +16,13 @@ wait in `<split>/pending/` until the shard is packed, so an interrupted run lose
 Format 1 (one `.npz` per room straight under `<split>/`, the first dataset gi-v1) is still read.
 
 Room i of a procedural split comes from `np.random.default_rng([seed, split_id, i])` (train 0, val 1)
-with the ranges preset the manifest names (viewer.training.ranges), so any room can be made again alone.
+with the ranges preset the manifest names (viewer.neural.ranges), so any room can be made again alone.
 Keys of one room's `.npz` (`FORMAT` below):
     name, params, generator   JSON strings: scene name, the drawn parameters, how the room was made
     vertices (V, 3) float32, faces (F, 3) int32, albedo (F, 3) float16, emission (F, 3) float32,
     face_group (F,) int16, groups (JSON list of names), sun (6,) float64 direction + irradiance or (0,),
     camera (10,) float64 origin, target, up, fov
-    lo, hi (3,) float64      the probe box: scene.bounds, as `viewer.gi.solve` uses
+    lo, hi (3,) float64      the probe box: scene.bounds, as `viewer.physical.gi.solve` uses
     sh_{M} (M, M, M, 9, 3)   ground-truth incident-radiance SH at the probe centres (format 2: float16,
                              relative precision 5e-4, or float32 where a value is past float16's range)
     sh_{M}_direct            the part of sh_{M} straight from emitters and the sun (sh_{M} - sh_{M}_direct
@@ -52,11 +52,11 @@ from typing import Iterator
 
 import numpy as np
 
-from viewer.probes import fill_invalid
-from viewer.reference import ReferenceUnavailable
+from viewer.probes.grid import fill_invalid
+from viewer.reference.mitsuba import ReferenceUnavailable
 from viewer.scene import Camera, DirectionalLight, Scene, SceneError, load
 from viewer.training import procedural, truth as truths
-from viewer.training.ranges import PRESETS
+from viewer.neural.ranges import PRESETS
 
 FORMAT = 2
 """2: rooms in shards, targets float16, filled on loading. 1: one file per room (read, no longer made)."""
@@ -276,10 +276,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--val", type=int, default=300, help="procedural validation rooms (default 300)")
     p.add_argument("--seed", type=int, default=14, help="room i of a split is default_rng([seed, split, i])")
     p.add_argument("--ranges", choices=sorted(PRESETS), default="v2",
-                   help="procedural ranges (viewer.training.ranges; default v2, issue 14's wide ones)")
+                   help="procedural ranges (viewer.neural.ranges; default v2, issue 14's wide ones)")
     p.add_argument("--probes", default="24,16", help="probe resolutions M, comma separated (default 24,16)")
     p.add_argument("--truth", choices=truths.TRUTHS, default="physical",
-                   help="ground truth: physical (viewer.gi's solver, ~1-3 s a room; the default, "
+                   help="ground truth: physical (viewer.physical.gi's solver, ~1-3 s a room; the default, "
                         "docs/TRAINING.md says why), mitsuba (path traced, --directions stratified rays with "
                         "light sampling per probe) or solver (the all-pairs numpy solver, slow)")
     p.add_argument("--directions", type=int, default=256,
@@ -340,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
         if (args.workers is not None and args.workers < 1) or args.mitsuba_every < 1 or args.mitsuba_directions < 0:
             raise SceneError("--workers and --mitsuba-every must be at least 1, --mitsuba-directions at least 0")
         if args.truth == "mitsuba" or args.mitsuba_directions:
-            from viewer import reference
+            from viewer.reference import mitsuba as reference
 
             reference.variant()  # ReferenceUnavailable says what to install
         splits = [s.strip() for s in args.splits.split(",") if s.strip()]

@@ -44,7 +44,7 @@ within 2x of the truth."""
 
 
 def dark_ranges(preset: str):
-    from viewer.training.ranges import PRESETS
+    from viewer.neural.ranges import PRESETS
 
     return replace(PRESETS[preset], albedo=(0.01, 0.04), grey_level=(0.01, 0.04), value=(0.01, 0.04),
                    saturated_wall_probability=0.0, saturated_object_probability=0.0)
@@ -90,9 +90,9 @@ def measure_scene(scene: scenes.Scene, methods: dict, points_count: int, directi
 
 
 def neural_method(model: Path):
-    from viewer.encoding import occluders
-    from viewer.neural import NeuralField
-    from viewer.voxels import voxelize
+    from viewer.neural.encoding import occluders
+    from viewer.neural.field import NeuralField
+    from viewer.rays.voxels import voxelize
 
     field = NeuralField(model)
 
@@ -105,7 +105,7 @@ def neural_method(model: Path):
 
 
 def physical_method(probes: int):
-    from viewer import gi
+    from viewer.physical import gi
 
     def solve(scene):
         settings = replace(gi.GISettings(), voxels=32, probes=probes)
@@ -117,8 +117,10 @@ def physical_method(probes: int):
 def perfect_method(probes: int, directions: int):
     """Mitsuba's probes on the lattice: (all the light, its reflected part) as probe grids, the probes the
     physical solver finds inside solids filled from their neighbours (`probes.fill_invalid`)."""
-    from viewer import geometry, gi, reference
-    from viewer.probes import ProbeGrid, fill_invalid
+    from viewer.physical import geometry
+    from viewer.physical import gi
+    from viewer.reference import mitsuba as reference
+    from viewer.probes.grid import ProbeGrid, fill_invalid
 
     settings = gi.geometry_settings(replace(gi.GISettings(), voxels=32, probes=probes))
 

@@ -1,4 +1,4 @@
-"""A trained ProbeNet -> `models/<name>.onnx` + its JSON card (what `viewer.neural` loads).
+"""A trained ProbeNet -> `models/<name>.onnx` + its JSON card (what `viewer.neural.field` loads).
 
     python -m viewer.training.export runs/probenet --name probenet [--out models]
 
@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from viewer import encoding
-from viewer.domain import Domain
-from viewer.neural import OUTPUTS, file_sha256
+from viewer.neural import encoding
+from viewer.neural.domain import Domain
+from viewer.neural.field import OUTPUTS, file_sha256
 from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
 from viewer.training.samples import ENCODING_VOXELS
 
@@ -68,8 +68,8 @@ def max_difference(model: ProbeNet, path: Path, inputs: np.ndarray) -> float:
 
 def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, metrics: dict,
                ranges: str | None = None) -> dict:
-    """The card beside the .onnx file. `ranges`: the viewer.training.ranges preset the dataset was drawn
-    from (else the one `training` names), whose training domain (viewer.domain) the card carries: the
+    """The card beside the .onnx file. `ranges`: the viewer.neural.ranges preset the dataset was drawn
+    from (else the one `training` names), whose training domain (viewer.neural.domain) the card carries: the
     viewer warns on scenes outside it."""
     ranges = ranges or training.get("ranges")
     card = {

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from viewer.scene import DirectionalLight
-from viewer.training.ranges import Ranges
+from viewer.neural.ranges import Ranges
 
 if TYPE_CHECKING:
     from viewer.training.procedural import Frame

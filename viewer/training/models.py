@@ -1,6 +1,6 @@
 """The production network: ProbeNet, a small 3D U-Net from the encoded probe lattice to the probes' SH.
 
-Input (B, CHANNELS, M, M, M) from `viewer.encoding.encode` (B = 3 x scenes: one monochrome problem per
+Input (B, CHANNELS, M, M, M) from `viewer.neural.encoding.encode` (B = 3 x scenes: one monochrome problem per
 colour channel); output (B, OUTPUTS, M, M, M) in units of the encoding's scale: 9 SH coefficients of
 all the incident radiance (`sample`, the comparisons with Mitsuba), 9 of the light reflected by
 surfaces alone (what the renderer's probes hold: it shades emitters and the sun itself), and one logit
@@ -13,7 +13,7 @@ Why this shape:
 - Shadows and contact are local: the finest level keeps each probe's own cell and its neighbours.
 - The head is per probe (1x1x1 convolutions): cheap at 16^3 = 4096 probes, and the same weights work
   for any lattice size divisible by 2^levels.
-- The shadowed direct light and one unshadowed bounce of it are inputs (`viewer.encoding`), and the
+- The shadowed direct light and one unshadowed bounce of it are inputs (`viewer.neural.encoding`), and the
   head's outputs are corrections to them: what the coarse shadows miss of the direct light (9 SH), and
   the reflected light (9 SH) on top of the bounce times a learned gain. The corrections are relative
   (times the local light, `MAGNITUDE_FLOOR`) and the convolutions read the light through asinh
@@ -31,7 +31,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from viewer import encoding
+from viewer.neural import encoding
 
 
 @dataclass(frozen=True)

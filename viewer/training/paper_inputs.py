@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from viewer.voxels import VoxelGrid
+from viewer.rays.voxels import VoxelGrid
 
 VOXEL_FEATURES = 10
 """centre (3), albedo (3), emission (3), hash id (1)."""

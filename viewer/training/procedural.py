@@ -4,7 +4,7 @@
 `cornell`), walls in whites and greys with now and then a saturated colour, up to a few objects on the
 floor or stacked, area lights (viewer.training.lights), and sometimes a window with the sun shining
 through it; with the wide ranges also thin partitions and glowing objects. Every number it draws comes
-from a field of `Ranges` (viewer.training.ranges: `Ranges()` is the first dataset's, `PRESETS["v2"]`
+from a field of `Ranges` (viewer.neural.ranges: `Ranges()` is the first dataset's, `PRESETS["v2"]`
 issue 14's), so an out-of-distribution study can draw scenes outside the training ranges with
 `random_scene(rng, name, Ranges(room_scale=(1.3, 1.6)))`.
 
@@ -21,12 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from viewer import meshes
-from viewer.meshes import X_AXIS, Y_AXIS, Mesh, rotate, scale, transformed, translate
+from viewer.scene import meshes
+from viewer.scene.meshes import X_AXIS, Y_AXIS, Mesh, rotate, scale, transformed, translate
 from viewer.scene import Camera, DirectionalLight, Scene
 from viewer.training.lights import CORNELL_POWER  # noqa: F401 - re-exported (tests, studies)
 from viewer.training.lights import WALL_GAP, draw_lights, draw_window, glow_objects, rectangle_light
-from viewer.training.ranges import OBJECT_KINDS, PRESETS, Ranges  # noqa: F401 - re-exported
+from viewer.neural.ranges import OBJECT_KINDS, PRESETS, Ranges  # noqa: F401 - re-exported
 
 OBJECT_GAP = 0.03
 """Smallest distance between an object and a wall, and between an object's top and the ceiling lights."""

@@ -4,7 +4,7 @@ shard and read back memory-mapped, so that thousands of rooms train in a few gig
     python -m viewer.training.samples --data data/gi-v2 [--probes 24]   # builds the caches (optional:
                                                                           # training builds them too)
 
-A room's inputs come from `viewer.encoding.encode` on its voxels (the same call the viewer makes); its
+A room's inputs come from `viewer.neural.encoding.encode` on its voxels (the same call the viewer makes); its
 targets are the ground-truth SH of the dataset (invalid probes filled), per colour channel, divided by
 the encoding's scale, so that inputs and targets are in the same units:
 
@@ -35,9 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer import encoding
-from viewer.probes import fill_invalid
-from viewer.voxels import voxelize
+from viewer.neural import encoding
+from viewer.probes.grid import fill_invalid
+from viewer.rays.voxels import voxelize
 
 ENCODING_VOXELS = 24
 """Voxel resolution the encoder reads, recorded in the model card: the probe lattice's (24^3), so that a

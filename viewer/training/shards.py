@@ -22,7 +22,7 @@ import numpy as np
 
 from viewer.scene import SceneError
 from viewer.training import dataset
-from viewer.training.ranges import PRESETS
+from viewer.neural.ranges import PRESETS
 
 FINGERPRINT = ("format", "seed", "ranges", "truth", "directions", "probes", "voxels", "mitsuba_directions",
                "mitsuba_every", "shard_size")
@@ -34,7 +34,7 @@ class Settings:
     seed: int = 14
     """Room i of a split is drawn from np.random.default_rng([seed, split id, i])."""
     ranges: str = "v2"
-    """Name of the procedural ranges preset (viewer.training.ranges.PRESETS)."""
+    """Name of the procedural ranges preset (viewer.neural.ranges.PRESETS)."""
     truth: str = "physical"
     """Ground truth of the targets: physical, mitsuba or solver (viewer.training.truth)."""
     directions: int = 256
@@ -233,7 +233,7 @@ def versions(mitsuba: bool) -> dict:
         import drjit
         import mitsuba
 
-        from viewer import reference
+        from viewer.reference import mitsuba as reference
 
         out.update(mitsuba=mitsuba.__version__, drjit=drjit.__version__, variant=reference.variant())
     try:

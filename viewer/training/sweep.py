@@ -27,12 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer import encoding, reference
+from viewer.neural import encoding
+from viewer.reference import mitsuba as reference
 from viewer import scene as scenes
 from viewer.bench.accuracy import PUBLIC_BOX, relative_rmse
 from viewer.bench.points import free_space_points
-from viewer.neural import NeuralField
-from viewer.voxels import voxelize
+from viewer.neural.field import NeuralField
+from viewer.rays.voxels import voxelize
 
 ROOT = Path(__file__).resolve().parents[2]
 EVALUATION_SCENES = ("cornell", "paper-test", "paper-train-1", "paper-train-2", "paper-train-3",

@@ -42,7 +42,7 @@ PAPER_REPORTED = {"mlp": "0.003-0.007", "cnn": "0.6-0.78"}
 
 def paper_encode(path: str, resolution: int) -> dict[str, np.ndarray]:
     from viewer.training.dataset import load_example
-    from viewer.voxels import voxelize
+    from viewer.rays.voxels import voxelize
 
     example = load_example(path)
     rows = voxel_list(voxelize(example.scene, PAPER_VOXELS))
@@ -270,7 +270,6 @@ def write_report(results: dict, args) -> None:
                     f"{s['val'][0]:.3f} | {s['test'][0]:.3f} | {100 * s['val'][1]:.1f}% | {100 * s['test'][1]:.1f}% | "
                     f"{PAPER_REPORTED.get(r['family'], '')} | {r['seconds']:.0f} s |")
     plot_curves(results, ROOT / "docs" / "images" / "table1_curves.png")
-    from viewer.bench.report import replace_block
 
     rooms = sorted({r.get("training_rooms") for r in results.values() if r.get("training_rooms")})
     trained = f"Every network trained on the same {' / '.join(f'{n:,}' for n in rooms)} rooms. " if rooms else ""

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from viewer import encoding
+from viewer.neural import encoding
 from viewer.training.models import REFLECTED, TOTAL, VALIDITY, ProbeNet, ProbeNetConfig, parameter_count
 from viewer.training.samples import Samples, load_split, training_split
 
@@ -74,7 +74,7 @@ class TrainSettings:
     around it, every probe alike) or `room` (each room's squared error over its reflected light's
     energy: the relative RMSE the validation reports, where the bright probes count most)."""
     direct_input: str = "encoded"
-    """What the direct-light features hold: `encoded` (the encoding's, `viewer.encoding`: shadows traced
+    """What the direct-light features hold: `encoded` (the encoding's, `viewer.neural.encoding`: shadows traced
     on a coarse grid) or `traced` (the truth's own direct light: the experiment of a network whose
     direct term is exact)."""
 

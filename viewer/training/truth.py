@@ -1,13 +1,13 @@
 """Training targets for one scene: ground-truth probe SH and probe validity.
 
-Three sources of truth: Mitsuba 3 (`viewer.reference.probe_sh_parts`, the independent path tracer;
-unbiased, noisy at low direction counts), the physical solver (`viewer.gi.PhysicalGI`: the geometry
+Three sources of truth: Mitsuba 3 (`viewer.reference.mitsuba.probe_sh_parts`, the independent path tracer;
+unbiased, noisy at low direction counts), the physical solver (`viewer.physical.gi.PhysicalGI`: the geometry
 traced once, the bounces solved to convergence; about a second a room, 4-5% off Mitsuba, and what the
 issue-14 datasets use, docs/TRAINING.md says why) or the all-pairs numpy solver (the old `solver`). Both give the incident light at each probe and, apart, its part straight from
 the emitters and the sun: the renderer shades that part itself, so its probes hold only the rest, the
 light reflected by surfaces.
 
-Validity follows the renderer's rule (`viewer.probes.project`): a probe that sees the back of surfaces
+Validity follows the renderer's rule (`viewer.probes.grid.project`): a probe that sees the back of surfaces
 in more than `ProbeSettings.invalid_backface_fraction` of its directions, marched through the 32^3
 voxels, is inside a solid object.
 """
@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from viewer import sh
-from viewer.probes import ProbeGrid, ProbeSettings, fill_invalid
+from viewer.probes import sh
+from viewer.physical.projection import ProbeSettings
+from viewer.probes.grid import ProbeGrid, fill_invalid
 from viewer.scene import Scene
 
 TRUTHS = ("physical", "mitsuba", "solver")
@@ -29,9 +30,9 @@ VALIDITY_DIRECTIONS = 128
 
 def probe_validity(scene: Scene, lo, hi, resolutions, voxel_resolution: int = VALIDITY_VOXELS,
                    directions: int = VALIDITY_DIRECTIONS) -> dict[int, np.ndarray]:
-    """{M: (M, M, M) bool}: False for probes inside solid geometry (the rule of `probes.project`)."""
-    from viewer.raymarch import BACKFACE, Tracer
-    from viewer.voxels import voxelize
+    """{M: (M, M, M) bool}: False for probes inside solid geometry (the rule of `projection.project`)."""
+    from viewer.rays.raymarch import BACKFACE, Tracer
+    from viewer.rays.voxels import voxelize
 
     tracer = Tracer.build(voxelize(scene, voxel_resolution))
     dirs, _ = sh.sphere_directions(directions)
@@ -46,7 +47,7 @@ def probe_validity(scene: Scene, lo, hi, resolutions, voxel_resolution: int = VA
 
 
 def mitsuba_available() -> bool:
-    from viewer import reference
+    from viewer.reference import mitsuba as reference
 
     try:
         reference.variant()
@@ -59,7 +60,7 @@ def mitsuba_sh(scene: Scene, lo, hi, resolution: int, directions: int, seed: int
     """(total, direct), each (M, M, M, 9, 3) float32: the incident-radiance SH from Mitsuba at the probe
     centres, and its part straight from the emitters and the sun, from the same paths (not cached on
     disk: every scene is new)."""
-    from viewer import reference
+    from viewer.reference import mitsuba as reference
 
     points = ProbeGrid.positions_for(lo, hi, resolution).reshape(-1, 3)
     reflected, direct = reference.probe_sh_parts(scene, points, directions=directions, seed=seed)
@@ -79,12 +80,13 @@ def unbiased_targets(scene: Scene, lo, hi, resolution: int, directions: int, see
 
 def solver_sh(scene: Scene, resolutions, directions: int, voxels: int) -> dict[int, tuple]:
     """{M: (total, direct, valid)} from the numpy solver over scene.bounds: the steps of
-    `viewer.gi.solve`, with the bounces solved once for every M. Its probes come filled already
-    (`probes.project` calls `fill_invalid`), so raw and filled targets are the same array."""
-    from viewer import probes, transport
-    from viewer.gi import GISettings
-    from viewer.raymarch import Tracer
-    from viewer.voxels import voxelize
+    `viewer.physical.gi.solve`, with the bounces solved once for every M. Its probes come filled already
+    (`projection.project` calls `fill_invalid`), so raw and filled targets are the same array."""
+    from viewer.physical import projection
+    from viewer.physical import transport
+    from viewer.physical.gi import GISettings
+    from viewer.rays.raymarch import Tracer
+    from viewer.rays.voxels import voxelize
 
     settings = GISettings(voxels=voxels, directions=directions)
     grid = voxelize(scene, settings.voxels, settings.normal_mode)
@@ -94,20 +96,22 @@ def solver_sh(scene: Scene, resolutions, directions: int, voxels: int) -> dict[i
                             transition=transition, tracer=tracer)
     out = {}
     for m in resolutions:
-        total, reflected = (probes.project(grid, light, scene.sun, scene.bounds, probes.ProbeSettings(
+        total, reflected = (projection.project(grid, light, scene.sun, scene.bounds, ProbeSettings(
             resolution=m, directions=directions, include_emitted=emitted), tracer) for emitted in (True, False))
         out[m] = (total.coefficients, total.coefficients - reflected.coefficients, total.valid)
     return out
 
 
 def physical_sh(scene: Scene, resolutions, directions: int = 256, voxels: int = 32) -> dict[int, tuple]:
-    """{M: (total, direct, valid, filled)} from the physical solver over scene.bounds (viewer.gi's
+    """{M: (total, direct, valid, filled)} from the physical solver over scene.bounds (viewer.physical.gi's
     `PhysicalGI` stages): the voxels are traced and lit once, and each M traces only its probe rays
     (`geometry.with_probes`). total and direct are the probes as projected (raw), filled has the probes
     inside solids filled from valid neighbours (the renderer's `fill_invalid`)."""
-    from viewer import geometry as geometries, lightpaths, relight
-    from viewer.gi import GISettings, geometry_settings
-    from viewer.voxels import voxelize_with_faces
+    from viewer.physical import geometry as geometries
+    from viewer.physical import lightpaths
+    from viewer.physical import relight
+    from viewer.physical.gi import GISettings, geometry_settings
+    from viewer.rays.voxels import voxelize_with_faces
 
     resolutions = sorted(resolutions, reverse=True)
     settings = geometry_settings(GISettings(voxels=voxels, probes=resolutions[0], directions=directions))

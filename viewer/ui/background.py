@@ -17,7 +17,7 @@ import traceback
 from typing import Any, Callable
 
 SOLVER_STAGES = ("voxelize", "geometry", "relight")
-"""The stages of the physical kernel's solve (viewer.gi.PhysicalGI), in order (its Timings keys); an edit
+"""The stages of the physical kernel's solve (viewer.physical.gi.PhysicalGI), in order (its Timings keys); an edit
 that needs no tracing runs only the last."""
 
 
@@ -61,7 +61,7 @@ def _solver_worker(connection) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl+C is for the viewer, which then stops us
-    from viewer import gi
+    from viewer.physical import gi
 
     class ReportingStages(dict):
         def __setitem__(self, name, seconds):

@@ -2,7 +2,7 @@
 solver, or the neural field; one place that restarts the active source when the scene or the GI
 settings change and hands finished probe grids to the render loop.
 
-The CPU solver (viewer.gi.solve) runs in a worker process (viewer.ui.background.SolverProcess) and its
+The CPU solver (viewer.physical.gi.solve) runs in a worker process (viewer.ui.background.SolverProcess) and its
 grid replaces the shown one when it is done. The compute solver (viewer.gpu.compute_solver) runs on the
 render thread's GL context, a few milliseconds a frame, and its probes are shown as they converge.
 """
@@ -14,9 +14,9 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from viewer.domain import warning
-from viewer.gi import GISettings
-from viewer.probes import ProbeGrid
+from viewer.neural.domain import warning
+from viewer.physical.gi import GISettings
+from viewer.probes.grid import ProbeGrid
 from viewer.resources import MODELS
 from viewer.scene import Scene
 from viewer.ui.background import SOLVER_STAGES, BackgroundTask, SolverProcess
@@ -76,7 +76,7 @@ class ComputeSource:
 
     def step(self, budget_ms: float) -> ProbeGrid | None:
         """Work for about `budget_ms`; returns new probes when it is time to show them."""
-        from viewer.voxels import voxelize
+        from viewer.rays.voxels import voxelize
 
         try:
             now = time.perf_counter()
@@ -132,18 +132,18 @@ class ComputeSource:
 
 
 class NeuralSource:
-    """The trained network (viewer.neural.NeuralGI). A colour edit (an albedo, the lamp's colour or
+    """The trained network (viewer.neural.field.NeuralGI). A colour edit (an albedo, the lamp's colour or
     intensity) keeps the voxels and recolours them, and the network runs on the render thread at once
     (a millisecond when only the lamp's colour changed: the network's output is reused, scaled). A
     moved lamp or a new scene is voxelized off the render thread first, as for the compute solver;
     the network then runs in the frame the voxels arrive.
 
     Creating it loads and checks the model: a missing, corrupt or mismatched model raises
-    `viewer.neural.ModelError`, which the controller shows and answers by falling back to the compute
+    `viewer.neural.field.ModelError`, which the controller shows and answers by falling back to the compute
     solver."""
 
     def __init__(self, model: Path | None = None):
-        from viewer.neural import DEFAULT_MODEL, NeuralField, NeuralGI
+        from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI
 
         self.field = NeuralField(model or DEFAULT_MODEL)
         self.gi = NeuralGI(self.field)
@@ -154,7 +154,7 @@ class NeuralSource:
         self.edit_to_probes: float | None = None
         """Seconds from the last request to its probes."""
         self.outside: list[str] = []
-        """Why the scene of the last probes lies outside the model's training domain (viewer.domain)."""
+        """Why the scene of the last probes lies outside the model's training domain (viewer.neural.domain)."""
         self._request = None              # (scene, asked at): the latest request not started yet
         self._voxelizing_request = None
 
@@ -298,7 +298,7 @@ class GIController:
             self._outgoing.append(self.baked)
         elif self.source == "neural":
             if self._neural is None:
-                from viewer.neural import ModelError
+                from viewer.neural.field import ModelError
 
                 try:
                     self._neural = NeuralSource(self.neural_model)
@@ -347,7 +347,7 @@ class GIController:
     @property
     def domain_warning(self) -> str | None:
         """While the neural source shows a scene outside its model's training domain: one line that says
-        so, why, and that the physical solver computes it (viewer.domain.warning); else None."""
+        so, why, and that the physical solver computes it (viewer.neural.domain.warning); else None."""
         if self.source != "neural" or self._neural is None:
             return None
         return warning(self._neural.outside)

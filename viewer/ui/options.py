@@ -8,7 +8,7 @@ import argparse
 from types import SimpleNamespace
 
 from viewer.errors import InputError
-from viewer.gi import GISettings
+from viewer.physical.gi import GISettings
 
 VIEW_CHOICES = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
 GI_CHOICES = ("off", "compute", "solver", "neural")

@@ -4,7 +4,7 @@ relit after every edit.
 Tracing (the geometry stage, the lamp paths, the sun's) runs on a worker thread: its traces are compiled
 code that releases the GIL, so the window keeps drawing. The relight runs where it is fastest on this
 device: in compute shaders on the render thread's context (viewer.gpu.compute_relight) on a real GPU, or
-with the tracing on the worker thread (viewer.relight, compiled, all cores) on a software GL, where
+with the tracing on the worker thread (viewer.physical.relight, compiled, all cores) on a software GL, where
 llvmpipe shares the CPU and the compute relight measured 10x slower (docs/PERFORMANCE.md). Either way:
 
 - a colour or intensity edit: the relight only, on screen within a few frames;
@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import time
 
-from viewer.gi import GISettings, PhysicalGI, Timings
-from viewer.probes import ProbeGrid
+from viewer.physical.gi import GISettings, PhysicalGI, Timings
+from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 from viewer.ui.background import BackgroundTask
 

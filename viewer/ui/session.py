@@ -154,7 +154,7 @@ class Session:
 
     def _update_voxels(self) -> None:
         """Voxelize the shown scene for the `voxels` view (in the background, at the GI resolution)."""
-        from viewer.voxels import voxelize
+        from viewer.rays.voxels import voxelize
 
         key = (self.scene_version, self.gi.settings.voxels)
         if self._voxels is not None and self._voxels.done:

@@ -13,5 +13,5 @@ One module per study, each with `run(config) -> StudyResult` and `chart(result, 
 - ood         the neural model out of its training distribution: error against distance from it
 
 The methods compared live in one registry (`methods.METHODS`); `scenes` builds the study scenes.
-docs/STABILITY.md holds the results; tests/test_stability.py the properties that must always hold.
+docs/STABILITY.md holds the results; tests/bench/test_stability.py the properties that must always hold.
 """

@@ -6,11 +6,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from viewer import sh
+from viewer.probes import sh
 from viewer.bench.stability.methods import METHODS, MethodUnavailable, MethodSettings, run
-from viewer.probes import ProbeGrid
+from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
-from viewer.voxels import FACINGS
+from viewer.rays.voxels import FACINGS
 
 DC_TO_RADIANCE = 1.0 / (0.282095 * 4.0 * np.pi)
 """Mean radiance over the sphere from the SH DC coefficient."""

@@ -6,7 +6,7 @@ x axis).
   but only for numbers: a shape or a light placement the generator never makes has no range to be
   outside of, and a colour 0.99 is only 0.1 widths past 0.9 whatever it does to the light.
 - `EncodingDistance`: one number for any scene, comparable across axes. The network sees a scene only
-  through its input encoding (`viewer.encoding`, one monochrome pass per colour channel), so the
+  through its input encoding (`viewer.neural.encoding`, one monochrome pass per colour channel), so the
   distance is taken there, in a view of each pass: `statistics` (what the scene is made of: a few
   statistics per feature over the lattice) or `layout` (where: the features averaged over 4^3 blocks
   of the lattice). Standardized by the training set's spread, the scene's distance in a view is that
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer import encoding
+from viewer.neural import encoding
 from viewer.scene import Scene
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -77,7 +77,7 @@ VIEWS = {"statistics": statistics, "layout": layout}
 
 
 def scene_encoding(scene: Scene, voxels: int, resolution: int) -> np.ndarray:
-    """The network's input for a scene, as `viewer.neural` makes it (over the scene's bounds)."""
+    """The network's input for a scene, as `viewer.neural.field` makes it (over the scene's bounds)."""
     return encoding.encode_scene(scene, resolution, voxels).inputs
 
 

@@ -2,7 +2,7 @@
 
 - White furnace (a closed room whose every side emits 1 and reflects `albedo`): L = 1 / (1 - albedo)
   everywhere inside, exactly. The eq. 30 series converges only because no receiver gathers more than
-  its hemisphere (rows of T clamped to pi, viewer.transport); the discretised `physical` rows gather
+  its hemisphere (rows of T clamped to pi, viewer.physical.transport); the discretised `physical` rows gather
   ~1.5% less than pi, and the furnace amplifies a missing fraction d of the hemisphere into a relative
   error of about albedo * d / (1 - albedo): the measured price of the discretisation.
 - The closed lit room of the other studies at the same albedos, against Mitsuba; no light may exceed
@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from viewer import gi, reference
+from viewer.physical import gi
+from viewer.reference import mitsuba as reference
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, radiance, style, try_method

@@ -16,11 +16,11 @@ Light is given as a fraction of the lit room's (Mitsuba) light, so 0.01 is 1% of
 
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 
-from viewer import gi, reference
+from viewer.physical import gi
+from viewer.reference import mitsuba as reference
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, radiance, try_method

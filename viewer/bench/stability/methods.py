@@ -18,9 +18,11 @@ from typing import Callable
 
 import numpy as np
 
-from viewer import gi, reference, reference_cache
+from viewer.physical import gi
+from viewer.reference import mitsuba as reference
+from viewer.reference import cache as reference_cache
 from viewer.bench.points import free_space_points
-from viewer.probes import ProbeGrid
+from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 
 
@@ -130,7 +132,7 @@ PROBE_DIRECTIONS = 1024
 def _neural(scene: Scene, settings: MethodSettings) -> ProbeGrid:
     """The shipped network (models/probenet.onnx) at the voxel and probe resolution it was trained at
     (its card's), whatever the settings say: one loaded model for the whole run."""
-    from viewer.neural import ModelError, NeuralField
+    from viewer.neural.field import ModelError, NeuralField
 
     return _once("neural", NeuralField, ModelError).solve(scene, include_emitted=settings.include_emitted)
 
@@ -156,7 +158,7 @@ def size_label(name: str, voxels: int, probes: int) -> str:
     if name == "ambient":
         return "-"
     if name == "neural":
-        from viewer.neural import DEFAULT_MODEL, ModelCard
+        from viewer.neural.field import DEFAULT_MODEL, ModelCard
 
         try:
             card = ModelCard.read(DEFAULT_MODEL)

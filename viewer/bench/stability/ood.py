@@ -1,7 +1,7 @@
 """Out of distribution: the neural field's error against a scene's distance from its training set.
 
 Rooms are drawn with `viewer.training.procedural.random_scene` and the ranges the shipped model was
-trained on (its card's domain, viewer.domain) moved one axis at a time, from inside them to well
+trained on (its card's domain, viewer.neural.domain) moved one axis at a time, from inside them to well
 outside (`steps`): room proportions, colours, lights
 (size and placement) and shapes; plus rooms drawn with the training ranges themselves (`in
 distribution`: the same generator, seeds the training set never used) as the baseline. Per room:
@@ -20,19 +20,19 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer import gi
+from viewer.physical import gi
 from viewer.bench.accuracy import relative_rmse
 from viewer.bench.points import free_space_points
 from viewer.bench.stability.common import RunConfig, StudyResult, try_method
 from viewer.bench.stability.distance import ROOT, outside, scene_encoding, training_distances
 from viewer.bench.stability.methods import MethodSettings, truth_sh
-from viewer.domain import Domain
-from viewer.domain import outside as guard
+from viewer.neural.domain import Domain
+from viewer.neural.domain import outside as guard
 from viewer.training.procedural import PRESETS, Ranges, random_scene
 
 def shipped_card():
-    """The shipped model's card (viewer.neural.ModelCard), or None without a model."""
-    from viewer.neural import DEFAULT_MODEL, ModelCard, ModelError
+    """The shipped model's card (viewer.neural.field.ModelCard), or None without a model."""
+    from viewer.neural.field import DEFAULT_MODEL, ModelCard, ModelError
 
     try:
         return ModelCard.read(DEFAULT_MODEL)
@@ -42,7 +42,7 @@ def shipped_card():
 
 CARD = shipped_card()
 DOMAIN = CARD.domain if CARD is not None else Domain.from_preset("v1")
-"""What the shipped network was trained on (its card's domain, viewer.domain; v1 without a model)."""
+"""What the shipped network was trained on (its card's domain, viewer.neural.domain; v1 without a model)."""
 TRAINED = PRESETS[DOMAIN.ranges]
 """The ranges its rooms were drawn from: the steps below move one axis of them at a time."""
 VOXELS, PROBES = (CARD.voxels, CARD.probes) if CARD is not None else (16, 16)
@@ -165,7 +165,7 @@ def columns(methods) -> list[tuple[str, str, str]]:
              ("statistics", "distance: statistics", "{:.2f}"), ("layout", "distance: layout", "{:.2f}"),
              ("distance", "distance", "{:.2f}")]
             + [(error_key(m, light), f"{m}, {header}", "{:.3f}") for m in methods for light, header, _ in LIGHTS]
-            + [("guard", "the viewer's domain guard (viewer.domain)", "{}")])
+            + [("guard", "the viewer's domain guard (viewer.neural.domain)", "{}")])
 
 
 ERRORS = slice(8, -1)
@@ -232,7 +232,7 @@ def run(config: RunConfig) -> StudyResult:
         "shades from the probes). Outside the ranges: the varied axis's drawn values (room half extents; albedos "
         f"and HSV saturations; light half extents; object count) past the ranges `{DOMAIN.ranges}` the shipped "
         "model's card names (its domain), in widths of the range. The guard: the reasons the viewer gives for "
-        "the room (viewer.domain, from the card's domain). "
+        "the room (viewer.neural.domain, from the card's domain). "
         f"Distance: the network input's nearest-neighbour distance to the {distances['statistics'].count} "
         "training scenes in two views, "
         "`statistics` (per-feature mean, spread and 99th percentile over the lattice, albedo percentiles) and "

@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from viewer import gi
+from viewer.physical import gi
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, axis_irradiance, try_method
 from viewer.bench.stability.methods import MethodSettings, MethodUnavailable, gl_context
-from viewer.probes import ProbeGrid
+from viewer.probes.grid import ProbeGrid
 
 COLUMNS = [("radiance", "lamp radiance", "{:.0e}"), ("light", "light", "{}"), ("method", "method", "{}"),
            ("packing", "packing", "{}"), ("largest", "largest coefficient", "{:.3g}"),

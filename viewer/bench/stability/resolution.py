@@ -13,17 +13,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from viewer import probes as probe_grid
-from viewer import reference, transport
+from viewer.physical import projection
+from viewer.probes import grid as probe_grid
+from viewer.reference import mitsuba as reference
+from viewer.physical import transport
 from viewer import scene as scene_files
 from viewer.bench.accuracy import relative_rmse
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, try_method
 from viewer.bench.stability.methods import MethodSettings, MethodUnavailable, gl_context
-from viewer.gi import GISettings
-from viewer.raymarch import Tracer
-from viewer.voxels import voxelize
+from viewer.physical.gi import GISettings
+from viewer.rays.raymarch import Tracer
+from viewer.rays.voxels import voxelize
 
 COLUMNS = [("scene", "scene", "{}"), ("method", "method", "{}"), ("voxels", "voxels N", "{}"),
            ("probes", "probes M", "{}"), ("rmse", "rel. RMSE", "{:.3f}"), ("seconds", "seconds", "{:.1f}")]
@@ -38,8 +40,8 @@ def numpy_grids(scene, voxels: int, resolutions) -> dict[int, probe_grid.ProbeGr
     grid = voxelize(scene, voxels)
     tracer = Tracer.build(grid)
     light = transport.solve(grid, scene.sun, tracer=tracer)
-    return {m: probe_grid.project(grid, light, scene.sun, scene.bounds,
-                                  probe_grid.ProbeSettings(resolution=m, directions=DIRECTIONS), tracer)
+    return {m: projection.project(grid, light, scene.sun, scene.bounds,
+                                  projection.ProbeSettings(resolution=m, directions=DIRECTIONS), tracer)
             for m in resolutions}
 
 

@@ -1,14 +1,14 @@
 """SH ringing: a small bright emitter, seen by a probe as almost a delta, rings below zero in L2.
 
-The L2 projection of a delta gives negative irradiance on its far side (-0.040 of the peak, viewer.sh);
+The L2 projection of a delta gives negative irradiance on its far side (-0.040 of the peak, viewer.probes.sh);
 a probe near a small lamp sees nearly that. Measured at every probe of the grid and at free-space points,
 over 4096 lattice normals each, for the full incident light (`sample`) and the indirect light only (what
 the renderer shades from the probes; it clamps negative irradiance to 0, i.e. black), without deringing
-and with the deringing window (`GISettings.dering`, viewer.sh.dering, the poussin window: strength 1
+and with the deringing window (`GISettings.dering`, viewer.probes.sh.dering, the poussin window: strength 1
 guarantees non-negative irradiance for non-negative radiance, at the cost of blurring band 1 by half).
 
 The deringing is applied to each method's grid as the product does it, after projection and fill
-(viewer.probes.project), so one solve serves every strength. Mitsuba's probes show the ringing that the
+(viewer.probes.grid.project), so one solve serves every strength. Mitsuba's probes show the ringing that the
 truncation to L2 itself causes: no method can do better without deringing.
 """
 
@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from viewer import gi, sh
+from viewer.physical import gi
+from viewer.probes import sh
 from viewer.bench.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, style, try_method

@@ -20,7 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from viewer import gi
+from viewer.physical import gi
 from viewer.bench.accuracy import relative_rmse
 from viewer.bench.points import free_space_points
 from viewer.bench.stability.common import RunConfig, StudyResult
@@ -57,8 +57,8 @@ def entering_power(scene, window: dict) -> float:
 
 def voxel_sun_power(scene, voxels: int) -> float:
     """Sunlight the solver's voxels receive (mean of RGB), as its first bounce sees it."""
-    from viewer.transport import sun_irradiance
-    from viewer.voxels import voxelize
+    from viewer.physical.transport import sun_irradiance
+    from viewer.rays.voxels import voxelize
 
     grid = voxelize(scene, voxels)
     return float((sun_irradiance(grid, scene.sun).mean(axis=1) * grid.area).sum())
@@ -87,8 +87,8 @@ def floor_sun_visibility(scene, voxels: int) -> tuple[float, float]:
     """Of random points just above the floor: the fraction that truly see the sun (exact ray casts
     against the triangles) and the fraction that the voxel tracer lets see it although a surface is in
     the way (`Tracer.escapes`, as the solver's sun term and its probes use it)."""
-    from viewer.raymarch import Tracer
-    from viewer.voxels import voxelize
+    from viewer.rays.raymarch import Tracer
+    from viewer.rays.voxels import voxelize
 
     lo, hi = scene.bounds
     rng = np.random.default_rng(0)

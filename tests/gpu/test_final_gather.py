@@ -1,0 +1,145 @@
+"""The final gather of the baked indirect light (viewer/gpu/final_gather.py): where its rays land in the
+lightmap, and that their sum is the irradiance integral."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scenes import box, CUBE_QUADS
+
+from viewer.rays import dda
+from viewer.gpu.final_gather import GatherRays
+from viewer.physical.geometry import voxelize_with_faces
+from viewer.gpu.direct_bake import lightmap_layout, lightmap_texels
+from viewer.scene import Scene, load
+
+TEXEL = 0.05
+
+
+def gather(scene: Scene, points, normals, rays: int = 72, seed: int = 0):
+    """The rays of the samples, and the lightmap's texel positions ((H, 2W, 3): front | back)."""
+    origin, n, size = lightmap_layout(scene, TEXEL)
+    keep = scene.face_areas > 0
+    face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
+    cells = dda.Cells.of(voxelize_with_faces(scene, 16), scene)
+    rays = GatherRays.of(np.asarray(points, np.float64), np.asarray(normals, np.float64), cells, face_tile, origin,
+                         n, size[0], 1e-6, rays, seed)
+    position = lightmap_texels(scene, origin, n, size)[0][..., :3]
+    return rays, np.concatenate([position, position], axis=1)
+
+
+def open_top_room() -> Scene:
+    """The closed room of half size 1 without its ceiling (CUBE_QUADS[3], y = 1)."""
+    room = box(inward=True, albedo=0.5)
+    keep = np.ones(len(room.faces), bool)
+    keep[[3, 3 + len(CUBE_QUADS)]] = False            # quads_to_triangles: first halves, then second
+    assert np.allclose(room.vertices[room.faces[~keep]][..., 1], 1.0)
+    return Scene("open", room.vertices, room.faces[keep], room.albedo[keep], room.emission[keep],
+                 room.face_group[keep], room.groups)
+
+
+def floor_points(count: int, spread: float = 0.0, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    points = np.column_stack([rng.uniform(-spread, spread, count), np.full(count, -1.0),
+                              rng.uniform(-spread, spread, count)])
+    return points, np.tile([0.0, 1.0, 0.0], (count, 1))
+
+
+def test_a_closed_room_sends_every_ray_back_and_the_sum_is_what_it_reflects():
+    """In a closed room every ray lands on a texel, so a lightmap that reflects 1 everywhere gives
+    irradiance 1 (the furnace), and 0.3 where the room reflects 0.3."""
+    scene = box(inward=True, albedo=0.5)
+    rays, position = gather(scene, *floor_points(300, spread=0.9))
+    assert (rays.hits >= 0).all()
+    pixels = position.shape[0] * position.shape[1]
+    np.testing.assert_allclose(rays.irradiance(np.ones((pixels, 3), np.float32)), 1.0, rtol=1e-6)
+    np.testing.assert_allclose(rays.irradiance(np.full((pixels, 3), 0.3, np.float32)), 0.3, rtol=1e-5)
+
+
+def test_rays_out_of_an_open_side_bring_nothing_and_the_rest_is_the_form_factor():
+    """From the centre of the floor of a room without a ceiling, the cosine-weighted share of the
+    hemisphere that escapes is the form factor to the opening, 0.2394 (a point to a parallel 2 x 2
+    square 2 above its centre: four corner rectangles of A = B = 1/2). Each sample shifts its strata at
+    random, so their mean converges to the integral (a fixed pattern would err alike on every sample)."""
+    rays, position = gather(open_top_room(), *floor_points(400))
+    escaped = (rays.hits == -1).mean()
+    a = b = 0.5
+    corner = (a / np.sqrt(1 + a * a) * np.arctan(b / np.sqrt(1 + a * a))
+              + b / np.sqrt(1 + b * b) * np.arctan(a / np.sqrt(1 + b * b))) / (2 * np.pi)
+    assert escaped == pytest.approx(4 * corner, abs=0.006)
+    pixels = position.shape[0] * position.shape[1]
+    light = rays.irradiance(np.ones((pixels, 3), np.float32))
+    assert light.mean() == pytest.approx(1.0 - 4 * corner, abs=0.006)
+
+
+def test_a_ray_lands_on_the_texel_of_the_surface_it_hits():
+    """Texel-accurate hits in the Cornell box: each texel a sample's ray lands on lies in front of the
+    sample, and the segment to it is clear, but for a few grazing rays that land a texel off a corner."""
+    scene = load("cornell")
+    origin, n, size = lightmap_layout(scene, TEXEL)
+    texels, normals, _ = lightmap_texels(scene, origin, n, size)
+    covered = texels[..., 3] > 0
+    pick = np.random.default_rng(1).choice(int(covered.sum()), 300, replace=False)
+    points, normals = texels[covered][pick, :3].astype(np.float64), normals[covered][pick, :3].astype(np.float64)
+    rays, position = gather(scene, points, normals, rays=32)
+    sample, ray = np.nonzero(rays.hits >= 0)
+    landed = position.reshape(-1, 3)[rays.hits[sample, ray]]
+    ahead = np.einsum("ij,ij->i", landed - points[sample], normals[sample])
+    assert (ahead > 0).mean() > 0.99
+    toward = points[sample] + 0.97 * (landed - points[sample])       # stop short of the surface landed on
+    clear = dda.segments_clear(dda.Cells.of(voxelize_with_faces(scene, 32), scene),
+                               points[sample] + 1e-5 * normals[sample], toward)
+    assert clear.mean() > 0.98
+
+
+def test_a_ray_that_meets_the_back_of_a_face_reads_its_back_side():
+    """A one-sided wall across a closed room, its front towards +x: rays from a point facing it from
+    -x meet its back, and read the back sides' half of the lightmap (the right half)."""
+    wall = np.array([[0.02, -1, -1], [0.02, 1, -1], [0.02, 1, 1], [0.02, -1, 1]], np.float64)
+    partition = Scene("partition", wall, np.array([[0, 1, 2], [0, 2, 3]]), 0.5, 0.0, 0, ("partition",))
+    assert (partition.face_normals[:, 0] > 0.99).all()
+    scene = Scene.concatenate("partitioned", [box(inward=True, albedo=0.5, name="room"), partition])
+    rays, position = gather(scene, np.tile([-0.5, 0.0, 0.0], (20, 1)), np.tile([1.0, 0.0, 0.0], (20, 1)))
+    width = position.shape[1] // 2
+    assert (rays.hits >= 0).all()
+    back = rays.hits % (2 * width) >= width
+    assert back.mean() > 0.75           # the partition fills the view but for grazing rays to the side walls
+    pixels = position.shape[0] * position.shape[1]
+    reflected = np.zeros((position.shape[0], 2 * width, 3), np.float32)
+    reflected[:, width:] = 2.0                                       # back sides reflect 2, fronts 0
+    assert rays.irradiance(reflected.reshape(pixels, 3)).mean() == pytest.approx(2.0 * back.mean(), rel=1e-5)
+
+
+def test_ray_counts_must_fill_the_grid_of_strata():
+    """A truncated grid of strata leans towards the normal (2% more cos theta at 64 rays): refused."""
+    with pytest.raises(ValueError, match="2 r"):
+        gather(box(inward=True), *floor_points(2), rays=64)
+
+
+@pytest.mark.parametrize("where", [(0.0, 0.9, 0.0), (0.7, -0.2, 0.4), (0.0, -0.99, 0.0)])
+def test_the_moved_faces_sphere_skips_only_rays_that_cannot_meet_them(where):
+    """`_affected` skips rays (and rows of strata) that cannot meet the moved triangles' bounding sphere;
+    what it marks is exactly what it marks with a sphere that skips nothing, for samples all around the
+    triangles (near them, under them, on their plane)."""
+    from viewer.gpu import final_gather
+
+    rng = np.random.default_rng(5)
+    count = 400
+    points = rng.uniform(-1.0, 1.0, (count, 3))
+    normals = rng.normal(size=(count, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    corners = np.array(where) + np.array([[[-0.1, 0, -0.1], [0.1, 0, -0.1], [0.1, 0, 0.1]],
+                                          [[-0.1, 0, -0.1], [0.1, 0, 0.1], [-0.1, 0.05, 0.1]]])
+    points[:10] = corners[0, 0] + rng.uniform(-0.02, 0.02, (10, 3))      # a few right next to them
+    frame = final_gather._Frame.of(points, normals, 72, 0)
+    hits = rng.integers(-1, 50, (count, 72)).astype(np.int32)
+    pixel_points = rng.uniform(-1.0, 1.0, (50, 3))
+    v0, e1, e2 = corners[:, 0].copy(), corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    sample_moved, pixel_moved = rng.random(count) < 0.02, rng.random(50) < 0.1   # some rays marked anyway
+    args = (*frame.args(0.0), hits, sample_moved, pixel_moved, pixel_points, v0, e1, e2, 0.01)
+    sphere = final_gather._bounding_sphere(v0, e1, e2)
+    culled = final_gather._affected(*args, sphere)
+    everything = final_gather._affected(*args, (0.0, 0.0, 0.0, 1e6))
+    assert 0 < culled.sum() < culled.size
+    np.testing.assert_array_equal(culled, everything)
+    assert culled[sample_moved].all() and culled[np.isin(hits, np.flatnonzero(pixel_moved))].all()

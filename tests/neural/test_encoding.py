@@ -1,0 +1,218 @@
+"""The network's input encoding: the symmetries the design relies on, and the direct-light feature's
+physics."""
+
+import numpy as np
+import pytest
+
+from scenes import box, ceiling_lamp
+from viewer.neural import encoding
+from viewer.probes import sh
+from viewer.scene import DirectionalLight, Scene, load
+from viewer.rays.voxels import voxelize
+
+
+def encode(scene: Scene, m: int = 8, n: int = 16) -> encoding.Encoding:
+    return encoding.encode_scene(scene, m, n)
+
+
+def test_shape_and_finite():
+    enc = encode(load("cornell"), m=16, n=32)
+    assert enc.inputs.shape == (3, encoding.CHANNELS, 16, 16, 16)
+    assert np.all(np.isfinite(enc.inputs)) and np.all(enc.scale > 0)
+
+
+def test_brighter_light_only_changes_the_scale():
+    """Transport is linear in the emitted light: the network sees the same input, the output scale doubles."""
+    scene = load("cornell")
+    brighter = scene.with_emission("light", 2 * scene.emission[scene.face_group == scene.group_index("light")][0])
+    a, b = encode(scene), encode(brighter)
+    np.testing.assert_allclose(b.scale, 2 * a.scale, rtol=1e-5)
+    np.testing.assert_allclose(b.inputs, a.inputs, atol=1e-5)
+
+
+def test_colour_channels_are_independent():
+    """Recolouring a wall in green only changes the green pass: its albedo, and the light it reflects."""
+    scene = load("cornell")
+    red = scene.group_albedo("red-wall")
+    a, b = encode(scene), encode(scene.with_albedo("red-wall", [red[0], 0.6, red[2]]))
+    changed = np.abs(b.inputs - a.inputs).reshape(3, encoding.CHANNELS, -1).max(axis=2) > 1e-6
+    assert not changed[0].any() and not changed[2].any()
+    expected = np.zeros(encoding.CHANNELS, bool)
+    expected[encoding.FEATURES.index("albedo")] = True
+    expected[encoding.BOUNCE] = True
+    np.testing.assert_array_equal(changed[1], expected)
+    # the green wall reflects more green: the bounce's DC grows, most beside the wall
+    more = (b.inputs[1, encoding.BOUNCE][0] - a.inputs[1, encoding.BOUNCE][0])
+    assert more.min() >= -1e-6 and more.max() > 0
+    assert more[0].mean() > more[-1].mean()  # red wall at -x
+
+
+def test_no_light_gives_zero_scale_and_zero_inputs_of_light():
+    enc = encode(box(inward=True, albedo=0.5, name="dark-room"))
+    assert np.all(enc.scale == 0)
+    assert np.all(enc.inputs[:, encoding.DIRECT] == 0)
+
+
+def test_direct_feature_is_the_lamps_solid_angle():
+    """A small lamp straight above a probe in an open scene: the DC of the unshadowed feature equals
+    L * A * cos / r^2 * Y00 within the near-field clamp's error."""
+    lamp = ceiling_lamp(half_size=0.05, height=0.95, radiance=10.0)
+    scene = Scene.concatenate("lamp-above-floor", [lamp, box(half_size=1.0, centre=(0, -2.0, 0), name="block")])
+    voxels = voxelize(scene, 32)
+    probe = np.array([[0.0, -0.05, 0.0]])
+    lights = encoding.emitting_patches(np.zeros(voxels.count, np.int64), voxels)
+    value = encoding.emitter_sh(lights, probe)[0, 0, 0]
+    r = 1.0
+    expected = 10.0 * 0.01 / (r * r) * sh.basis(np.array([0.0, 1.0, 0.0]))[0]
+    assert value == pytest.approx(expected, rel=0.02)
+
+
+def test_sun_reaches_only_the_cells_under_the_window():
+    """A closed room with a hole in the ceiling: straight-down sun lights the column under the hole."""
+    room = box(inward=True, albedo=0.5, name="room")
+    ceiling = np.abs(room.triangles[:, :, 1] - 1.0).max(axis=1) < 1e-9
+    walls = Scene("room", room.vertices, room.faces[~ceiling], 0.5, 0.0, 0, ("room",))
+    frame = []
+    for x0, x1, z0, z1 in ((-1, 1, -1, -0.25), (-1, 1, 0.25, 1), (-1, -0.25, -0.25, 0.25), (0.25, 1, -0.25, 0.25)):
+        v = np.array([[x0, 1, z0], [x0, 1, z1], [x1, 1, z1], [x1, 1, z0]], np.float64)  # facing down
+        frame.append(Scene("frame", v, np.array([[0, 1, 2], [0, 2, 3]]), 0.5, 0.0, 0, ("ceiling",)))
+    sun = DirectionalLight(direction=np.array([0.0, 1.0, 0.0]), irradiance=np.ones(3))
+    scene = Scene.concatenate("window", [walls, *frame], sun=sun)
+    enc = encode(scene, m=8, n=32)
+    visible = enc.inputs[0, encoding.DIRECT.start] > 0  # DC of the direct light: the sun is all there is
+    assert visible[3:5, :7, 3:5].all()  # under the hole, all the way down
+    assert not visible[0:2, :7, 0:2].any() and not visible[6:8, :7, 6:8].any()  # under the solid ceiling
+
+
+def test_a_wall_between_the_lamp_and_a_probe_casts_its_shadow():
+    """A partition hanging from the ceiling beside the lamp: probes behind it, below the lamp's height,
+    get no direct light; the same probes without the partition get it; probes in front keep theirs."""
+    lamp = ceiling_lamp(half_size=0.15, height=0.95, radiance=10.0)
+    room = box(inward=True, albedo=0.5, name="room")
+    v = np.array([[0.4, 1.0, -1.0], [0.4, 1.0, 1.0], [0.4, -0.2, 1.0], [0.4, -0.2, -1.0]])  # x = 0.4, y >= -0.2
+    partition = Scene("partition", v, np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]]), 0.5, 0.0, 0,
+                      ("partition",))
+    shadowed = encode(Scene.concatenate("shadowed", [room, lamp, partition]), m=8, n=16)
+    open_ = encode(Scene.concatenate("open", [room, lamp]), m=8, n=16)
+
+    def direct(enc):
+        return enc.inputs[0, encoding.DIRECT.start] * enc.scale[0]
+
+    behind = (slice(6, 8), slice(2, 5), slice(None))   # x > 0.5, y in (-0.5, 0.25): hidden by the partition
+    in_front = (slice(2, 6), slice(2, 5), slice(None))
+    assert direct(open_)[behind].min() > 0
+    assert np.all(direct(shadowed)[behind] == 0)
+    np.testing.assert_allclose(direct(shadowed)[in_front], direct(open_)[in_front], rtol=1e-5)
+
+
+def test_the_bounce_is_the_lit_walls_reflected_light():
+    """One bounce follows the albedo linearly: black walls reflect nothing, white walls twice what grey
+    ones do; it is there wherever the walls are lit and scaled out like the direct light."""
+    lamp = ceiling_lamp(half_size=0.3, height=0.95, radiance=5.0)
+
+    def bounce(albedo):
+        enc = encode(Scene.concatenate("room", [box(inward=True, albedo=albedo, name="room"), lamp]), m=8, n=16)
+        return enc.inputs[:, encoding.BOUNCE] * enc.scale[:, None, None, None, None], enc
+
+    black, _ = bounce(0.0)
+    grey, enc = bounce(0.4)
+    white, _ = bounce(0.8)
+    assert np.all(black == 0)
+    assert grey[:, 0].min() > 0
+    np.testing.assert_allclose(white, 2 * grey, rtol=1e-4, atol=1e-7 * np.abs(grey).max())
+    # the lamp lights the floor, not the ceiling: the bounce comes from below (Y_1-1 < 0), and most
+    # steeply under the dark ceiling
+    tilt = grey[0, 1, 4, :, 4] / grey[0, 0, 4, :, 4]
+    assert np.all(tilt < 0) and tilt[-1] < tilt[3]
+
+
+def test_both_sides_of_a_thin_wall_reflect_apart():
+    """A thin partition lit on one side reflects that light whether or not its dark back is modelled:
+    the back's voxels share cells with the front's, and merged with them into one patch their normals
+    cancel and the lit side shines nowhere (the first v3 encoding did this)."""
+    assert list(encoding.facings(np.vstack([np.eye(3), -np.eye(3)]))) == [1, 3, 5, 0, 2, 4]
+    lamp = ceiling_lamp(half_size=0.15, height=0.95, radiance=10.0)
+    room = box(inward=True, albedo=0.5, name="room")
+    v = np.array([[0.4, 1.0, -1.0], [0.4, 1.0, 1.0], [0.4, -0.6, 1.0], [0.4, -0.6, -1.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]])
+    lit_side = [f for f in faces if np.cross(*(v[f[1:]] - v[f[0]]))[0] < 0]   # facing -x: towards the lamp
+    assert len(lit_side) == 2
+
+    def bounce(partition_faces):
+        partition = Scene("partition", v, np.array(partition_faces), 0.8, 0.0, 0, ("partition",))
+        enc = encode(Scene.concatenate("room", [room, lamp, partition]), m=8, n=16)
+        return (enc.inputs[0, encoding.BOUNCE.start] * enc.scale[0])[4:6, 3:7, 2:6]   # just before the partition
+
+    one_sided, two_sided = bounce(lit_side), bounce(faces)
+    assert one_sided.min() > 0
+    np.testing.assert_allclose(two_sided, one_sided, rtol=0.02)
+
+
+def test_a_kept_bounce_gathers_only_the_patches_whose_light_changed():
+    """`Bounce` kept across albedo edits: the same numbers as a fresh `bounce_sh` after each, while
+    gathering only the recoloured group's patches; a change of the direct light gathers them all, and a
+    pass left out of `channels` keeps its earlier values."""
+    scene = load("cornell")
+    lo, hi = scene.bounds
+    voxels = voxelize(scene, 16)
+    bands = np.array([1.0, 0.1, 0.1, 0.1, 0.05, 0.05, 0.05, 0.05, 0.05])   # a positive DC, small wiggles
+    direct = np.random.default_rng(3).random((12 ** 3, 9, 3)) * bands[None, :, None]
+    kept = encoding.Bounce(voxels, lo, hi, 12)
+    np.testing.assert_allclose(kept.sh(voxels.albedo, direct), encoding.bounce_sh(voxels, direct, lo, hi, 12), rtol=1e-6)
+    everything = kept.gathered_patches
+    for albedo in [(0.9, 0.1, 0.3), (0.2, 0.7, 0.3), (0.05, 0.05, 0.05)]:
+        edited = voxelize(scene.with_albedo("red-wall", albedo), 16)
+        assert kept.fits(edited)
+        fresh = encoding.bounce_sh(edited, direct, lo, hi, 12)
+        np.testing.assert_allclose(kept.sh(edited.albedo, direct), fresh, rtol=1e-5, atol=1e-6 * np.abs(fresh).max())
+        assert 0 < kept.gathered_patches < everything / 4
+    brighter = 2.0 * direct
+    np.testing.assert_allclose(kept.sh(edited.albedo, brighter), 2.0 * fresh, rtol=1e-5, atol=1e-6 * np.abs(fresh).max())
+    assert kept.gathered_patches == everything
+    only_red = kept.sh(voxels.albedo, brighter, channels=np.array([True, False, False]))
+    np.testing.assert_allclose(only_red[..., 0], 2.0 * encoding.bounce_sh(voxels, direct, lo, hi, 12)[..., 0], rtol=1e-5,
+                               atol=1e-6 * np.abs(fresh).max())
+    np.testing.assert_allclose(only_red[..., 1:], 2.0 * fresh[..., 1:], rtol=1e-5, atol=1e-6 * np.abs(fresh).max())
+    assert not kept.fits(voxelize(scene.transformed_group("small-box", np.diag([1.0, 0.5, 1.0, 1.0])), 16))
+
+
+def test_the_bounce_gather_of_any_surface_light():
+    """`Bounce.gathered` gathers the light the voxels leave with as the bounce does: given each voxel's
+    albedo x its irradiance from the direct light / pi it is the bounce; it is linear, and a surface
+    light of zero gives zero; 1-cell patches on the probes' own lattice gather the same light."""
+    scene = load("cornell")
+    lo, hi = scene.bounds
+    voxels = voxelize(scene, 16)
+    bands = np.array([1.0, 0.1, 0.1, 0.1, 0.05, 0.05, 0.05, 0.05, 0.05])
+    direct = np.random.default_rng(4).random((12 ** 3, 9, 3)) * bands[None, :, None]
+    bounce = encoding.Bounce(voxels, lo, hi, 12)
+    expected = bounce.sh(voxels.albedo, direct)
+    leaving = voxels.albedo * bounce._leaving_per_albedo
+    np.testing.assert_allclose(bounce.gathered(leaving), expected, rtol=1e-6, atol=1e-9 * np.abs(expected).max())
+    np.testing.assert_allclose(bounce.gathered(3.0 * leaving), 3.0 * expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max())
+    assert not np.any(bounce.gathered(np.zeros_like(leaving)))
+    fine = encoding.Bounce(voxels, lo, hi, 12, patch=1, lattice=1).gathered(leaving)
+    # the same light in all: the DC summed over the probes agrees to a few percent
+    assert abs(fine[:, 0].sum() / expected[:, 0].sum() - 1.0) < 0.1
+
+
+def test_the_bounce_floor_scores_each_gather_by_its_best_gain():
+    """viewer.training.bounce_floor: a target that is the gather of the solver's converged surface light
+    scores 0 for that gather, any gain of it too, and no gather scores above 100% (a gain of 0 does)."""
+    from types import SimpleNamespace
+
+    from viewer.physical.gi import GISettings, PhysicalGI
+    from viewer.training import bounce_floor
+
+    scene = load("cornell")
+    lo, hi = scene.bounds
+    solver = PhysicalGI(GISettings(voxels=16, probes=8))
+    solver.update(scene)
+    grid = voxelize(scene, 16)
+    gathered = encoding.Bounce(grid, lo, hi, 8).gathered(solver.lighting.reflected.astype(np.float64))
+    target = 2.5 * gathered.reshape(8, 8, 8, 9, 3).transpose(4, 3, 0, 1, 2)
+    example = SimpleNamespace(scene=scene, lo=np.asarray(lo), hi=np.asarray(hi), path="cornell")
+    errors = bounce_floor.room_errors(example, target, np.ones((8, 8, 8), bool), 8, 16, full=False)
+    assert errors["converged surface light"] < 1e-6
+    assert all(0.0 <= e <= 1.0 + 1e-9 for e in errors.values())
+    assert errors["bounce input"] > 0.01

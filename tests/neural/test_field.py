@@ -1,0 +1,257 @@
+"""The neural GI source: export fidelity, model cards, refusal of bad models, and the symmetries the
+training relies on."""
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from viewer.neural import encoding
+from viewer.neural import field as neural
+from viewer.scene import Scene, load
+from viewer.rays.voxels import voxelize
+
+torch = pytest.importorskip("torch", reason="the train extra (torch) is needed to build models in tests")
+
+from viewer.training import export  # noqa: E402 - needs torch
+from viewer.training.models import ProbeNet, ProbeNetConfig  # noqa: E402
+from viewer.training.train import mirror  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def random_model(seed: int = 0) -> ProbeNet:
+    """A small ProbeNet with every weight random (the zero-initialized last layer too)."""
+    torch.manual_seed(seed)
+    model = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2))
+    with torch.no_grad():
+        for p in model.parameters():
+            p.normal_(0.0, 0.3)
+    return model.eval()
+
+
+def encoded(scene: Scene, m: int = 8) -> encoding.Encoding:
+    return encoding.encode_scene(scene, m, 16)
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """A random model exported with a card, as the training pipeline writes it."""
+    folder = tmp_path_factory.mktemp("models")
+    model = random_model()
+    path = folder / "tiny.onnx"
+    export.export_onnx(model, path, 8)
+    export.write_card(path, model, 8, training={"note": "random weights, for tests"}, metrics={})
+    card = json.loads(path.with_suffix(".json").read_text())
+    card["inputs"]["voxels"] = 16
+    path.with_suffix(".json").write_text(json.dumps(card))
+    return model, path
+
+
+def test_onnx_equals_torch(exported):
+    model, path = exported
+    inputs = encoded(load("cornell")).inputs
+    assert export.max_difference(model, path, inputs) < 1e-4
+
+
+def test_neural_field_gives_probes_in_radiance_units(exported):
+    model, path = exported
+    field = neural.NeuralField(path)
+    scene = load("cornell")
+    grid = field.solve(scene)
+    assert grid.coefficients.shape == (8, 8, 8, 9, 3) and np.all(np.isfinite(grid.coefficients))
+    enc = encoded(scene)
+    with torch.no_grad():
+        out = model(torch.from_numpy(enc.inputs)).numpy()
+    expected = out[:, :9] * enc.scale[:, None, None, None, None]
+    np.testing.assert_allclose(grid.coefficients, expected.transpose(2, 3, 4, 1, 0), rtol=1e-4, atol=1e-5)
+    reflected = field.solve(scene, include_emitted=False).coefficients
+    assert not np.allclose(reflected, grid.coefficients)
+
+
+def test_brighter_lamp_gives_exactly_brighter_probes(exported):
+    """Linearity in the emitted light holds by construction (the encoding's scale), for any weights."""
+    _, path = exported
+    field = neural.NeuralField(path)
+    scene = load("cornell")
+    light = scene.group_index("light")
+    brighter = scene.with_emission("light", 3 * scene.emission[scene.face_group == light][0])
+    np.testing.assert_allclose(field.solve(brighter).coefficients, 3 * field.solve(scene).coefficients,
+                               rtol=1e-4, atol=1e-5)
+
+
+def test_dark_scene_gives_zero_probes(exported):
+    _, path = exported
+    from scenes import box
+
+    grid = neural.NeuralField(path).solve(box(inward=True, albedo=0.5, name="dark"))
+    assert np.all(grid.coefficients == 0)
+
+
+def test_predictions_after_edits_equal_fresh_ones(exported):
+    """The kept encoder and the reused network passes change no number: after each edit the probes
+    are those of a prediction from scratch; a lamp's colour edit runs no pass of the network."""
+    _, path = exported
+    field = neural.NeuralField(path)
+    scene = load("cornell")
+    lo, hi = scene.bounds
+    lamp = scene.emission[scene.face_group == scene.group_index("light")][0]
+    matrix = np.eye(4)
+    matrix[0, 3] = 0.2
+    steps = [("new", scene), ("lamp colour", scene.with_emission("light", lamp * (0.5, 1.0, 1.5))),
+             ("albedo", scene.with_albedo("red-wall", (0.2, 0.7, 0.2))),
+             ("lamp moved", scene.transformed_group("light", matrix))]
+    for what, edited in steps:
+        voxels = voxelize(edited, 16)
+        blockers = encoding.occluders(edited, voxels)
+        kept = field.predict(voxels, edited.sun, lo, hi, blockers, include_emitted=False)
+        passes = field.passes_run
+        fresh = field.predict(voxels, edited.sun, lo, hi, blockers, include_emitted=False, reuse=False)
+        np.testing.assert_allclose(kept.coefficients, fresh.coefficients, rtol=1e-4,
+                                   atol=1e-5 * np.abs(fresh.coefficients).max(), err_msg=what)
+        assert np.array_equal(kept.valid, fresh.valid)
+        assert passes == {"new": 3, "lamp colour": 0, "albedo": 3, "lamp moved": 3}[what], what
+
+
+def test_neural_gi_recolours_the_voxels_of_a_colour_edit(exported):
+    """The viewer's path: a colour edit keeps the voxels (recoloured by the faces' shares), a moved lamp
+    voxelizes again; either way the probes are those of the edited scene from scratch."""
+    _, path = exported
+    gi = neural.NeuralGI(neural.NeuralField(path))
+    scene = load("cornell")
+    matrix = np.eye(4)
+    matrix[2, 3] = 0.15
+    lamp = scene.emission[scene.face_group == scene.group_index("light")][0]
+    recoloured = scene.with_albedo("green-wall", (0.8, 0.8, 0.1))
+    for what, edited in (("new", scene), ("albedo", recoloured),
+                         ("lamp colour", recoloured.with_emission("light", lamp * (1.2, 0.6, 0.3))),
+                         ("lamp moved", scene.transformed_group("light", matrix))):
+        timings: dict = {}
+        grid = gi.update(edited, include_emitted=True, timings=timings)
+        assert ("voxelize" in timings) == (what in ("new", "lamp moved")), what
+        assert gi.field.passes_run == (0 if what == "lamp colour" else 3), what
+        fresh = neural.NeuralField(path).solve(edited, include_emitted=True)
+        np.testing.assert_allclose(grid.coefficients, fresh.coefficients, rtol=1e-4,
+                                   atol=1e-5 * np.abs(fresh.coefficients).max(), err_msg=what)
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "no-card", "bad-card", "sha", "version"])
+def test_bad_model_is_refused_with_a_clear_message(exported, tmp_path, damage):
+    _, path = exported
+    target = tmp_path / "model.onnx"
+    shutil.copy(path, target)
+    shutil.copy(path.with_suffix(".json"), target.with_suffix(".json"))
+    card = json.loads(target.with_suffix(".json").read_text())
+    if damage == "garbage":
+        target.write_bytes(b"\x00not an onnx file" * 64)
+        card["sha256"] = neural.file_sha256(target)
+    elif damage == "truncated":
+        target.write_bytes(path.read_bytes()[:2000])
+        card["sha256"] = neural.file_sha256(target)
+    elif damage == "no-card":
+        target.with_suffix(".json").unlink()
+    elif damage == "bad-card":
+        card = {"name": "x"}
+    elif damage == "sha":
+        card["sha256"] = "0" * 64
+    elif damage == "version":
+        card["inputs"]["encoding_version"] = encoding.VERSION + 1
+    if damage != "no-card":
+        target.with_suffix(".json").write_text(json.dumps(card))
+    with pytest.raises(neural.ModelError) as info:
+        neural.NeuralField(target)
+    message = str(info.value)
+    assert "\n" not in message and "model" in message.lower() or target.name in message
+
+
+def test_sample_with_a_missing_model_exits_2(tmp_path):
+    points = tmp_path / "p.npy"
+    np.save(points, np.zeros((4, 3), np.float32))
+    result = subprocess.run([sys.executable, "-m", "viewer", "sample", "cornell", "--points", str(points),
+                             "--method", "neural", "--model", str(tmp_path / "none.onnx"),
+                             "--out", str(tmp_path / "o.npy")], capture_output=True, text=True, cwd=ROOT)
+    assert result.returncode == 2
+    assert len(result.stderr.strip().splitlines()) == 1 and "no trained model" in result.stderr
+
+
+def test_mirror_augmentation_is_the_mirrored_scene():
+    """Training mirrors encoded scenes instead of re-encoding them: the mirror of the encoding must be
+    the encoding of the mirrored scene (x -> -x, winding reversed)."""
+    scene = load("paper-test")
+    flipped = Scene("mirrored", scene.vertices * np.array([-1.0, 1.0, 1.0]), scene.faces[:, ::-1],
+                    scene.albedo, scene.emission, scene.face_group, scene.groups)
+    a, b = encoded(scene), encoded(flipped)
+    x = torch.from_numpy(a.inputs)
+    y = torch.zeros(3, 18, 8, 8, 8)
+    v = torch.zeros(3, 8, 8, 8)
+    mirrored, _, _ = mirror(x, y, v, axis=0)
+    np.testing.assert_allclose(b.scale, a.scale, rtol=1e-4)
+    rest = np.ones(encoding.CHANNELS, bool)
+    rest[encoding.BOUNCE] = False
+    np.testing.assert_allclose(mirrored.numpy()[:, rest], b.inputs[:, rest], atol=2e-3)
+    # the bounce's patches are merged on the voxel grid, which is not symmetric about the scene, so the
+    # mirror is the mirrored scene's only in the mean (a wrong sign would be off by the whole coefficient)
+    bounce = b.inputs[:, encoding.BOUNCE]
+    difference = mirrored.numpy()[:, encoding.BOUNCE] - bounce
+    assert np.sqrt(np.mean(difference ** 2)) < 0.03 * np.sqrt(np.mean(bounce ** 2))
+
+
+def _wait_for_grid(gi, seconds: float = 60.0):
+    import time
+
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        changed, grid = gi.update()
+        if changed and grid is not None:
+            return grid
+        time.sleep(0.01)
+    raise AssertionError("no probes arrived")
+
+
+def test_viewer_neural_source_updates_after_an_edit(exported):
+    """GI source "neural": the network runs in the frame the voxels arrive; a recoloured wall gives
+    new probes that differ where the wall's light goes."""
+    from viewer.physical.gi import GISettings
+    from viewer.ui.gi_sources import GIController
+
+    _, path = exported
+    gi = GIController(ctx=None, source="neural", settings=GISettings(voxels=16, probes=8), neural_model=path)
+    gi.unavailable.pop("neural", None)
+    gi.source = "neural"
+    scene = load("cornell")
+    try:
+        gi.set_scene(scene, version=1)
+        first = _wait_for_grid(gi)
+        assert first.coefficients.shape == (8, 8, 8, 9, 3) and gi.status()[2] is None
+        assert "ms network" in gi.status()[0]
+        gi.set_scene(scene.with_albedo("red-wall", (0.05, 0.05, 0.8)), version=2)
+        second = _wait_for_grid(gi)
+        assert not np.allclose(first.coefficients, second.coefficients)
+    finally:
+        gi.close()
+
+
+def test_viewer_falls_back_to_the_compute_solver_on_a_corrupt_model(exported, tmp_path):
+    from viewer.physical.gi import GISettings
+    from viewer.ui.gi_sources import GIController
+
+    _, path = exported
+    broken = tmp_path / "broken.onnx"
+    broken.write_bytes(b"garbage")
+    shutil.copy(path.with_suffix(".json"), broken.with_suffix(".json"))
+    gi = GIController(ctx=None, source="compute", settings=GISettings(voxels=8, probes=4), neural_model=broken)
+    gi.unavailable.pop("neural", None)
+    gi.unavailable.pop("compute", None)
+    try:
+        gi.source = "off"
+        gi.scene, gi._scene_version = load("cornell"), 1
+        gi.set_source("neural")
+        assert gi.source == "compute"
+        line, _, error = gi.status()
+        assert error is not None and "Neural model unusable" in error and "compute solver" in error
+    finally:
+        gi.close()

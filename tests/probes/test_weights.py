@@ -1,0 +1,109 @@
+"""Per-point probe weights of the baked indirect light (viewer/probes/weights.py): what a surface point
+may take from the probe lattice, and the bake that sums it once per GI update."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scenes import box, lit_room
+
+from viewer.rays import dda
+from viewer.probes import weights as probe_weights
+from viewer.physical.geometry import voxelize_with_faces
+from viewer.probes.weights import CORNERS, SurfaceBake, SurfaceWeights
+from viewer.probes.grid import ProbeGrid
+from viewer.scene import Scene, load
+
+
+def cells_of(scene: Scene) -> dda.Cells:
+    return dda.Cells.of(voxelize_with_faces(scene, 32), scene)
+
+
+def random_probes(scene: Scene, m: int, seed: int = 0, valid_fraction: float = 1.0) -> ProbeGrid:
+    rng = np.random.default_rng(seed)
+    c = 0.2 * rng.standard_normal((m, m, m, 9, 3)).astype(np.float32)
+    c[..., 0, :] = 1.0 + rng.random((m, m, m, 3))
+    lo, hi = scene.bounds
+    return ProbeGrid(lo, hi, c, rng.random((m, m, m)) < valid_fraction)
+
+
+def partitioned_room() -> Scene:
+    """A closed room (half size 1) split at x = 0.02 by a thin two-sided wall that reaches every side."""
+    wall = np.array([[0.02, -1, -1], [0.02, 1, -1], [0.02, 1, 1], [0.02, -1, 1]], np.float64)
+    partition = Scene("partition", wall, np.array([[0, 1, 2], [0, 2, 3]]), 0.5, 0.0, 0, ("partition",))
+    return Scene.concatenate("partitioned", [box(inward=True, albedo=0.5, name="room"), partition])
+
+
+def test_a_face_never_takes_light_from_probes_behind_a_thin_wall():
+    """Points on the floor just left of a partition, between two probe layers: the probes of their
+    lattice cell on the far side of the wall are in front of the floor, within a probe spacing (the
+    lattice alone gives them a third of the light and more), but the wall hides them: no weight. The
+    weights still sum to 1; without the visibility term those probes would count."""
+    scene = partitioned_room()
+    probes = random_probes(scene, 8)                     # layers at x = -0.125 and 0.125 around the wall
+    rng = np.random.default_rng(2)
+    points = np.column_stack([rng.uniform(-0.1, 0.0, 200), np.full(200, -0.999999), rng.uniform(-0.9, 0.9, 200)])
+    normals = np.tile([0.0, 1.0, 0.0], (200, 1))
+    weights = SurfaceWeights.of(points, normals, probes, cells_of(scene), normal_offset=0.0)
+    corner_x = probes.lo[0] + (weights.base[:, None, 0] + CORNERS[None, :, 0] + 0.5) * probes.spacing[0]
+    across = corner_x > 0.02
+    assert across.sum(axis=1).min() == 4
+    np.testing.assert_allclose(weights.weights.sum(axis=1), 1.0, rtol=1e-5)
+    assert weights.weights[across].max() == 0.0
+    open_room = SurfaceWeights.of(points, normals, probes, cells_of(box(inward=True, albedo=0.5)), normal_offset=0.0)
+    assert open_room.weights[across].reshape(200, 4).sum(axis=1).mean() > 0.2
+
+
+def test_a_point_that_sees_none_of_its_probes_gets_no_light():
+    """The ceiling right above the Cornell box's lamp (hung 1 cm below it): every probe of its cell is
+    behind the lamp or behind the ceiling, so it is dark, as in Mitsuba, rather than lit by probes that
+    cannot reach it (a bright rim around the lamp before); a point on the open ceiling is lit."""
+    scene = load("cornell")
+    probes = random_probes(scene, 24)
+    points = np.array([[0.0, 0.9999, 0.0], [0.0, 0.9999, 0.6]])
+    normals = np.tile([0.0, -1.0, 0.0], (2, 1))
+    weights = SurfaceWeights.of(points, normals, probes, cells_of(scene))
+    assert weights.weights[0].sum() == 0.0
+    assert weights.weights[1].sum() == pytest.approx(1.0, rel=1e-5)
+    light = SurfaceBake.of(weights, np.zeros(2, np.int64), normals[:1]).irradiance(probes.coefficients)
+    assert light[0].max() == 0.0 and light[1].min() > 0.0
+
+
+def test_weights_are_trilinear_in_open_space_facing_all_probes():
+    """Away from any surface but the one shaded, with every probe in front and valid, the weights are
+    the trilinear weights times DDGI's back-face term, renormalized."""
+    scene = box(inward=True, albedo=0.5, name="room")
+    probes = random_probes(scene, 6)
+    point, normal = np.array([[0.05, -0.999999, 0.1]]), np.array([[0.0, 1.0, 0.0]])   # on the floor
+    w = SurfaceWeights.of(point, normal, probes, cells_of(scene), normal_offset=0.0)
+    u = np.clip((point[0] - probes.lo) / probes.spacing - 0.5, 0, 5)
+    f = u - np.floor(u)
+    trilinear = np.prod(np.where(CORNERS.astype(bool), f, 1 - f), axis=1)
+    position = probes.lo + (w.base[0] + CORNERS + 0.5) * probes.spacing
+    toward = position - point[0]
+    cosine = toward @ normal[0] / np.linalg.norm(toward, axis=1)
+    expected = trilinear * (((cosine + 1) / 2) ** 2 + probe_weights.BACKFACE_FLOOR)
+    np.testing.assert_allclose(w.weights[0], expected / expected.sum(), rtol=1e-5)
+
+
+@pytest.mark.parametrize("dense", [True, False])
+def test_the_bake_sums_the_same_light_as_the_weights(monkeypatch, dense):
+    """SurfaceBake (per (probe, normal) pair, then 8 pairs a point) equals the direct sum over the 8
+    probes' SH, with the pair table and with the sorted keys that replace it for many normals."""
+    if not dense:
+        monkeypatch.setattr(probe_weights, "DENSE_PAIRS", 0)
+    scene = lit_room(box(0.3, (0.2, -0.7, 0.1), name="crate"))
+    probes = random_probes(scene, 10, valid_fraction=0.8)
+    faces = np.flatnonzero(scene.face_areas > 0)
+    rng = np.random.default_rng(4)
+    face = rng.choice(faces, 500)
+    u, v = rng.random(500), rng.random(500)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    tri = scene.triangles[face]
+    points = tri[:, 0] + u[:, None] * (tri[:, 1] - tri[:, 0]) + v[:, None] * (tri[:, 2] - tri[:, 0])
+    normals, normal_id = np.unique(scene.face_normals[face], axis=0, return_inverse=True)
+    weights = SurfaceWeights.of(points, normals[normal_id], probes, cells_of(scene))
+    bake = SurfaceBake.of(weights, normal_id, normals)
+    np.testing.assert_allclose(bake.irradiance(probes.coefficients), weights.irradiance(probes, normals[normal_id]),
+                               rtol=1e-4, atol=1e-5)

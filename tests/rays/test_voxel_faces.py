@@ -1,0 +1,58 @@
+"""Voxels kept per (voxel, face) (viewer.rays.voxel_faces): the voxelization of a scene whose faces moved in
+part, made from the moved faces alone, is the scene's own voxelization."""
+
+import numpy as np
+import pytest
+
+from viewer.scene import load
+from viewer.training.procedural import PRESETS, random_scene
+from viewer.rays.voxel_faces import FaceVoxels
+from viewer.rays.voxels import voxelize_with_faces
+
+
+def assert_same_voxelization(ours, theirs):
+    assert np.array_equal(ours.keys, theirs.keys)
+    for name in ("coords", "position", "normal", "area", "albedo", "emission"):
+        np.testing.assert_allclose(getattr(ours.grid, name), getattr(theirs.grid, name), rtol=1e-12, atol=1e-12,
+                                   err_msg=name)
+    np.testing.assert_allclose(ours.faces.toarray(), theirs.faces.toarray(), atol=1e-12)
+    assert np.array_equal(ours.grid.lights.voxel, theirs.grid.lights.voxel)
+    np.testing.assert_allclose(ours.grid.lights.position, theirs.grid.lights.position)
+
+
+def moved(scene, group, offset, size=1.0):
+    matrix = np.eye(4)
+    matrix[:3, :3] *= size
+    matrix[:3, 3] = offset
+    return scene.transformed_group(group, matrix)
+
+
+@pytest.mark.parametrize("name", ["cornell", "paper-test"])
+@pytest.mark.parametrize("resolution", [16, 24])
+def test_a_moved_lamp_gives_the_scenes_own_voxels(name, resolution):
+    scene = load(name)
+    pairs = FaceVoxels.of(scene, resolution)
+    assert_same_voxelization(pairs.voxelization(scene), voxelize_with_faces(scene, resolution))
+    for offset, size in (((0.2, 0.0, -0.15), 1.0), ((-0.1, -0.05, 0.1), 1.0), ((0.0, 0.0, 0.0), 1.0)):
+        edited = moved(scene, "light", offset, size)
+        pairs = pairs.moved(edited)
+        assert pairs is not None
+        assert_same_voxelization(pairs.voxelization(edited), voxelize_with_faces(edited, resolution))
+
+
+def test_a_moved_object_in_a_wide_room():
+    scene, params = random_scene(np.random.default_rng([14, 1]), "v2", PRESETS["v2"])
+    pairs = FaceVoxels.of(scene, 16)
+    edited = moved(scene, params["objects"][0]["kind"] + "-1", (0.05, 0.0, 0.05))
+    assert_same_voxelization(pairs.moved(edited).voxelization(edited), voxelize_with_faces(edited, 16))
+
+
+def test_what_cannot_be_kept_is_voxelized_afresh():
+    scene = load("cornell")
+    pairs = FaceVoxels.of(scene, 16)
+    assert pairs.moved(moved(scene, "floor", (0.0, -0.5, 0.0))) is None      # the bounds grew
+    assert pairs.moved(load("paper-test")) is None                          # other faces
+    everything = scene.transformed_group("floor", np.eye(4))
+    for group in scene.groups:
+        everything = moved(everything, group, (0.01, 0.0, 0.0), 0.99)
+    assert pairs.moved(everything) is None                                  # every face moved

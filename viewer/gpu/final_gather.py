@@ -1,0 +1,316 @@
+"""A final gather over the lightmap: each surface sample's indirect irradiance from the light its
+surroundings reflect, read from the lightmap where the rays land, instead of interpolated between
+probes.
+
+Probes a few centimetres to decimetres apart cannot hold light that changes over less than their
+spacing, and their L2 SH cannot say that part of a hemisphere is dark: a box face that looks out of
+the Cornell box's open side, or down at a floor it stands on, gets the probes' blur. Lightmap bakers fix
+this with a final gather. From each sample point, K cosine-weighted rays (one per cell of an r x 2r grid
+of strata, the grid shifted at random per sample so that no fixed pattern errs alike over a whole face)
+are traced against the scene's triangles once per geometry (`GatherRays.of`); each remembers the
+lightmap pixel it lands on, front or back side, or that it left the scene. Every GI update then sums
+
+    E(p) = (1 / K) sum_k  albedo(x_k) (E_direct(x_k) + E_indirect(x_k))
+
+the irradiance integral with cosine-weighted rays (each carries pi / K of it; a diffuse surface
+reflects radiance albedo E / pi). E_direct is the baked direct lightmap (lamps and sun with their
+shadows), E_indirect the probes' light at x_k: the probes carry the second bounce on, where their blur
+is multiplied by the albedo and spread over the hemisphere. Emission is not gathered: the direct
+lightmap holds the lamps' light. A ray that leaves the scene brings nothing (the scenes have no sky).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numba
+import numpy as np
+
+from viewer.rays import dda
+from viewer.physical.geometry import tangent_frames
+
+RAYS = 72
+"""Gather rays per sample (RenderSettings.final_gather's default): 2 r^2, a grid of r x 2r strata in (u1, u2)."""
+ESCAPED = -1
+"""GatherRays.hits of a ray that leaves the scene (or lands on a face without a tile)."""
+
+
+@dataclass(frozen=True)
+class GatherRays:
+    """The lightmap pixel (of the front | back image, row-major) that each of K rays of S samples lands
+    on, ESCAPED for none."""
+
+    hits: np.ndarray
+    """(S, K) int32."""
+
+    @staticmethod
+    def of(points: np.ndarray, normals: np.ndarray, cells: dda.Cells, face_tile: np.ndarray,
+           tile_origin: np.ndarray, tile_n: np.ndarray, width: int, lift: float, rays: int = RAYS,
+           seed: int = 0) -> "GatherRays":
+        """points, normals (S, 3): the samples; cells: the scene's triangles (`cells.triangle` indexes
+        the scene's faces); face_tile (F,): each scene face's lightmap tile, -1 for none; tile_origin
+        (tiles, 2) and tile_n (tiles,): the atlas layout (viewer.gpu.direct_bake.lightmap_layout),
+        `width` texels a side; lift: how far off the surface the rays start."""
+        frame = _Frame.of(points, normals, rays, seed)
+        hits = np.empty((frame.count, rays), np.int32)
+        _trace(*frame.args(lift), *_tracing_args(cells, face_tile, tile_origin, tile_n, width), hits)
+        return GatherRays(hits)
+
+    def after_moving(self, sample_moved: np.ndarray, pixel_moved: np.ndarray, pixel_points: np.ndarray,
+                     moved: np.ndarray, slack: float, points: np.ndarray, normals: np.ndarray, cells: dda.Cells,
+                     face_tile: np.ndarray, tile_origin: np.ndarray, tile_n: np.ndarray, width: int, lift: float,
+                     seed: int = 0) -> "GatherRays":
+        """The rays of the same samples after some faces moved (a lamp dragged: the same faces, the same
+        lightmap layout), without tracing them all again. `points`, `normals`, `cells` and the layout are
+        as for `of`, of the scene after the move; sample_moved (S,): the samples on moved faces;
+        pixel_moved (pixels,): the pixels of their tiles; pixel_points (pixels, 3): each pixel's world
+        point before the move (within a texel of where a ray that landed on it met its face); moved
+        (M, 3, 3): the moved faces' corners now. A ray is traced again if its sample moved, if it landed on
+        a moved face, or if it meets a moved face where it is now less than `slack` beyond where it
+        landed. The others cannot have changed: nothing moved into their way, and what they met is where
+        it was. So the hits are those of `of` on the moved scene (tests/gpu/test_final_gather.py)."""
+        rays = self.hits.shape[1]
+        frame = _Frame.of(points, normals, rays, seed)
+        corners = np.ascontiguousarray(moved, np.float64).reshape(-1, 3, 3)
+        edges = (corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])   # v0, e1, e2
+        todo = _affected(*frame.args(0.0), self.hits, np.ascontiguousarray(sample_moved, np.bool_),
+                         np.ascontiguousarray(pixel_moved, np.bool_), np.ascontiguousarray(pixel_points, np.float64),
+                         *edges, float(slack), _bounding_sphere(*edges))
+        hits = self.hits.copy()
+        rows = np.argwhere(todo).astype(np.int64)
+        hits[todo] = ESCAPED
+        _retrace(*frame.args(lift), *_tracing_args(cells, face_tile, tile_origin, tile_n, width), rows, hits)
+        return GatherRays(hits)
+
+    def inside(self, width: int) -> np.ndarray:
+        """(S,) bool: the samples most of whose rays meet the backs of faces (inside a solid); `width`:
+        lightmap texels a side (the back sides' pixels are the columns from `width` to 2 `width`)."""
+        return _inside(self.hits, int(width))
+
+    def irradiance(self, reflected: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """(S, 3) float32: each sample's irradiance from what the lightmap pixels reflect, `reflected`
+        (pixels, 3) float32 = albedo x (direct + indirect irradiance) over the front | back image,
+        row-major (one array: the rays land anywhere, and each further array read costs a cache miss)."""
+        if out is None:
+            out = np.empty((len(self.hits), 3), np.float32)
+        _sum(reflected, self.hits, out)
+        return out
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """The samples' ray frames: the same rays for the same samples and seed, whichever are traced."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    tangents: np.ndarray
+    bitangents: np.ndarray
+    rows: int
+    shift: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return len(self.points)
+
+    @staticmethod
+    def of(points, normals, rays: int, seed: int) -> "_Frame":
+        n = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
+        t, b = tangent_frames(n)
+        rows = int(round(np.sqrt(rays / 2.0)))
+        if rows < 1 or 2 * rows * rows != rays:
+            raise ValueError(f"gather rays must be 2 r^2 (a full grid of strata: 8, 32, 72, 128, ...), not {rays}")
+        # one random shift of the strata per sample (Cranley-Patterson): unbiased over samples, where a
+        # fixed pattern errs alike on a whole face (a face looking at a bright floor at grazing angles)
+        shift = np.random.default_rng(seed).random((len(n), 2))
+        return _Frame(np.ascontiguousarray(points, np.float64).reshape(-1, 3), n, np.ascontiguousarray(t),
+                      np.ascontiguousarray(b), rows, shift)
+
+    def args(self, lift: float) -> tuple:
+        return self.points, self.normals, self.tangents, self.bitangents, self.rows, 2 * self.rows, self.shift, \
+            float(lift)
+
+
+def _tracing_args(cells: dda.Cells, face_tile, tile_origin, tile_n, width: int) -> tuple:
+    by_face = replace(cells, voxel=cells.triangle)                   # a front hit names its face
+    flipped = replace(by_face, e1=cells.e2, e2=cells.e1)             # a back hit, seen from the front
+    return (by_face.args(), flipped.args(), np.ascontiguousarray(face_tile, np.int64),
+            np.ascontiguousarray(tile_origin, np.int64), np.ascontiguousarray(tile_n, np.int64), int(width))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _direction(s, k, normals, tangents, bitangents, rows, columns, shift):
+    """Ray k of sample s: stratum (k // columns, k % columns) of (u1, u2), shifted by the sample's shift,
+    cosine-weighted (r = sqrt(u1), phi = 2 pi u2)."""
+    u1 = (k // columns + shift[s, 0]) / rows
+    u2 = (k % columns + shift[s, 1]) / columns
+    r, phi = np.sqrt(u1), 2.0 * np.pi * u2
+    lx, ly, lz = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(1.0 - u1, 0.0))
+    dx = lx * tangents[s, 0] + ly * bitangents[s, 0] + lz * normals[s, 0]
+    dy = lx * tangents[s, 1] + ly * bitangents[s, 1] + lz * normals[s, 1]
+    dz = lx * tangents[s, 2] + ly * bitangents[s, 2] + lz * normals[s, 2]
+    return dx, dy, dz
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _landing(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile,
+             tile_origin, tile_n, width, none):
+    """The pixel ray k of sample s lands on, ESCAPED if none."""
+    v0, e1, e2 = cells[6], cells[7], cells[8]
+    ox = points[s, 0] + lift * normals[s, 0]
+    oy = points[s, 1] + lift * normals[s, 1]
+    oz = points[s, 2] + lift * normals[s, 2]
+    dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
+    face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, cells, none)
+    side = 0
+    if face == dda.BACKFACE:
+        face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, flipped, none)
+        side = 1
+    if face < 0 or face_tile[face] < 0:
+        return ESCAPED
+    wx, wy, wz = ox + t * dx - v0[face, 0], oy + t * dy - v0[face, 1], oz + t * dz - v0[face, 2]
+    aa = e1[face, 0] ** 2 + e1[face, 1] ** 2 + e1[face, 2] ** 2
+    ab = e1[face, 0] * e2[face, 0] + e1[face, 1] * e2[face, 1] + e1[face, 2] * e2[face, 2]
+    bb = e2[face, 0] ** 2 + e2[face, 1] ** 2 + e2[face, 2] ** 2
+    wa = wx * e1[face, 0] + wy * e1[face, 1] + wz * e1[face, 2]
+    wb = wx * e2[face, 0] + wy * e2[face, 1] + wz * e2[face, 2]
+    det = aa * bb - ab * ab
+    if det <= 0.0:
+        return ESCAPED
+    u, v = (bb * wa - ab * wb) / det, (aa * wb - ab * wa) / det
+    tile = face_tile[face]
+    m = tile_n[tile]
+    # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
+    ku = min(max(int(np.floor(u * m + 1.0)), 0), m + 1)
+    kv = min(max(int(np.floor(v * m + 1.0)), 0), m + 1)
+    return (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side * width
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _trace(points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile, tile_origin,
+           tile_n, width, hits):
+    """Trace every ray of every sample into hits (S, K)."""
+    none = np.zeros(0, np.int64)
+    for s in numba.prange(hits.shape[0]):
+        for k in range(hits.shape[1]):
+            hits[s, k] = _landing(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, cells,
+                                  flipped, face_tile, tile_origin, tile_n, width, none)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _retrace(points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile, tile_origin,
+             tile_n, width, todo, hits):
+    """Trace the rays todo (N, 2) = (sample, ray) into hits."""
+    none = np.zeros(0, np.int64)
+    for i in numba.prange(todo.shape[0]):
+        s, k = todo[i, 0], todo[i, 1]
+        hits[s, k] = _landing(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, cells,
+                              flipped, face_tile, tile_origin, tile_n, width, none)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _affected(points, normals, tangents, bitangents, rows, columns, shift, lift, hits, sample_moved, pixel_moved,
+              pixel_points, v0, e1, e2, slack, sphere):
+    """(S, K) bool: the rays that a move of the triangles (v0, e1, e2) (their places now) may change.
+
+    The triangles lie in `sphere` (centre x, y, z, radius: `_bounding_sphere`): a ray whose line passes
+    outside it cannot meet them, and a sample far from it skips whole rows of strata whose angle from
+    the normal is too far from the sphere's (the sphere is widened past the edges' tolerance, so the rays
+    skipped are only ones the exact test below would not mark)."""
+    count, rays = hits.shape
+    todo = np.zeros((count, rays), np.bool_)
+    tolerance = 1e-4
+    cx, cy, cz, radius = sphere
+    for s in numba.prange(count):
+        if sample_moved[s]:
+            todo[s, :] = True
+            continue
+        ox, oy, oz = cx - points[s, 0], cy - points[s, 1], cz - points[s, 2]   # to the sphere's centre
+        distance = np.sqrt(ox * ox + oy * oy + oz * oz)
+        far_away = distance > radius + slack   # no ray can meet it behind its origin (t > -slack)
+        polar = half = 0.0
+        row_misses = False
+        if far_away:
+            cosine = (ox * normals[s, 0] + oy * normals[s, 1] + oz * normals[s, 2]) / distance
+            polar = np.arccos(min(max(cosine, -1.0), 1.0))
+            half = np.arcsin(min(radius / distance, 1.0))
+        for k in range(rays):
+            if far_away and k % columns == 0:   # a new row of strata: its angle from the normal, asin(sqrt(u1))
+                u1 = (k // columns + shift[s, 0]) / rows
+                row_misses = abs(np.arcsin(min(np.sqrt(u1), 1.0)) - polar) > half + 1e-9
+            p = hits[s, k]
+            if p >= 0 and pixel_moved[p]:
+                todo[s, k] = True
+                continue
+            if far_away and row_misses:
+                continue
+            dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
+            along = ox * dx + oy * dy + oz * dz
+            if distance * distance - along * along > radius * radius:
+                continue   # the ray's line passes outside the sphere
+            far = np.inf
+            if p >= 0:
+                far = np.sqrt((pixel_points[p, 0] - points[s, 0]) ** 2 + (pixel_points[p, 1] - points[s, 1]) ** 2
+                              + (pixel_points[p, 2] - points[s, 2]) ** 2) + slack
+            for f in range(v0.shape[0]):   # Moller-Trumbore, both sides, the edges widened a little
+                px = dy * e2[f, 2] - dz * e2[f, 1]
+                py = dz * e2[f, 0] - dx * e2[f, 2]
+                pz = dx * e2[f, 1] - dy * e2[f, 0]
+                det = e1[f, 0] * px + e1[f, 1] * py + e1[f, 2] * pz
+                if det == 0.0:
+                    continue
+                inv = 1.0 / det
+                tx, ty, tz = points[s, 0] - v0[f, 0], points[s, 1] - v0[f, 1], points[s, 2] - v0[f, 2]
+                u = (tx * px + ty * py + tz * pz) * inv
+                if u < -tolerance or u > 1.0 + tolerance:
+                    continue
+                qx = ty * e1[f, 2] - tz * e1[f, 1]
+                qy = tz * e1[f, 0] - tx * e1[f, 2]
+                qz = tx * e1[f, 1] - ty * e1[f, 0]
+                v = (dx * qx + dy * qy + dz * qz) * inv
+                if v < -tolerance or u + v > 1.0 + tolerance:
+                    continue
+                t = (e2[f, 0] * qx + e2[f, 1] * qy + e2[f, 2] * qz) * inv
+                if -slack < t < far:
+                    todo[s, k] = True
+                    break
+    return todo
+
+
+def _bounding_sphere(v0: np.ndarray, e1: np.ndarray, e2: np.ndarray) -> tuple[float, float, float, float]:
+    """(centre x, y, z, radius) of a sphere around the triangles (v0, e1, e2) and a margin past their
+    edges: the box's centre, the farthest corner, plus 1% (the test's edge tolerance is 1e-4 of an edge).
+    A radius of -1 for no triangles: every ray misses."""
+    if len(v0) == 0:
+        return 0.0, 0.0, 0.0, -1.0
+    points = np.concatenate([v0, v0 + e1, v0 + e2])
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    radius = float(np.linalg.norm(points - centre, axis=1).max())
+    return float(centre[0]), float(centre[1]), float(centre[2]), 1.01 * radius + 1e-12
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _inside(hits, width):
+    count, rays = hits.shape
+    out = np.zeros(count, np.bool_)
+    for s in numba.prange(count):
+        back = 0
+        for k in range(rays):
+            p = hits[s, k]
+            if p >= 0 and p % (2 * width) >= width:
+                back += 1
+        out[s] = back > 0.5 * rays
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _sum(reflected, hits, out):
+    rays = hits.shape[1]
+    for s in numba.prange(hits.shape[0]):
+        r = g = b = np.float32(0.0)
+        for k in range(rays):
+            p = hits[s, k]
+            if p >= 0:
+                r += reflected[p, 0]
+                g += reflected[p, 1]
+                b += reflected[p, 2]
+        out[s, 0], out[s, 1], out[s, 2] = r / rays, g / rays, b / rays

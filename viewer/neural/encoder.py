@@ -1,0 +1,407 @@
+"""The network's input across edits: `viewer.neural.encoding.encode`'s numbers for one probe lattice, where an
+edit recomputes only what it changes.
+
+Geometry changes rarely and light often (DESIGN.md). `encode` spends most of its time on the direct
+light (every emitting patch against every probe, its shadows traced: `encoding.patch_visibility`) and
+on splatting the voxels onto the lattice. An `Encoder` keeps, for the voxel geometry it last saw
+(positions, normals, areas) and the occluders it was given (`encoding.occluders`):
+
+- the trilinear splat as a sparse matrix (lattice cells x voxels), and what it gives from geometry
+  alone: the density and normal features, with the coordinate and extent ones;
+- the emitters: the emitting patches of `encoding.emitting_patches`, in groups that share one colour
+  and touch each other (a lamp), each with the shadowed SH of its patches at every probe summed once
+  (`emitter_basis`): each patch's terms times its visibility, traced as `encode` traces it (one ray
+  per probe and cluster of patches, `encoding.shadow_targets`). The direct light is linear in the
+  emitted radiance, so a lamp's colour or intensity is its basis times a new RGB;
+- the sun's visibility for the last direction (`encoding.sun_visibility`): its irradiance is a factor;
+- the one-bounce feature's patches and their last light (`encoding.Bounce`): the bounce is linear in
+  the patches' radiance, so an albedo edit gathers only the patches of the recoloured surfaces.
+
+So an emission colour or intensity edit is a few products over the cached bases, and an albedo edit
+recomputes the albedo feature and gathers the changed patches' bounce; neither traces a ray. New
+occluders (a moved lamp or object: the triangles cast other shadows) recompute every basis and the
+sun's visibility. With the same occluders, patches that start emitting or change cluster get new bases,
+traced for their clusters alone (the other emitters keep theirs), and a new geometry recomputes the
+splat.
+
+A colour pass whose inputs an edit leaves unchanged is noted in `revisions`, so that the network's
+output for it can be reused: the scale-out normalization divides each pass's light by its own scale,
+so a light edit that scales every emitter of a channel by the same factor (a single lamp's colour or
+intensity) leaves that channel's network input as it was. The network then does not run at all.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage, sparse
+
+from viewer.rays import dda
+from viewer.neural import encoding
+from viewer.probes import sh
+from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, Encoding
+from viewer.probes.grid import ProbeGrid
+from viewer.rays.voxels import VoxelGrid
+
+SAME_COLOUR = 1e-9
+"""Two patches belong to one emitter when their radiances point the same way in RGB to this
+tolerance; an emitter keeps its basis while its patches' radiances stay proportional to it."""
+_serials = itertools.count()
+
+
+class _Geometry:
+    """What the encoding takes from the voxels' geometry alone (positions, normals, areas) on one lattice."""
+
+    def __init__(self, voxels: VoxelGrid, lo: np.ndarray, hi: np.ndarray, points: np.ndarray):
+        self.position, self.normal, self.area = voxels.position, voxels.normal, voxels.area
+        m = round(len(points) ** (1 / 3))
+        spacing = (hi - lo) / m
+        face_area = np.array([spacing[1] * spacing[2], spacing[0] * spacing[2], spacing[0] * spacing[1]])
+        self.cell_area = float(np.mean(face_area))
+        cells = m ** 3
+        # the same splat as `encode`, its eight corners as the eight entries of each voxel's column (eight
+        # distinct cells): the same numbers to round-off
+        corners = encoding._splat(voxels.position, lo, spacing, m)
+        rows = np.stack([index for index, _ in corners], axis=1).ravel()
+        weights = np.stack([weight for _, weight in corners], axis=1).ravel()
+        self.splat = sparse.csc_matrix((weights, rows, np.arange(0, len(rows) + 1, len(corners))),
+                                       shape=(cells, voxels.count))
+        cell = np.clip(np.floor((voxels.position - lo) / spacing).astype(np.int64), 0, m - 1)
+        self.cell = (cell[:, 0] * m + cell[:, 1]) * m + cell[:, 2]
+        self.density = self.splat @ voxels.area
+        self.safe = np.where(self.density > 0, self.density, 1.0)
+        normals = self.splat @ (voxels.area[:, None] * voxels.normal)
+        self.features = np.empty((CHANNELS, cells), np.float32)
+        """The features that geometry alone fixes; the albedo, emission and direct rows are filled per
+        encoding."""
+        self.features[0] = self.density / self.cell_area
+        self.features[1:4] = normals.T / self.cell_area
+        self.features[15:18] = ((points - lo) / (hi - lo) * 2.0 - 1.0).T
+        extent = hi - lo
+        self.features[18:21] = (extent / extent.max())[:, None]
+        self.spacing = spacing
+
+    def fits(self, voxels: VoxelGrid) -> bool:
+        return all(a is b or np.array_equal(a, b) for a, b in (
+            (self.position, voxels.position), (self.normal, voxels.normal), (self.area, voxels.area)))
+
+    def gather(self, values: np.ndarray) -> np.ndarray:
+        """Area-weighted per-voxel values (K, C) splatted onto the lattice cells: (cells, C)."""
+        return self.splat @ (self.area[:, None] * values)
+
+
+class _Shadows:
+    """What the encoding's shadows take from the occluders (`encoding.occluders`; None: nothing casts a
+    shadow) on one lattice: the visibility rays of emitting patches, and the sun's visibility for the
+    last direction asked."""
+
+    def __init__(self, blockers: dda.Cells | None, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray):
+        self.blockers, self.points, self.lo, self.spacing = blockers, points, lo, spacing
+        self._sun: tuple[bytes, np.ndarray] | None = None
+
+    def fits(self, blockers: dda.Cells | None) -> bool:
+        """Whether `blockers` are these occluders: the same object, or equal arrays (a new listing of the
+        same triangles)."""
+        a, b = self.blockers, blockers
+        if a is b:
+            return True
+        if a is None or b is None:
+            return False
+        return all(np.array_equal(x, y) for x, y in zip(a.args(), b.args()))
+
+    def targets(self, position: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`encoding.shadow_targets` of the emitting patches: (C, 3) where each cluster's ray ends, (E,)
+        each patch's cluster (one cluster at the origin when nothing casts a shadow)."""
+        if self.blockers is None:
+            return np.zeros((min(len(position), 1), 3)), np.zeros(len(position), np.int64)
+        return encoding.shadow_targets(self.blockers, position, normal, self.lo, self.spacing)
+
+    def visibility(self, target: np.ndarray) -> np.ndarray:
+        """(C, P) float32: 1 where probe p sees the end of ray c, as `encoding.patch_visibility` traces
+        it (the same `dda.pairs_clear`, each pair on its own: any subset of the clusters gives their
+        columns of the whole)."""
+        if self.blockers is None:
+            return np.ones((len(target), len(self.points)), np.float32)
+        return np.ascontiguousarray(dda.pairs_clear(self.blockers, self.points, target).T)
+
+    def sun_visibility(self, direction: np.ndarray) -> np.ndarray:
+        """(P,) `encoding.sun_visibility` against these occluders, kept for the last direction asked."""
+        key = direction.tobytes()
+        if self._sun is None or self._sun[0] != key:
+            self._sun = (key, encoding.sun_visibility(self.blockers, self.points, direction))
+        return self._sun[1]
+
+
+@dataclass
+class Emitter:
+    """Emitting patches that share one colour and touch each other: a lamp, or one glowing object."""
+
+    weights: dict[bytes, float]
+    """Patch (position, normal, area and the end of its visibility ray, as bytes) -> its share w: its
+    radiance is w x `radiance`."""
+    basis: np.ndarray
+    """(9, P) float32: sum over the patches of w x their SH at the probes (radiance 1), times their
+    visibility."""
+    radiance: np.ndarray
+    """(3,) the current radiance per unit weight."""
+
+
+class Encoder:
+    """`encoding.encode(voxels, sun, lo, hi, resolution, blockers)`, kept across calls (see the module
+    docstring).
+
+    One encoder serves one lattice; any voxel grid and occluders may be passed to `encode`, and whatever
+    still holds from the previous call is reused."""
+
+    def __init__(self, lo, hi, resolution: int):
+        self.lo, self.hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        self.resolution = int(resolution)
+        self.points = ProbeGrid.positions_for(self.lo, self.hi, self.resolution).reshape(-1, 3)  # x slowest, as encode
+        self.serial = next(_serials)
+        """Tells encoders apart (a cache of the network's outputs keys on it and on `revisions`)."""
+        self.revisions = np.zeros(3, np.int64)
+        """Per colour pass: bumped whenever an encoding's inputs for that pass differ from the previous
+        one's; equal revisions of one encoder mean equal inputs."""
+        self.emitters: list[Emitter] = []
+        self.recomputed: list[str] = []
+        """What the last `encode` had to recompute: `geometry`, `shadows` (new occluders), `albedo`,
+        `emission`, `emitters` (a basis), `sun`."""
+        self._geometry: _Geometry | None = None
+        self._shadows: _Shadows | None = None
+        self._albedo = self._emission = None        # the voxels' (K, 3) of the last call
+        self._albedo_feature = None                 # (3, cells) float32
+        self._emitted = None                        # (cells, 3) splatted emitted radiance x area
+        self._sun = (None, np.zeros(3))             # (direction or None, irradiance)
+        self._bounce: encoding.Bounce | None = None   # the bounce's patches and their last light
+        self._last: Encoding | None = None
+        self._last_voxels: VoxelGrid | None = None
+
+    def fits(self, lo, hi, resolution: int) -> bool:
+        return (int(resolution) == self.resolution and np.array_equal(np.asarray(lo, np.float64), self.lo)
+                and np.array_equal(np.asarray(hi, np.float64), self.hi))
+
+    def encode(self, voxels: VoxelGrid, sun, blockers: dda.Cells | None) -> Encoding:
+        """The network's input for `voxels` and `sun`, shadowed by `blockers` (`encoding.occluders` of the
+        scene; None: nothing casts a shadow): `encoding.encode`'s numbers (to float32 round-off). Pass
+        the same occluders object while the scene's triangles stay the same: an equal new one is found
+        equal, at the cost of comparing its arrays."""
+        direction, irradiance = _sun_parts(sun)
+        shadows_changed = self._shadows is None or not self._shadows.fits(blockers)
+        if (voxels is self._last_voxels and not shadows_changed
+                and _same_sun((direction, irradiance), self._sun) and self._last is not None):
+            self.recomputed = []
+            return self._last
+        self.recomputed = []
+        geometry_changed = self._geometry is None or not self._geometry.fits(voxels)
+        if geometry_changed:
+            self._geometry = _Geometry(voxels, self.lo, self.hi, self.points)
+            self.recomputed.append("geometry")
+        if shadows_changed:
+            self._shadows = _Shadows(blockers, self.points, self.lo, self._geometry.spacing)
+            self.emitters = []   # every basis holds the old shadows
+            self.recomputed.append("shadows")
+        g = self._geometry
+        albedo_changed = (np.ones(3, bool) if geometry_changed
+                          else ~_same_columns(self._albedo, voxels.albedo))
+        if albedo_changed.any():
+            self._albedo_feature = np.asarray((g.gather(voxels.albedo) / g.safe[:, None]).T, np.float32)
+            self.recomputed.append("albedo")
+        light_changed = geometry_changed or shadows_changed or not np.array_equal(self._emission, voxels.emission)
+        emitters_changed = False
+        if light_changed:
+            self._emitted = g.gather(voxels.emission)
+            emitters_changed = self._update_emitters(voxels)
+            self.recomputed.append("emission")
+        sun_moved = not _same_direction(direction, self._sun[0])
+        if (sun_moved or shadows_changed) and direction is not None:
+            self.recomputed.append("sun")
+        unchanged = ~albedo_changed
+        if geometry_changed or shadows_changed or emitters_changed or sun_moved:
+            unchanged[:] = False
+        elif light_changed or not np.array_equal(irradiance, self._sun[1]):
+            unchanged &= _proportional_channels((self._emission, self._sun[1]), (voxels.emission, irradiance))
+        self._albedo, self._emission, self._sun = voxels.albedo, voxels.emission, (direction, irradiance)
+        direct = self._direct(direction, irradiance)  # (3, 9, P) float32
+        scale = np.maximum(direct[:, 0, :], 0.0).mean(axis=1)
+        if self._last is not None and unchanged.all():
+            inputs = self._last.inputs
+        else:
+            inputs = self._assemble(voxels, direct, scale, unchanged)
+        self.revisions += ~unchanged
+        self._last = Encoding(inputs=inputs, scale=scale.astype(np.float32), lo=self.lo, hi=self.hi)
+        self._last_voxels = voxels
+        return self._last
+
+    # ---- the parts ----------------------------------------------------------------------------------
+    def _assemble(self, voxels: VoxelGrid, direct: np.ndarray, scale: np.ndarray,
+                  unchanged: np.ndarray) -> np.ndarray:
+        """(3, CHANNELS, M, M, M) float32, as `encode` lays it out; passes in `unchanged` keep the
+        previous encoding's values (equal to round-off), so the network's output for them still holds.
+        The bounce (`encoding.Bounce`) is brought up to date for the other passes only, and after an
+        albedo edit gathers only the patches whose light changed."""
+        g, m = self._geometry, self.resolution
+        redo = np.ones(3, bool) if self._last is None else ~unchanged
+        if self._bounce is None or not self._bounce.fits(voxels):
+            self._bounce = encoding.Bounce(voxels, self.lo, self.hi, m)
+        bounce = self._bounce.sh(voxels.albedo, direct.transpose(2, 1, 0), redo)  # (P, 9, 3)
+        inv = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1.0), 0.0)
+        inputs = np.empty((3, CHANNELS, m ** 3), np.float32)
+        previous = None if self._last is None else self._last.inputs.reshape(3, CHANNELS, -1)
+        emitted = self._emitted.T / g.cell_area
+        for c in range(3):
+            if unchanged[c] and previous is not None:
+                inputs[c] = previous[c]
+                continue
+            inputs[c] = g.features
+            inputs[c, 4] = self._albedo_feature[c]
+            inputs[c, 5] = emitted[c] * inv[c]
+            np.multiply(direct[c], np.float32(inv[c]), out=inputs[c, DIRECT])
+            inputs[c, BOUNCE] = bounce[:, :, c].T * inv[c]
+        inputs = inputs.reshape(3, CHANNELS, m, m, m)
+        inputs.flags.writeable = False  # shared with the next encoding when it is the same
+        return inputs
+
+    def _direct(self, direction, irradiance) -> np.ndarray:
+        """(3, 9, P) float32: the emitters' bases times their radiance, plus the sun."""
+        p = len(self.points)
+        direct = np.zeros((3, sh.SH_COUNT, p), np.float32)
+        for emitter in self.emitters:
+            for c in range(3):
+                if emitter.radiance[c] != 0.0:
+                    direct[c] += np.float32(emitter.radiance[c]) * emitter.basis
+        if direction is not None and np.any(irradiance > 0):
+            visible = self._shadows.sun_visibility(direction).astype(np.float32)
+            delta = sh.basis(direction / np.linalg.norm(direction))  # per unit irradiance (sh.project_delta)
+            for c in range(3):
+                if irradiance[c] != 0.0:
+                    direct[c] += (delta * irradiance[c]).astype(np.float32)[:, None] * visible[None, :]
+        return direct
+
+    def _update_emitters(self, voxels: VoxelGrid) -> bool:
+        """Match the emitting patches to the emitters kept so far; patches of no kept emitter (a lamp
+        moved or resized, a new light, a colour no longer shared, a patch whose cluster of visibility
+        rays gained or lost a patch) form new ones, whose rays are traced and bases computed. Returns
+        whether the emitters changed (beyond their radiances)."""
+        position, normal, area, radiance = encoding.emitting_patches(self._geometry.cell, voxels)
+        target, cluster = self._shadows.targets(position, normal)
+        keys = _patch_keys(position, normal, area, target[cluster])
+        index = {key: e for e, key in enumerate(keys)}
+        claimed = np.zeros(len(keys), bool)
+        kept = []
+        for emitter in self.emitters:
+            members = [index.get(key) for key in emitter.weights]
+            if any(e is None for e in members) or claimed[members].any():
+                continue
+            weights = np.fromiter(emitter.weights.values(), np.float64, len(members))
+            rows = radiance[members]
+            top = int(np.argmax(weights))
+            per_weight = rows[top] / weights[top]
+            if np.abs(rows - weights[:, None] * per_weight).max() <= SAME_COLOUR * max(np.abs(rows).max(), 1e-300):
+                emitter.radiance = per_weight
+                claimed[members] = True
+                kept.append(emitter)
+        fresh = np.flatnonzero(~claimed)
+        changed = len(kept) != len(self.emitters) or len(fresh) > 0
+        row, visible = np.full(len(target), -1), None   # each traced cluster's row of `visible`
+        if len(fresh):
+            self.recomputed.append("emitters")
+            traced = np.unique(cluster[fresh])
+            row[traced] = np.arange(len(traced))
+            visible = self._shadows.visibility(target[traced])
+        for members in self._lamps(fresh, position, radiance, voxels.voxel_size):
+            weights = radiance[members].max(axis=1)
+            basis = emitter_basis(self.points, position[members], normal[members], area[members], weights,
+                                  visible, row[cluster[members]])
+            kept.append(Emitter({keys[e]: float(w) for e, w in zip(members, weights)}, basis,
+                                radiance[members[0]] / weights[0]))
+        self.emitters = kept
+        return changed
+
+    def _lamps(self, patches: np.ndarray, position: np.ndarray, radiance: np.ndarray,
+               voxel_size: float) -> list[np.ndarray]:
+        """`patches` split into emitters: the same colour (direction in RGB), and cells that touch. Voxels
+        larger than the lattice's cells leave gaps between a lamp's patches, so cells touch on a lattice
+        coarsened to the voxels' size."""
+        if len(patches) == 0:
+            return []
+        spacing = self._geometry.spacing
+        colour = radiance[patches] / radiance[patches].max(axis=1, keepdims=True)
+        _, family = np.unique(np.round(colour / SAME_COLOUR).astype(np.int64), axis=0, return_inverse=True)
+        reach = max(1, int(np.ceil(voxel_size / spacing.min())))
+        cell = np.floor((position[patches] - self.lo) / (reach * spacing)).astype(np.int64)
+        out = []
+        for f in range(family.max() + 1):
+            mine = np.flatnonzero(family.ravel() == f)
+            corner = cell[mine].min(axis=0)
+            local = cell[mine] - corner
+            occupied = np.zeros(local.max(axis=0) + 1, bool)   # the box around them is enough
+            occupied[tuple(local.T)] = True
+            labels, _ = ndimage.label(occupied, structure=np.ones((3, 3, 3), bool))
+            part = labels[tuple(local.T)]
+            out += [patches[mine[part == label]] for label in np.unique(part)]
+        return out
+
+
+def _patch_keys(position, normal, area, target) -> list[bytes]:
+    """A patch's identity across edits: its position, normal, area and the end of its visibility ray
+    (equal patches, should two ever coincide, are told apart by their order)."""
+    keys = [row.tobytes() for row in np.column_stack([position, normal, area, target])]
+    if len(set(keys)) < len(keys):
+        seen: dict[bytes, int] = {}
+        for e, key in enumerate(keys):
+            seen[key] = seen.get(key, -1) + 1
+            keys[e] = key + bytes([seen[key] % 256]) * (seen[key] > 0)
+    return keys
+
+
+def _sun_parts(sun) -> tuple[np.ndarray | None, np.ndarray]:
+    if sun is None:
+        return None, np.zeros(3)
+    return np.asarray(sun.direction, np.float64), np.asarray(sun.irradiance, np.float64)
+
+
+def _same_direction(a, b) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(a, b))
+
+
+def _same_sun(a, b) -> bool:
+    return _same_direction(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def _same_columns(a: np.ndarray | None, b: np.ndarray) -> np.ndarray:
+    """(3,) whether each colour column of two (K, 3) arrays is equal."""
+    if a is None or a.shape != b.shape:
+        return np.zeros(3, bool)
+    return np.array([np.array_equal(a[:, c], b[:, c]) for c in range(3)])
+
+
+def _proportional_channels(before, after) -> np.ndarray:
+    """(3,) per colour channel: whether all the light of `after` (voxel emission (K, 3), sun irradiance
+    (3,)) is that of `before` times one positive factor, or both are dark: then the scale-out leaves
+    the pass's inputs as they were."""
+    out = np.zeros(3, bool)
+    if before[0] is None or before[0].shape != after[0].shape:
+        return out
+    for c in range(3):
+        old = np.append(before[0][:, c], before[1][c])
+        new = np.append(after[0][:, c], after[1][c])
+        top_old, top_new = np.abs(old).max(), np.abs(new).max()
+        if top_old == 0 or top_new == 0:
+            out[c] = top_old == top_new
+            continue
+        factor = top_new / top_old
+        out[c] = np.abs(new - factor * old).max() <= 1e-12 * top_new
+    return out
+
+
+def emitter_basis(points: np.ndarray, position, normal, area, weights, visible: np.ndarray,
+                  ray: np.ndarray) -> np.ndarray:
+    """(9, P) float32: sum over patches of weight x the SH of their light at the probes (P, 3), for
+    radiance 1: `encoding.emitter_sh`'s terms, each patch seen where row `ray[e]` of `visible` (C, P)
+    says so, summed once per emitter instead of per edit."""
+    lights = (position, normal, area, np.asarray(weights)[:, None])
+    return encoding.emitter_sh_rows(lights, points, np.asarray(visible)[np.asarray(ray, np.int64)])[0]

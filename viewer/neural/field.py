@@ -1,0 +1,354 @@
+"""VoxelGrid -> ProbeGrid in one shot: the trained network (ONNX) run by onnxruntime on the CPU.
+
+A model is a `.onnx` file with a JSON card beside it (`models/<name>.json`): what the network reads
+(`viewer.neural.encoding` version, voxel resolution), the probe lattice it writes, how it was trained, its
+measured error and the file's sha256. Anything that does not match (missing file, corrupt bytes, another
+encoding version, unexpected tensor shapes) is a `ModelError` with one readable line: the command line
+turns it into exit status 2, the viewer into a message and a fall-back to the compute solver.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from viewer.rays import dda
+from viewer.neural import encoding
+from viewer.neural.domain import Domain, Shape, measure, outside
+from viewer.neural.encoder import Encoder
+from viewer.probes.grid import ProbeGrid
+from viewer.resources import DEFAULT_MODEL
+from viewer.scene import Scene
+from viewer.rays.voxel_faces import FaceVoxels
+from viewer.rays.voxels import VoxelGrid, voxelize
+
+OUTPUTS = 19
+"""Per probe and colour pass: 9 SH of all the light, 9 of the reflected light, 1 validity logit."""
+
+
+def clock_now() -> float:
+    """Seconds on `CLOCK`, for the stages' timings."""
+    return CLOCK()
+
+
+CLOCK = time.perf_counter
+"""What the stages are timed with; `python -m viewer.bench.neural` swaps in time.thread_time to count the
+CPU time of each stage alone (everything here runs on the calling thread) on a machine shared with
+other work."""
+
+
+class ModelError(ValueError):
+    """The model file or its card is missing, corrupt or made for other inputs."""
+
+
+def open_session(path: Path, threads: int = 1):
+    """An onnxruntime session on the CPU, or ModelError in one line. One thread by default: the networks
+    are small, and a second one fights the renderer's threads for the two cores (measured slower under
+    load, docs/PERFORMANCE.md)."""
+    try:
+        import onnxruntime as ort
+    except ImportError as exc:
+        raise ModelError(f"the neural GI source needs onnxruntime ({exc}): pip install onnxruntime") from None
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = threads
+    options.inter_op_num_threads = 1
+    try:
+        return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    except Exception as exc:  # noqa: BLE001 - onnxruntime raises its own types for bad files
+        raise ModelError(f"{Path(path).name}: onnxruntime cannot load it ({str(exc).splitlines()[0]})") from None
+
+
+@dataclass(frozen=True)
+class ModelCard:
+    path: Path
+    """The .onnx file."""
+    data: dict
+    """The card as written by `viewer.training.export`."""
+
+    @property
+    def probes(self) -> int:
+        return int(self.data["probes"]["resolution"])
+
+    @property
+    def voxels(self) -> int:
+        return int(self.data["inputs"]["voxels"])
+
+    @property
+    def sha256(self) -> str:
+        return str(self.data["sha256"])
+
+    @property
+    def domain(self) -> Domain:
+        """What the model was trained on (viewer.neural.domain): the card's `domain`, or for a card written
+        before cards had one, the domain of the ranges its dataset names (`training.ranges`; `v1`, the
+        first dataset's, when it names none)."""
+        if "domain" in self.data:
+            return Domain.from_dict(self.data["domain"])
+        return Domain.from_preset(str(self.data.get("training", {}).get("ranges", "v1")))
+
+    @staticmethod
+    def read(model: Path) -> "ModelCard":
+        card_path = model.with_suffix(".json")
+        if not model.is_file():
+            raise ModelError(f"no trained model at {model} (train one: see docs/TRAINING.md)")
+        if not card_path.is_file():
+            raise ModelError(f"{model.name} has no model card ({card_path.name})")
+        try:
+            data = json.loads(card_path.read_text())
+            card = ModelCard(model, data)
+            _ = (card.probes, card.voxels, card.sha256, data["inputs"]["encoding_version"], card.domain)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ModelError(f"{card_path.name}: not a valid model card ({exc})") from None
+        return card
+
+
+def file_sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+_blas = None
+
+
+def _one_blas_thread():
+    """BLAS on one thread for the encoding's small products: OpenBLAS's threads spin-wait for each
+    other, and when the renderer (or anything else) keeps the second core busy a 36864 x 16 x 3 product
+    takes 30 ms instead of 0.4 ms (measured here)."""
+    global _blas
+    if _blas is None:
+        from threadpoolctl import ThreadpoolController
+
+        _blas = ThreadpoolController()
+    return _blas.limit(limits=1, user_api="blas")
+
+
+class NeuralField:
+    """A loaded model: `predict` maps voxels to probes."""
+
+    def __init__(self, model: str | Path = DEFAULT_MODEL, threads: int = 1):
+        self.card = ModelCard.read(Path(model))
+        if file_sha256(self.card.path) != self.card.sha256:
+            raise ModelError(f"{self.card.path.name}: file does not match its card's sha256 (corrupt or replaced)")
+        version = self.card.data["inputs"]["encoding_version"]
+        if version != encoding.VERSION:
+            raise ModelError(f"{self.card.path.name} was trained on encoding version {version}, "
+                             f"this viewer encodes version {encoding.VERSION}")
+        self.session = open_session(self.card.path, threads)
+        inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        if len(inputs) != 1 or inputs[0].shape[1] != encoding.CHANNELS:
+            raise ModelError(f"{self.card.path.name}: expects inputs {inputs[0].shape}, "
+                             f"the encoding gives (3, {encoding.CHANNELS}, M, M, M)")
+        if len(outputs) != 1 or outputs[0].shape[1] != OUTPUTS:
+            raise ModelError(f"{self.card.path.name}: gives outputs {outputs[0].shape}, expected (3, {OUTPUTS}, M, M, M)")
+        self.input_name = inputs[0].name
+        self._encoder: Encoder | None = None
+        self._output: np.ndarray | None = None       # the network's last output, and per colour pass
+        self._output_keys: list = [None] * 3         # the (encoder, revision) of the inputs it ran on
+        self.passes_run = 0
+        """Colour passes the network ran for in the last `predict` (0 to 3)."""
+
+    @property
+    def resolution(self) -> int:
+        return self.card.probes
+
+    def predict(self, voxels: VoxelGrid, sun, lo, hi, blockers: dda.Cells | None, include_emitted: bool = True,
+                timings: dict | None = None, resolution: int | None = None, reuse: bool = True) -> ProbeGrid:
+        """Probes over [lo, hi]: all the incident light (`include_emitted`, as `sample` and Mitsuba see
+        it) or the light reflected by surfaces alone (what the renderer samples). `blockers` cast the
+        direct light's shadows: `encoding.occluders` of the scene the voxels were made from, the same
+        object while its triangles stay the same. `resolution` other than the card's runs the same
+        convolutional network on another lattice (for timing; its accuracy there is not what the card
+        measured).
+
+        The encoder of the lattice is kept (viewer.neural.encoder), so a call after an edit recomputes only
+        what the edit changed, and the network runs only for the colour passes whose inputs changed
+        (none after a lamp's colour or intensity edit: the scale-out makes those exactly linear).
+        `reuse=False` encodes and runs everything afresh: what a new scene costs."""
+        m = resolution or self.resolution
+        clock = clock_now()
+        with _one_blas_thread():
+            encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m)
+            enc = encoder.encode(voxels, sun, blockers)
+        encoded = clock_now()
+        out = self._network(encoder, enc.inputs) if reuse else self._run(enc.inputs)  # (3, 19, M, M, M)
+        ran = clock_now()
+        grid = unpack(out, enc.scale, enc.lo, enc.hi, include_emitted)
+        if timings is not None:
+            timings.update(encode=encoded - clock, network=ran - encoded, unpack=clock_now() - ran)
+        return grid
+
+    def forget(self) -> None:
+        """Drop the kept encoder and network outputs: the next prediction costs what a new scene does."""
+        self._encoder, self._output, self._output_keys = None, None, [None] * 3
+
+    def encoder(self, lo, hi, resolution: int) -> Encoder:
+        """The encoder of this lattice, kept from the last call when the lattice is the same."""
+        if self._encoder is None or not self._encoder.fits(lo, hi, resolution):
+            self._encoder = Encoder(lo, hi, resolution)
+        return self._encoder
+
+    def _network(self, encoder: Encoder, inputs: np.ndarray) -> np.ndarray:
+        """The network's (3, 19, M, M, M) output, run for the colour passes whose inputs differ from the
+        ones it last ran on (`Encoder.revisions`); the others keep their output."""
+        keys = [(encoder.serial, int(r)) for r in encoder.revisions]
+        stale = [c for c in range(3) if self._output is None or self._output_keys[c] != keys[c]
+                 or self._output.shape[2:] != inputs.shape[2:]]
+        if len(stale) == 3:
+            self._output = self._run(inputs)
+        elif stale:
+            fresh = self._run(np.ascontiguousarray(inputs[stale]))
+            self._output[stale] = fresh   # private: the grids unpacked from it hold copies
+        self.passes_run = len(stale)
+        self._output_keys = keys
+        return self._output
+
+    def _run(self, inputs: np.ndarray) -> np.ndarray:
+        self.passes_run = len(inputs)
+        return self.session.run(None, {self.input_name: inputs})[0]
+
+    def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:
+        """Voxelize the scene at the card's resolution, list its occluders, and predict over its bounds."""
+        clock = clock_now()
+        voxels = voxelize(scene, self.card.voxels)
+        blockers = encoding.occluders(scene, voxels)
+        if timings is not None:
+            timings["voxelize"] = clock_now() - clock
+        lo, hi = scene.bounds
+        return self.predict(voxels, scene.sun, lo, hi, blockers, include_emitted, timings)
+
+
+class SceneVoxels:
+    """A scene's geometry voxelized for the network, with each voxel's share of each face
+    (viewer.rays.voxels.Voxelization): the voxels of any scene with the same triangles, whatever its colours,
+    are one sparse product away (`voxels_of`). Kept per (voxel, face) (viewer.rays.voxel_faces), so that the
+    voxels of a scene where some faces moved (a dragged lamp) are made from the `previous` ones and the
+    moved faces alone. With what casts the encoding's shadows (`encoding.occluders`, listed afresh: they
+    are the triangles) and the triangles' shape for the domain check."""
+
+    def __init__(self, scene: Scene, resolution: int, previous: "SceneVoxels | None" = None):
+        clock = clock_now()
+        self.vertices, self.faces = scene.vertices, scene.faces
+        self.bounds = scene.bounds
+        self.pairs = previous.pairs.moved(scene) if previous is not None and previous.resolution == resolution else None
+        self.voxelized_afresh = self.pairs is None
+        """Whether all the faces were voxelized (else only those that moved)."""
+        self.pairs = self.pairs or FaceVoxels.of(scene, resolution)
+        self.voxelization = self.pairs.voxelization(scene)
+        self.shape = Shape.of(scene)
+        self._colours = None
+        self._grid = self.voxelization.grid
+        self.voxels_of(scene)   # colours by the faces' shares from the start: every edit's come the same way
+        self.blockers = encoding.occluders(scene, self._grid)
+        """The occluders of these triangles, one object for every colour edit (the encoder keeps its
+        shadows while it is given the same)."""
+        self.seconds = clock_now() - clock
+        """How long voxelizing and listing the occluders took."""
+
+    @property
+    def resolution(self) -> int:
+        return self.pairs.resolution
+
+    def fits(self, scene: Scene) -> bool:
+        """Whether `scene` has the triangles these voxels were made from (a colour edit keeps them)."""
+        return _same(self.vertices, scene.vertices) and _same(self.faces, scene.faces)
+
+    def voxels_of(self, scene: Scene) -> VoxelGrid:
+        """The voxels with `scene`'s albedo and emission (area-weighted per voxel, as `voxelize` gives
+        them, to round-off); the same object while the colours stay the same."""
+        if self._colours is None or not (_same(self._colours[0], scene.albedo)
+                                         and _same(self._colours[1], scene.emission)):
+            grid, faces = self.voxelization.grid, self.voxelization.faces
+            lights = grid.lights
+            if lights.face is not None and lights.count:
+                lights = replace(lights, radiance=scene.emission[lights.face])
+            self._grid = replace(grid, albedo=faces @ scene.albedo, emission=faces @ scene.emission, lights=lights)
+            self._colours = (scene.albedo, scene.emission)
+        return self._grid
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a is b or (a.shape == b.shape and np.array_equal(a, b))
+
+
+class NeuralGI:
+    """The neural field on a scene and its edits, as `viewer.physical.gi.PhysicalGI` is for the solver: the
+    voxels of the scene's geometry are kept (`SceneVoxels`), so a colour edit (an albedo, a lamp's
+    colour or intensity) recolours them instead of voxelizing, and the field's encoder recomputes only
+    what the edit changed (viewer.neural.encoder). A moved lamp or a new scene is voxelized again and its
+    occluders listed again (so the encoder traces its shadows again): `prepare` (which can run on a
+    worker thread) and `install`, or `update` for both."""
+
+    def __init__(self, field: NeuralField, resolution: int | None = None, voxels: int | None = None):
+        self.field = field
+        self.resolution = resolution or field.resolution
+        """Probes per axis: the card's, or another lattice divisible by 2^levels (for timing)."""
+        self.voxel_resolution = voxels or field.card.voxels
+        """Voxels per axis the encoding reads: the card's, or another (for timing)."""
+        self.voxels: SceneVoxels | None = None
+
+    def needs_voxelizing(self, scene: Scene) -> bool:
+        return self.voxels is None or not self.voxels.fits(scene)
+
+    def prepare(self, scene: Scene) -> SceneVoxels:
+        """Voxelize `scene`, from the installed voxels when only some faces moved (changes nothing here:
+        safe on a worker thread)."""
+        return SceneVoxels(scene, self.voxel_resolution, self.voxels)
+
+    def install(self, voxels: SceneVoxels) -> None:
+        self.voxels = voxels
+
+    def predict(self, scene: Scene, include_emitted: bool = False, timings: dict | None = None) -> ProbeGrid:
+        """The probes of `scene`, whose geometry is the installed one. `timings` gets `recolour` (the
+        voxels' colours) and the network's stages (`NeuralField.predict`)."""
+        clock = clock_now()
+        grid = self.voxels.voxels_of(scene)
+        if timings is not None:
+            timings["recolour"] = clock_now() - clock
+        lo, hi = self.voxels.bounds
+        return self.field.predict(grid, scene.sun, lo, hi, self.voxels.blockers, include_emitted, timings,
+                                  self.resolution)
+
+    def outside(self, scene: Scene) -> list[str]:
+        """Why `scene` (with the installed geometry) lies outside the model's training domain
+        (viewer.neural.domain; empty when it does not)."""
+        return outside(scene, self.field.card.domain, measure(scene, self.voxels.shape))
+
+    def update(self, scene: Scene, include_emitted: bool = False, timings: dict | None = None) -> ProbeGrid:
+        """Voxelize when the geometry changed, then predict."""
+        if self.needs_voxelizing(scene):
+            self.install(self.prepare(scene))
+            if timings is not None:
+                timings["voxelize"] = self.voxels.seconds
+        return self.predict(scene, include_emitted, timings)
+
+
+def unpack(out: np.ndarray, scale: np.ndarray, lo, hi, include_emitted: bool) -> ProbeGrid:
+    """The network's (3, 19, M, M, M) output in units of each pass's scale -> a ProbeGrid: SH (M, M, M,
+    9, 3) in radiance units (all the light, or the reflected light alone) and the validity vote of the
+    three passes; one compiled pass over the output."""
+    m = out.shape[-1]
+    coefficients = np.empty((m ** 3, 9, 3), np.float32)
+    valid = np.empty(m ** 3, np.bool_)
+    _unpack(out.reshape(3, OUTPUTS, -1), 0 if include_emitted else 9, np.asarray(scale, np.float32),
+            coefficients, valid)
+    return ProbeGrid(lo=lo, hi=hi, coefficients=coefficients.reshape(m, m, m, 9, 3), valid=valid.reshape(m, m, m))
+
+
+@numba.njit(cache=True, nogil=True)
+def _unpack(out, first, scale, coefficients, valid):
+    """coefficients[p, k, c] = out[c, first + k, p] x scale[c]; valid[p]: the mean logit of the passes
+    is positive. Blocks of 64 probes: the reads run along the output's rows, the writes stay in cache."""
+    count = out.shape[2]
+    for start in range(0, count, 64):
+        end = min(start + 64, count)
+        for c in range(3):
+            for k in range(9):
+                for p in range(start, end):
+                    coefficients[p, k, c] = out[c, first + k, p] * scale[c]
+        for p in range(start, end):
+            valid[p] = out[0, 18, p] + out[1, 18, p] + out[2, 18, p] > 0.0

@@ -1,0 +1,225 @@
+"""Which probes light a surface point, and how much: the per-point probe weights of the renderer's
+indirect light, in the spirit of DDGI (Majercik et al. 2019, "Dynamic Diffuse Global Illumination with
+Ray-Traced Irradiance Fields", section 5.2).
+
+A surface point p with normal n takes the probes at the 8 corners of the probe-lattice cell around
+p + offset x spacing x n, each weighted by
+
+    trilinear weight  x  validity (1, or probes.INVALID_WEIGHT inside solids)
+                      x  back-face weight ((dot(n, w) + 1) / 2)^2 + BACKFACE_FLOOR
+                      x  visibility (1 if the segment p -> probe crosses no surface, else 0)
+
+(w the unit direction from p to the probe) and renormalized. The visibility is exact: each segment is
+traced against the scene's triangles (viewer.rays.dda), so a face never mixes in a probe it cannot see (the
+inside of a box, the far side of a thin wall), which the lattice alone cannot tell. A point that sees
+none of its 8 probes lies in a gap narrower than the lattice (the ceiling above a lamp hung 1 cm below
+it, the floor under a box): it gets no indirect light, as in Mitsuba, instead of light from probes
+that cannot reach it.
+
+Visibility depends on the geometry and the probe lattice only, never on the light: it is computed once
+per scene and probe layout (`SurfaceWeights.of`), and every GI update after that is a weighted sum of 8
+probes per point (`SurfaceBake`, over the lightmap's texels for viewer/gpu/indirect_bake.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from viewer.rays import dda
+from viewer.probes import sh
+from viewer.probes.grid import ProbeGrid
+
+NORMAL_OFFSET = 0.25
+"""The lattice cell is the one around p + NORMAL_OFFSET probe spacings along n: a little off the surface,
+so that more of the 8 probes lie in front of it."""
+BACKFACE_FLOOR = 0.2
+"""DDGI's floor of the back-face weight, so that a point whose probes all lie behind its plane (a face
+closer to a probe layer than the offset) still gets their light, smoothly."""
+SURFACE_LIFT = 1e-4
+"""The visibility segments start this far off the surface, in probe spacings (not through the face
+itself)."""
+DENSE_PAIRS = 1 << 25
+"""SurfaceBake numbers its (probe, normal) pairs with a table of every possible pair up to this size
+(M^3 x distinct normals: 24^3 probes x 2400 normals); above it, by sorting."""
+CORNERS = np.array([[c & 1, (c >> 1) & 1, (c >> 2) & 1] for c in range(8)], np.int64)
+"""Corner c of a lattice cell is base + CORNERS[c] (x in bit 0, y in bit 1, z in bit 2)."""
+
+
+@dataclass(frozen=True)
+class SurfaceWeights:
+    """For P surface points: the lattice cell (P, 3) of each and the normalized weights (P, 8) of its
+    corners (CORNERS order). Weights sum to 1 per point."""
+
+    base: np.ndarray
+    weights: np.ndarray
+    resolution: int
+
+    @staticmethod
+    def of(points: np.ndarray, normals: np.ndarray, probes: ProbeGrid, cells: dda.Cells,
+           normal_offset: float = NORMAL_OFFSET) -> "SurfaceWeights":
+        """The weights of points (P, 3) with unit normals (P, 3) against the lattice of `probes`, with
+        the visibility traced against `cells` (the scene's triangles)."""
+        p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+        n = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
+        base, weights = _weights(p, n, np.asarray(probes.lo, np.float64), np.asarray(probes.spacing, np.float64),
+                                 int(probes.resolution), np.ascontiguousarray(probes.probe_weights(), np.float64),
+                                 float(normal_offset), SURFACE_LIFT, BACKFACE_FLOOR, cells.args())
+        return SurfaceWeights(base, weights, int(probes.resolution))
+
+    def irradiance(self, probes: ProbeGrid, normals: np.ndarray) -> np.ndarray:
+        """(P, 3) irradiance at the points from `probes` (the same lattice as the weights)."""
+        index = np.minimum(self.base[:, None, :] + CORNERS[None], self.resolution - 1)
+        c = probes.coefficients[index[..., 0], index[..., 1], index[..., 2]]        # (P, 8, 9, 3)
+        mixed = np.einsum("pk,pkjc->pjc", self.weights, c)
+        y = sh.basis(np.asarray(normals, np.float64).reshape(-1, 3)) * sh.COSINE_LOBE
+        return np.maximum(np.einsum("pj,pjc->pc", y, mixed), 0.0)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _weights(points, normals, lo, spacing, m, probe_weight, offset, lift, floor, cells):
+    count = points.shape[0]
+    base = np.empty((count, 3), np.int32)
+    weights = np.empty((count, 8), np.float32)
+    unit = spacing.min()
+    none = np.zeros(0, np.int64)
+    for r in numba.prange(count):
+        cell = np.empty(3, np.int64)
+        f = np.empty(3)
+        for a in range(3):
+            u = (points[r, a] + offset * unit * normals[r, a] - lo[a]) / spacing[a] - 0.5
+            u = min(max(u, 0.0), m - 1.0)
+            cell[a] = min(int(np.floor(u)), max(m - 2, 0))
+            f[a] = u - cell[a]
+            base[r, a] = cell[a]
+        w = np.zeros(8)
+        seen = np.zeros(8)
+        ox = points[r, 0] + lift * unit * normals[r, 0]
+        oy = points[r, 1] + lift * unit * normals[r, 1]
+        oz = points[r, 2] + lift * unit * normals[r, 2]
+        for c in range(8):
+            trilinear = 1.0
+            index = np.empty(3, np.int64)
+            toward = np.empty(3)
+            for a in range(3):
+                bit = (c >> a) & 1
+                trilinear *= f[a] if bit else 1.0 - f[a]
+                index[a] = min(cell[a] + bit, m - 1)
+                toward[a] = lo[a] + (index[a] + 0.5) * spacing[a] - points[r, a]
+            distance = np.sqrt(toward[0] ** 2 + toward[1] ** 2 + toward[2] ** 2)
+            cosine = (toward[0] * normals[r, 0] + toward[1] * normals[r, 1] + toward[2] * normals[r, 2]) \
+                / max(distance, 1e-300)
+            w[c] = trilinear * probe_weight[index[0], index[1], index[2]] * (((cosine + 1.0) / 2.0) ** 2 + floor)
+            if cosine > 0.0 and w[c] > 0.0:   # behind the point's plane the surface itself is in the way
+                tx, ty, tz = (lo[0] + (index[0] + 0.5) * spacing[0] - ox, lo[1] + (index[1] + 0.5) * spacing[1] - oy,
+                              lo[2] + (index[2] + 0.5) * spacing[2] - oz)
+                length = np.sqrt(tx * tx + ty * ty + tz * tz)
+                hit, _ = dda._march(ox, oy, oz, tx / length, ty / length, tz / length, length, cells, none)
+                seen[c] = 1.0 if hit == dda.MISS else 0.0
+        total = 0.0
+        total_seen = 0.0
+        for c in range(8):
+            total += w[c]
+            total_seen += w[c] * seen[c]
+        for c in range(8):   # no probe visible: a gap narrower than the lattice, left dark
+            weights[r, c] = w[c] * seen[c] / total_seen if total_seen > 1e-6 * total else 0.0
+    return base, weights
+
+
+@dataclass(frozen=True)
+class SurfaceBake:
+    """The irradiance of T surface points as a function of the probes, ready to evaluate once per GI
+    update: E_t = sum_k weights[t, k] E(probe_k, n_t), with E(probe, n) the probe's SH convolved with the
+    cosine lobe about n. Points of one face share a normal, so E is computed once per (probe, normal)
+    pair that some point uses (`pair_probe`, `pair_normal`) and each point sums 8 of them: 24
+    multiply-adds a point instead of 8 x 27."""
+
+    pair_probe: np.ndarray
+    """(Q,) flat index (x-major: (i M + j) M + k) of each pair's probe."""
+    pair_normal: np.ndarray
+    """(Q, 3) each pair's unit normal."""
+    texel_pairs: np.ndarray
+    """(T, 8) int32 the pair of each point's corner."""
+    weights: np.ndarray
+    """(T, 8) float32 SurfaceWeights.weights."""
+
+    @staticmethod
+    def of(weights: SurfaceWeights, normal_id: np.ndarray, normals: np.ndarray) -> "SurfaceBake":
+        """normal_id: (T,) each point's row of `normals` (U, 3), the distinct unit normals (a face's
+        normal, per side)."""
+        base = np.ascontiguousarray(weights.base, np.int64)
+        normal_id = np.ascontiguousarray(normal_id, np.int64)
+        m, count = weights.resolution, len(normals)
+        if m ** 3 * count <= DENSE_PAIRS:
+            texel_pairs, pair_probe, pair_normal = _pairs_dense(base, m, normal_id, count)
+        else:   # many normals (curved meshes): sort the keys instead of a table of every pair
+            index = np.minimum(base[:, None, :] + CORNERS[None], m - 1)
+            key = ((index[..., 0] * m + index[..., 1]) * m + index[..., 2]) * count + normal_id[:, None]
+            pairs, inverse = np.unique(key, return_inverse=True)
+            texel_pairs, pair_probe, pair_normal = inverse.reshape(key.shape).astype(np.int32), pairs // count, pairs % count
+        return SurfaceBake(pair_probe, np.asarray(normals, np.float64)[pair_normal], texel_pairs, weights.weights)
+
+    def irradiance(self, coefficients: np.ndarray, out: np.ndarray | None = None,
+                   rows: np.ndarray | None = None) -> np.ndarray:
+        """(T, 3) float32 irradiance from the probes' SH (M, M, M, 9, 3); or, given `out` (N, 3) float32
+        and `rows` (T,), written into out[rows] (an image's pixels), which is returned."""
+        flat = np.ascontiguousarray(np.asarray(coefficients, np.float32).reshape(-1, sh.SH_COUNT, 3))
+        lobe = (sh.basis(self.pair_normal) * sh.COSINE_LOBE).astype(np.float32)
+        pair = _pair_irradiance(flat, self.pair_probe, np.ascontiguousarray(lobe))
+        if out is None:
+            out, rows = np.empty((len(self.weights), 3), np.float32), np.arange(len(self.weights))
+        _mix(pair, self.texel_pairs, self.weights, out, rows)
+        return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _pairs_dense(base, m, normal_id, count):
+    """Number the (probe, normal) pairs in order of first use, with a table of every possible pair."""
+    table = np.full(m * m * m * count, -1, np.int64)
+    texel_pairs = np.empty((base.shape[0], 8), np.int32)
+    pair_probe = np.empty(base.shape[0] * 8, np.int64)
+    pair_normal = np.empty(base.shape[0] * 8, np.int64)
+    used = 0
+    for t in range(base.shape[0]):
+        for c in range(8):
+            i = min(base[t, 0] + (c & 1), m - 1)
+            j = min(base[t, 1] + ((c >> 1) & 1), m - 1)
+            k = min(base[t, 2] + ((c >> 2) & 1), m - 1)
+            probe = (i * m + j) * m + k
+            key = probe * count + normal_id[t]
+            if table[key] < 0:
+                table[key] = used
+                pair_probe[used] = probe
+                pair_normal[used] = normal_id[t]
+                used += 1
+            texel_pairs[t, c] = table[key]
+    return texel_pairs, pair_probe[:used].copy(), pair_normal[:used].copy()
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _pair_irradiance(coefficients, pair_probe, lobe):
+    out = np.empty((pair_probe.shape[0], 3), np.float32)
+    for q in numba.prange(pair_probe.shape[0]):
+        c = coefficients[pair_probe[q]]
+        for channel in range(3):
+            total = np.float32(0.0)
+            for j in range(c.shape[0]):
+                total += lobe[q, j] * c[j, channel]
+            out[q, channel] = total
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _mix(pair, texel_pairs, weights, out, rows):
+    for t in numba.prange(texel_pairs.shape[0]):
+        r = g = b = np.float32(0.0)
+        for k in range(8):
+            q = texel_pairs[t, k]
+            w = weights[t, k]
+            r += w * pair[q, 0]
+            g += w * pair[q, 1]
+            b += w * pair[q, 2]
+        row = rows[t]
+        out[row, 0], out[row, 1], out[row, 2] = max(r, 0.0), max(g, 0.0), max(b, 0.0)

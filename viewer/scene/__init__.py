@@ -1,0 +1,16 @@
+"""The scene layer: the `Scene` data type and everything that makes one.
+
+    types.py     Scene, DirectionalLight, Camera, SceneError: the data type (imports nothing of ours)
+    loading.py   load(source): built-in names, the sidecar JSON, which reader reads a file
+    obj.py       OBJ + MTL -> Scene
+    loaders.py   glTF, GLB, PLY (through trimesh) -> Scene
+    meshes.py    built-in meshes (boxes, spheres, ...) for procedural scenes
+
+`from viewer.scene import Scene, load` is the face every later stage uses.
+"""
+
+from viewer.scene.loading import (ASSETS, SUPPORTED_SUFFIXES, Camera, DirectionalLight, Scene, SceneError,
+                                  builtin_names, load, parse_sun, read_sidecar, scene_file)
+
+__all__ = ["Camera", "DirectionalLight", "Scene", "SceneError", "ASSETS", "SUPPORTED_SUFFIXES",
+           "builtin_names", "load", "read_sidecar", "parse_sun", "scene_file"]

@@ -1,0 +1,130 @@
+"""Wavefront OBJ + MTL reader (positions, faces, groups and Lambertian materials).
+
+Our own, because trimesh 5.2 resolves relative (negative) face indices against the end of the whole file
+instead of the vertices read so far, which scrambles files like the public-domain CornellBox-Original.obj.
+Polygons are fan-triangulated in their vertex order, so the counter-clockwise front is kept.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from viewer.scene.types import Scene, SceneError
+
+DEFAULT_ALBEDO = (0.7, 0.7, 0.7)
+
+
+def read_mtl(path: Path) -> dict[str, dict[str, np.ndarray]]:
+    """name -> {"Kd": rgb, "Ke": rgb} for every material in an MTL file."""
+    materials: dict[str, dict[str, np.ndarray]] = {}
+    current = None
+    for number, raw in enumerate(_lines(path), 1):
+        words = raw.split("#", 1)[0].split()
+        if not words:
+            continue
+        key = words[0]
+        if key == "newmtl":
+            current = " ".join(words[1:]) or "default"
+            materials[current] = {}
+        elif key in ("Kd", "Ke") and current is not None:
+            materials[current][key] = _rgb(words[1:], path, number)
+    return materials
+
+
+def read(path: Path) -> Scene:
+    positions: list[list[float]] = []
+    faces: list[tuple[int, int, int]] = []
+    face_material: list[int] = []
+    material_names: list[str] = []
+    materials: dict[str, dict[str, np.ndarray]] = {}
+    current = _material_index(material_names, "default")
+    for number, raw in enumerate(_lines(path), 1):
+        words = raw.split("#", 1)[0].split()
+        if not words:
+            continue
+        key = words[0]
+        if key == "v":
+            if len(words) < 4:
+                raise SceneError(f"{path}:{number}: vertex needs three coordinates")
+            positions.append(_floats(words[1:4], path, number))
+        elif key == "f":
+            corners = [_index(w, len(positions), path, number) for w in words[1:]]
+            if len(corners) < 3:
+                raise SceneError(f"{path}:{number}: a face needs at least three vertices")
+            for k in range(1, len(corners) - 1):
+                faces.append((corners[0], corners[k], corners[k + 1]))
+                face_material.append(current)
+        elif key == "usemtl":
+            current = _material_index(material_names, " ".join(words[1:]) or "default")
+        elif key == "mtllib":
+            rest = raw.split("#", 1)[0].strip()[len("mtllib"):].strip()
+            libraries = [rest] if _is_file(path.parent / rest) else rest.split()
+            for name in libraries:
+                if _is_file(path.parent / name):
+                    materials.update(read_mtl(path.parent / name))
+    if not faces:
+        raise SceneError(f"{path}: no faces found")
+    albedo = np.array([materials.get(n, {}).get("Kd", DEFAULT_ALBEDO) for n in material_names], np.float64)
+    emission = np.array([materials.get(n, {}).get("Ke", (0.0, 0.0, 0.0)) for n in material_names], np.float64)
+    used, group = np.unique(np.asarray(face_material), return_inverse=True)
+    names = tuple(material_names[i] for i in used)
+    return Scene(path.stem, np.asarray(positions, np.float64), np.asarray(faces, np.int64),
+                 albedo[used][group], emission[used][group], group, names)
+
+
+def _lines(path: Path):
+    try:
+        text = path.read_bytes().decode("utf-8", errors="replace")
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if "\x00" in text:
+        raise SceneError(f"{path}: not a text file (binary data in an OBJ/MTL)")
+    return text.splitlines()
+
+
+def _is_file(path: Path) -> bool:
+    """A material library that cannot even be looked up (a name too long for the file system, say) is
+    skipped like a missing one, not an error: the geometry is still good."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def _material_index(names: list[str], name: str) -> int:
+    if name not in names:
+        names.append(name)
+    return names.index(name)
+
+
+def _floats(words, path, number) -> list[float]:
+    try:
+        values = [float(w) for w in words]
+    except ValueError:
+        raise SceneError(f"{path}:{number}: {' '.join(words)!r} is not a number") from None
+    if not all(np.isfinite(values)):
+        raise SceneError(f"{path}:{number}: NaN or infinite coordinate")
+    return values
+
+
+def _rgb(words, path, number) -> np.ndarray:
+    values = _floats(words[:3], path, number)
+    if len(values) == 1:
+        values = values * 3
+    if len(values) != 3:
+        raise SceneError(f"{path}:{number}: a colour needs three numbers")
+    return np.asarray(values, np.float64)
+
+
+def _index(word: str, count: int, path, number) -> int:
+    """OBJ position index (1-based, negative = relative to the vertices read so far) -> 0-based."""
+    try:
+        i = int(word.split("/", 1)[0])
+    except ValueError:
+        raise SceneError(f"{path}:{number}: face index {word!r} is not an integer") from None
+    resolved = i - 1 if i > 0 else count + i
+    if i == 0 or not 0 <= resolved < count:
+        raise SceneError(f"{path}:{number}: face index {i} out of range (1..{count} vertices so far)")
+    return resolved

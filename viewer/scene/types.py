@@ -1,0 +1,216 @@
+"""The Scene data type: triangle meshes with Lambertian materials, area emitters and an optional sun.
+
+`Scene` is the first data type of the pipeline (Scene -> VoxelGrid -> ProbeGrid -> pixels). It is a
+flat triangle soup: every face carries its albedo, its emitted radiance and the index of the group
+(material or object) it came from, so that a group can be recoloured without reloading the file.
+
+Conventions (../shared/DESIGN.md): the file's own units and axes, y up; an emitter emits from its front
+face only, the side from which its vertices run counter-clockwise.
+
+The bottom of the scene modules: the file formats (viewer.scene.obj, viewer.scene.loaders) build Scenes, and
+viewer.scene picks the format of a file and loads built-in scenes by name; this module imports neither.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+
+MAX_COORDINATE = 1e15
+"""Largest vertex coordinate: the renderer and the compute solver work in float32 (up to 3.4e38), and
+triangle areas, squares of coordinates, summed over a voxel, must stay finite there."""
+FLAT = 1e-6
+"""A bounding box thinner than this fraction of its largest extent along an axis is flat along it."""
+
+
+class SceneError(ValueError):
+    """A scene file (or scene description) that cannot be used; the message is one readable line."""
+
+
+@dataclass(frozen=True)
+class DirectionalLight:
+    """A sun: parallel light from one direction."""
+
+    direction: np.ndarray
+    """Unit vector (3,) pointing from the scene towards the light."""
+    irradiance: np.ndarray
+    """RGB irradiance (W/m^2) on a surface facing the light (Mitsuba's `directional` emitter)."""
+
+    def __post_init__(self):
+        d = np.asarray(self.direction, np.float64).reshape(3)
+        e = np.asarray(self.irradiance, np.float64).reshape(3)
+        if not (np.all(np.isfinite(d)) and np.linalg.norm(d) > 1e-9):
+            raise SceneError("directional light: direction must be a finite non-zero vector")
+        if not np.all(np.isfinite(e)) or np.any(e < 0):
+            raise SceneError("directional light: irradiance must be finite and non-negative")
+        object.__setattr__(self, "direction", d / np.linalg.norm(d))
+        object.__setattr__(self, "irradiance", e)
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera; `fov` is the vertical field of view in degrees."""
+
+    origin: tuple[float, float, float] = (0.0, 0.0, 3.9)
+    target: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    fov: float = 39.3077
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A triangle soup with per-face Lambertian material and emission."""
+
+    name: str
+    vertices: np.ndarray
+    """(V, 3) float64 positions."""
+    faces: np.ndarray
+    """(F, 3) int64 vertex indices, counter-clockwise seen from the front."""
+    albedo: np.ndarray
+    """(F, 3) float64 diffuse reflectance in [0, 1)."""
+    emission: np.ndarray
+    """(F, 3) float64 emitted radiance (front side only)."""
+    face_group: np.ndarray
+    """(F,) int64 index into `groups`."""
+    groups: tuple[str, ...]
+    """Names of the materials / objects, for editing colours by name."""
+    sun: DirectionalLight | None = None
+    camera: Camera = field(default_factory=Camera)
+
+    def __post_init__(self):
+        v = np.ascontiguousarray(self.vertices, np.float64)
+        f = np.ascontiguousarray(self.faces, np.int64)
+        if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
+            raise SceneError(f"{self.name}: vertices and faces must be (n, 3) arrays")
+        if len(f) == 0 or len(v) == 0:
+            raise SceneError(f"{self.name}: the scene has no triangles")
+        if not np.all(np.isfinite(v)):
+            raise SceneError(f"{self.name}: vertex positions contain NaN or infinity")
+        if np.abs(v).max() > MAX_COORDINATE:
+            raise SceneError(f"{self.name}: vertex coordinates beyond +-{MAX_COORDINATE:.0e} (the GPU computes "
+                             f"areas in float32)")
+        if f.min() < 0 or f.max() >= len(v):
+            raise SceneError(f"{self.name}: face indices out of range (0..{len(v) - 1})")
+        # Voxelizing weighs every triangle by its area: some must be non-zero.
+        doubled_area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+        if not np.any(doubled_area > 0):
+            raise SceneError(f"{self.name}: every triangle is degenerate (zero area)")
+        albedo = np.broadcast_to(np.asarray(self.albedo, np.float64), f.shape).copy()
+        emission = np.broadcast_to(np.asarray(self.emission, np.float64), f.shape).copy()
+        if not (np.all(np.isfinite(albedo)) and np.all(np.isfinite(emission))):
+            raise SceneError(f"{self.name}: material colours contain NaN or infinity")
+        if np.any(emission < 0):
+            raise SceneError(f"{self.name}: negative emission")
+        # Albedo 1 never converges (eq. 30 is a geometric series in albedo): keep it just below.
+        albedo = np.clip(albedo, 0.0, 0.999)
+        group = np.broadcast_to(np.asarray(self.face_group, np.int64), (len(f),)).copy()
+        for name, value in (("vertices", v), ("faces", f), ("albedo", albedo),
+                            ("emission", emission), ("face_group", group)):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "groups", tuple(self.groups) or ("default",))
+
+    # ---- derived geometry -------------------------------------------------------------------------
+    @property
+    def triangles(self) -> np.ndarray:
+        """(F, 3, 3) corner positions."""
+        return self.vertices[self.faces]
+
+    @property
+    def face_cross(self) -> np.ndarray:
+        t = self.triangles
+        return np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+
+    @property
+    def face_areas(self) -> np.ndarray:
+        return 0.5 * np.linalg.norm(self.face_cross, axis=1)
+
+    @property
+    def face_normals(self) -> np.ndarray:
+        """Unit front-face normals (zero for degenerate faces)."""
+        c = self.face_cross
+        n = np.linalg.norm(c, axis=1, keepdims=True)
+        return np.divide(c, n, out=np.zeros_like(c), where=n > 0)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi): the box around the vertices the faces use, and the box every stage fills (probes,
+        the camera's framing). A flat scene (a floor alone, one lamp) has no depth along one axis: that
+        axis is widened, centred on the plane, to the box's largest extent, so that the probe grid over
+        it has a spacing on every axis and probes on both sides of the plane."""
+        used = self.vertices[np.unique(self.faces)]
+        lo, hi = used.min(axis=0), used.max(axis=0)
+        extent = hi - lo
+        flat = extent <= FLAT * extent.max()
+        if np.any(flat):
+            half = 0.5 * (extent.max() if extent.max() > 0 else 1.0)
+            centre = 0.5 * (lo + hi)
+            lo, hi = np.where(flat, centre - half, lo), np.where(flat, centre + half, hi)
+        return lo, hi
+
+    @property
+    def has_emitters(self) -> bool:
+        return bool(np.any(self.emission > 0)) or (self.sun is not None and np.any(self.sun.irradiance > 0))
+
+    # ---- edits (return new scenes) ----------------------------------------------------------------
+    def group_index(self, group: str) -> int:
+        try:
+            return self.groups.index(group)
+        except ValueError:
+            raise SceneError(f"{self.name}: no group named {group!r} (have {', '.join(self.groups)})") from None
+
+    def with_albedo(self, group: str, rgb) -> "Scene":
+        mask = self.face_group == self.group_index(group)
+        albedo = self.albedo.copy()
+        albedo[mask] = np.asarray(rgb, np.float64)
+        return replace(self, albedo=albedo)
+
+    def with_emission(self, group: str, rgb) -> "Scene":
+        mask = self.face_group == self.group_index(group)
+        emission = self.emission.copy()
+        emission[mask] = np.asarray(rgb, np.float64)
+        return replace(self, emission=emission)
+
+    def with_sun(self, sun: DirectionalLight | None) -> "Scene":
+        return replace(self, sun=sun)
+
+    def transformed_group(self, group: str, matrix: np.ndarray) -> "Scene":
+        """Move the vertices of one group by a 4x4 affine matrix (faces of a group own their vertices
+        after `load`, so no other group moves)."""
+        mask = self.face_group == self.group_index(group)
+        idx = np.unique(self.faces[mask])
+        v = self.vertices.copy()
+        m = np.asarray(matrix, np.float64)
+        v[idx] = v[idx] @ m[:3, :3].T + m[:3, 3]
+        return replace(self, vertices=v)
+
+    def largest_group(self) -> str:
+        """The group whose faces have the largest total area (a room's biggest wall or floor)."""
+        return self.groups[int(np.argmax(np.bincount(self.face_group, self.face_areas, len(self.groups))))]
+
+    def group_albedo(self, group: str) -> np.ndarray:
+        mask = self.face_group == self.group_index(group)
+        return np.average(self.albedo[mask], axis=0, weights=self.face_areas[mask] + 1e-30)
+
+    @staticmethod
+    def concatenate(name: str, parts: list["Scene"], sun: DirectionalLight | None = None,
+                    camera: Camera | None = None) -> "Scene":
+        verts, faces, alb, emi, grp, names = [], [], [], [], [], []
+        offset = 0
+        for p in parts:
+            verts.append(p.vertices)
+            faces.append(p.faces + offset)
+            offset += len(p.vertices)
+            alb.append(p.albedo)
+            emi.append(p.emission)
+            lookup = []
+            for g in p.groups:
+                if g not in names:
+                    names.append(g)
+                lookup.append(names.index(g))
+            grp.append(np.asarray(lookup)[p.face_group])
+        return Scene(name, np.concatenate(verts), np.concatenate(faces), np.concatenate(alb),
+                     np.concatenate(emi), np.concatenate(grp), tuple(names), sun=sun,
+                     camera=camera or parts[0].camera)
