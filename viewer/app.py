@@ -249,7 +249,7 @@ class ViewerApp(mglw.WindowConfig):
         from imgui_bundle import imgui
 
         gi = self.session.gi
-        return self.controls.moving or imgui.is_any_item_active() or (gi.source == "compute" and gi.busy)
+        return self.controls.moving or imgui.is_any_item_active() or gi.previewing
 
     def _throttle(self, drew: bool) -> None:
         """Cap the frame rate: llvmpipe and the solvers share the same few cores. When nothing moves and

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer import sources
 from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
 from viewer.capture import run_capture
 from viewer.errors import ArgumentParser, InputError, exit_status
@@ -60,7 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
     sample = sub.add_parser("sample", help="incident-radiance SH at points, as the renderer sees it")
     sample.add_argument("scene", help="a built-in scene name or a scene file (.obj .glb .gltf .ply)")
     sample.add_argument("--points", required=True, help="(P, 3) float32 world points, .npy")
-    sample.add_argument("--method", choices=("solver", "compute", "neural"), default="solver")
+    sample.add_argument("--method", choices=sources.sample_choices(), default=sources.SOLVER.name)
     sample.add_argument("--out", required=True, help="(P, 9, 3) float32 SH output, .npy")
     _gi_arguments(sample)
 
@@ -68,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     capture.add_argument("scene", nargs="?", default="cornell")
     capture.add_argument("--out", required=True, help="PNG file to write")
     capture.add_argument("--size", default="1280x720", help="WxH")
-    capture.add_argument("--gi", choices=("off", "compute", "solver", "neural"), default="solver")
+    capture.add_argument("--gi", choices=sources.chosen_by_name(), default=sources.SOLVER.name)
     capture.add_argument("--view", choices=VIEWS, default="final")
     capture.add_argument("--tonemap", choices=("aces", "reinhard", "none"), default="aces",
                          help="tone curve; `none` (clamp) for comparisons with Mitsuba")
@@ -133,9 +134,6 @@ def _load_scene(args):
 
 
 def run_sample(args) -> int:
-    from viewer.physical import gi
-    from viewer.neural.domain import print_warning
-
     settings = gi_settings(args)
     points = load_points(args.points)
     out = Path(args.out)
@@ -144,37 +142,17 @@ def run_sample(args) -> int:
     start = time.perf_counter()
     scene = _load_scene(args)
     timings = Timings({"load": time.perf_counter() - start})
-    if args.method == "solver":
-        grid = gi.solve(scene, settings, include_emitted=True, timings=timings)
-    elif args.method == "compute":
-        from viewer.gpu.compute_relight import solve_probes
-        from viewer.gpu.context import create_context
-
-        ctx = create_context()
-        try:
-            grid = solve_probes(ctx, scene, settings, include_emitted=True, timings=timings)
-        finally:
-            ctx.release()
-    else:
-        field = neural_field(args)
-        grid = field.solve(scene, include_emitted=True, timings=timings.stages)
-        print_warning(scene, field.card.domain)
+    options = sources.SolveOptions(include_emitted=True, model=getattr(args, "model", None), timings=timings)
+    try:
+        grid, timings = sources.lookup(args.method).solve(scene, settings, options)
+    except sources.SourceError as exc:
+        raise InputError(f"--method {args.method}: {exc}") from None
     clock = time.perf_counter()
     sh = grid.interpolate(points).astype(np.float32)
     timings.stages["interpolate"] = time.perf_counter() - clock
     np.save(out, sh)
     print(f"sample {args.method}: {len(points)} points; {timings}", file=sys.stderr)
     return 0
-
-
-def neural_field(args):
-    """The model of `--model` (or the shipped one); a missing or broken model is bad input (exit 2)."""
-    from viewer.neural.field import DEFAULT_MODEL, ModelError, NeuralField
-
-    try:
-        return NeuralField(getattr(args, "model", None) or DEFAULT_MODEL)
-    except ModelError as exc:
-        raise InputError(f"--method neural: {exc}") from None
 
 
 def run_bench(args) -> int:

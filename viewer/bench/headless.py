@@ -40,7 +40,7 @@ class HeadlessViewer:
         """One frame as the window runs it; True if the scene was drawn."""
         session = self.session
         session.update("final")
-        preview = self.gi.source == "compute" and self.gi.busy
+        preview = self.gi.previewing
         self.frames += 1
         return self.viewport.frame(session.camera.camera(), "final", session.content_key(), self.screen,
                                    preview=preview)

@@ -18,6 +18,7 @@ from typing import Callable
 import moderngl
 import numpy as np
 
+from viewer import sources
 from viewer.gpu.camera import parse_camera
 from viewer.gpu.context import create_context
 from viewer.gpu.renderer import VIEWS, RenderSettings, Renderer
@@ -26,7 +27,6 @@ from viewer.gpu.targets import DisplayTarget, HdrTarget
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Camera, Scene
 
-GI_MODES = ("off", "compute", "solver", "neural")
 MAX_SIZE = 8192
 
 
@@ -164,33 +164,22 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def solver_probes(args) -> ProbeSource:
-    """The probe source for `--gi solver` (the numpy transport solver, viewer.physical.gi.solve) and `--gi compute`
-    (the compute-shader solver on the capture's own context), with the GI settings found on args
+    """The probe source for a `--gi` source of viewer.sources that solves (the compute-shader solver on the
+    capture's own context, the numpy solver, the network of `--model`), with the GI settings found on args
     (voxels, probes, kernel, bounces, directions, dering; defaults otherwise), indirect light only."""
     def source(scene: Scene, gi: str, ctx) -> ProbeGrid | None:
-        from viewer.physical import gi as solver
+        from viewer.physical.gi import GISettings
 
         names = ("voxels", "probes", "kernel", "bounces", "directions", "dering")
-        settings = solver.GISettings(**{name: getattr(args, name) for name in names
-                                        if getattr(args, name, None) is not None})
-        if gi == "solver":
-            return solver.solve(scene, settings, include_emitted=False)
-        if gi == "compute":
-            from viewer.gpu.compute_relight import solve_probes
-
-            return solve_probes(ctx, scene, settings, include_emitted=False)
-        if gi == "neural":
-            from viewer.neural.field import DEFAULT_MODEL, ModelError, NeuralField
-
-            try:
-                field = NeuralField(getattr(args, "model", None) or DEFAULT_MODEL)
-            except ModelError as exc:
-                raise CaptureError(f"--gi neural: {exc}") from None
-            from viewer.neural.domain import print_warning
-
-            print_warning(scene, field.card.domain)
-            return field.solve(scene, include_emitted=False)
-        raise CaptureError(f"--gi {gi}: unknown GI source")
+        settings = GISettings(**{name: getattr(args, name) for name in names if getattr(args, name, None) is not None})
+        spec = sources.SOURCES.get(gi)
+        if spec is None or spec.solve is None:
+            raise CaptureError(f"--gi {gi}: unknown GI source")
+        options = sources.SolveOptions(include_emitted=False, ctx=ctx, model=getattr(args, "model", None))
+        try:
+            return spec.solve(scene, settings, options)[0]
+        except sources.SourceError as exc:
+            raise CaptureError(f"--gi {gi}: {exc}") from None
     return source
 
 
@@ -198,7 +187,7 @@ def run_capture(args, probe_source: ProbeSource | None = None) -> int:
     """`python -m viewer capture`. Reads from args (a missing attribute takes its default):
 
     scene (name or file, default cornell), out (.png/.jpg, or .npy for linear HDR; required),
-    size ("WxH" or (W, H); 512x512), gi (off|compute|solver|neural; off), view (one of VIEWS; final),
+    size ("WxH" or (W, H); 512x512), gi (a source of viewer.sources.chosen_by_name(); off), view (one of VIEWS; final),
     camera ("ox,oy,oz,tx,ty,tz"; the one the viewer opens the scene with), fov (degrees; that camera's),
     exposure (EV; 0),
     tonemap (aces|reinhard|none; aces), msaa (samples; 4), light_samples (32), sun ("dx,dy,dz,r,g,b"),
@@ -219,8 +208,8 @@ def run_capture(args, probe_source: ProbeSource | None = None) -> int:
     size = value("size", (512, 512))
     size = parse_size(size) if isinstance(size, str) else (int(size[0]), int(size[1]))
     gi = value("gi", "off")
-    if gi not in GI_MODES:
-        raise CaptureError(f"--gi {gi!r}: expected one of {', '.join(GI_MODES)}")
+    if gi not in sources.chosen_by_name():
+        raise CaptureError(f"--gi {gi!r}: expected one of {', '.join(sources.chosen_by_name())}")
     view = value("view", "final")
     if view not in VIEWS:
         raise CaptureError(f"--view {view!r}: expected one of {', '.join(VIEWS)}")
@@ -257,7 +246,7 @@ def run_capture(args, probe_source: ProbeSource | None = None) -> int:
     ctx = create_context()
     try:
         probes = None
-        if gi != "off":
+        if sources.SOURCES[gi].solve is not None:   # off solves nothing: direct light only
             probes = (probe_source or solver_probes(args))(scene, gi, ctx)
         solved = time.perf_counter()
         voxels, radiance = _debug_voxels(scene, view, settings, value("voxels", 32))

@@ -7,17 +7,17 @@ from __future__ import annotations
 import argparse
 from types import SimpleNamespace
 
+from viewer import sources
 from viewer.errors import InputError
 from viewer.physical.gi import GISettings
 
 VIEW_CHOICES = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
-GI_CHOICES = ("off", "compute", "solver", "neural")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The viewer's own flags (cheap to call: no GL or imgui import)."""
     d = GISettings()
-    parser.add_argument("--gi", choices=GI_CHOICES, default="compute",
+    parser.add_argument("--gi", choices=sources.chosen_by_name(), default=sources.DEFAULT,
                         help="indirect light source at start (compute: the compute-shader solver)")
     parser.add_argument("--view", choices=VIEW_CHOICES, default="final", help="what the view shows at start")
     parser.add_argument("--size", default="1280x720", help="window size WxH")

@@ -11,10 +11,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from imgui_bundle import imgui
 
+from viewer import sources
 from viewer.gpu.renderer import TONEMAPS, VIEWS, RenderSettings
 from viewer.ui.background import BackgroundTask
 from viewer.ui.frame_graph import FrameTimes, draw_frame_graph
-from viewer.ui.gi_sources import LABELS, SOURCES, GIController
+from viewer.ui.gi_sources import GIController
 from viewer.ui.scene_edits import SceneEdits
 
 PANEL_WIDTH = 360
@@ -101,15 +102,20 @@ def scene_section(name: str, triangles: int, edits: SceneEdits, loading: Backgro
     return imgui.button("Reset edits")
 
 
+def source_choices() -> list[tuple[str, str]]:
+    """(name, label) of every GI source the panel offers, in the registry's order (viewer.sources)."""
+    return [(name, spec.label) for name, spec in sources.SOURCES.items()]
+
+
 def gi_section(gi: GIController, baking: bool = False) -> None:
     """The GI source and its settings; `baking`: the renderer is making the lightmap's weights and
     final-gather rays for new geometry (Renderer.baking), said under the source's status."""
-    for index, source in enumerate(SOURCES):
+    for index, (source, label) in enumerate(source_choices()):
         reason = gi.unavailable.get(source)
         if index % 2:
             imgui.same_line(PANEL_WIDTH / 2)
         imgui.begin_disabled(reason is not None)
-        if imgui.radio_button(LABELS[source], gi.source == source):
+        if imgui.radio_button(label, gi.source == source):
             gi.set_source(source)
         imgui.end_disabled()
         if reason is not None:
