@@ -25,7 +25,7 @@ def test_quick_mode_writes_sane_numbers_charts_and_report_and_resumes(tmp_path):
     with open(tmp_path / "data" / "benchmark.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     methods = {r["method"] for r in rows}
-    assert {"ambient", "mitsuba", "numpy"} <= methods
+    assert {"ambient", "mitsuba", "solver"} <= methods
     for r in rows:
         ms, error = float(r["ms"]), float(r["relative_rmse"])
         assert math.isfinite(ms) and ms > 0, r
@@ -35,7 +35,7 @@ def test_quick_mode_writes_sane_numbers_charts_and_report_and_resumes(tmp_path):
     errors = [e for _, e in mitsuba]
     assert len(errors) >= 3 and errors == sorted(errors, reverse=True), mitsuba  # more directions, less noise
     assert errors[-1] < 0.08  # 256 directions: a few percent (the reference itself has 4096)
-    solvers = [float(r["relative_rmse"]) for r in rows if r["method"] in ("numpy", "compute")]
+    solvers = [float(r["relative_rmse"]) for r in rows if r["method"] in ("solver", "compute")]
     assert all(e < 0.4 for e in solvers)  # coarse grids (8^3 probes), but far better than a constant
     ambient = float(next(r["relative_rmse"] for r in rows if r["method"] == "ambient"))
     assert ambient > max(solvers)
@@ -124,7 +124,7 @@ def test_a_screen_edit_is_timed_to_the_settled_frame_and_scored_by_the_sources_f
     """`screen-edit`: the untimed half edits the scene away in the viewer, the timed half brings it back
     and returns once the viewer has settled (probes in, the lightmap's weights made and its gather done);
     the grid scored is the source's field of the scene itself."""
-    from viewer.bench.methods import screen_edit_method
+    from viewer.bench.edit_methods import screen_edit_method
     from viewer.physical.gi import GISettings, solve
     from viewer.scene import load
 

@@ -12,6 +12,10 @@ Memory is what the renderer keeps for the result: the probe textures (M^3 probes
 `ProbeGrid.texture_data`) plus, for a network, its .onnx file. A method that cannot run here (no GL
 context, a broken model) raises `MethodUnavailable` from `prepare`; the benchmark notes it and goes on.
 
+The viewer's own GI sources are named as viewer.sources names them (`compute`, `solver`, `neural`);
+rows written when the CPU solver was called `numpy` read as `solver` (viewer.bench.run). The edits' time
+to converged probes and to the settled frame are in viewer.bench.edit_methods.
+
 More entries come from providers (`register_provider`), each scanning for model files: the neural
 entries (models/, runs/sweep/) and the paper's model families (runs/table1/, `paper_families`).
 """
@@ -26,9 +30,10 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from viewer import sources
 from viewer.reference import mitsuba as reference
 from viewer.bench.points import free_space_points
-from viewer.physical.gi import GISettings, solve
+from viewer.physical.gi import GISettings
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 
@@ -48,7 +53,7 @@ class MethodUnavailable(RuntimeError):
 @dataclass(frozen=True)
 class Method:
     family: str
-    """Marker and colour in the charts: `compute`, `numpy`, `neural`, `ambient`, `mitsuba`, ..."""
+    """Marker and colour in the charts: `compute`, `solver`, `neural`, `ambient`, `mitsuba`, ..."""
     setting: str
     """What distinguishes it within its family, e.g. `N32 M24 conv` (voxels, probes, bounces)."""
     prepare: Callable[[], Produce]
@@ -76,7 +81,8 @@ def texture_bytes(probes: int) -> int:
     return probes ** 3 * TEXELS_PER_PROBE * TEXEL_BYTES
 
 
-def _grid_label(settings: GISettings) -> str:
+def grid_label(settings: GISettings) -> str:
+    """`N32 M24 conv`: voxels, probes, bounces (`conv`: to convergence)."""
     bounces = "conv" if settings.bounces == GISettings().bounces else f"b{settings.bounces}"
     return f"N{settings.voxels} M{settings.probes} {bounces}"
 
@@ -94,9 +100,16 @@ def solver_grid(defaults: GISettings = DEFAULT) -> list[GISettings]:
             + [replace(defaults, probes=m) for m in (8, 16, 32)])
 
 
-def numpy_method(settings: GISettings) -> Method:
-    family = "numpy" if settings.kernel == "physical" else f"numpy-{settings.kernel}"
-    return Method(family, _grid_label(settings), lambda: lambda scene, points: solve(scene, settings),
+def family(source: sources.Source, settings: GISettings) -> str:
+    """The source's name, with the kernel where it is not the physical one: `solver`, `compute-paper`."""
+    return source.name if settings.kernel == "physical" else f"{source.name}-{settings.kernel}"
+
+
+def solver_method(settings: GISettings) -> Method:
+    def produce(scene: Scene, points) -> ProbeGrid:
+        return sources.SOLVER.solve(scene, settings, sources.SolveOptions(include_emitted=True))[0]
+
+    return Method(family(sources.SOLVER, settings), grid_label(settings), lambda: produce,
                   texture_bytes(settings.probes), about=f"numpy solver, {settings.kernel} kernel (viewer.physical.gi.solve)")
 
 
@@ -104,7 +117,7 @@ _context = None
 _programs = None
 
 
-def _gl():
+def shared_gl():
     """One headless GL context and one program library for the whole run: the viewer compiles its
     shaders once, so the solver's time here does not include compiling them either."""
     global _context, _programs
@@ -126,7 +139,7 @@ def gl_renderer() -> str:
     from viewer.gpu.context import describe
 
     try:
-        return describe(_gl()[0])
+        return describe(shared_gl()[0])
     except MethodUnavailable as exc:
         return f"no GL context ({exc})"
 
@@ -135,67 +148,11 @@ def compute_method(settings: GISettings) -> Method:
     def prepare() -> Produce:
         from viewer.gpu.compute_relight import solve_probes
 
-        ctx, programs = _gl()
+        ctx, programs = shared_gl()   # the shared programs: compiling shaders is not the solve's time
         return lambda scene, points: solve_probes(ctx, scene, settings, programs=programs)
 
-    family = "compute" if settings.kernel == "physical" else f"compute-{settings.kernel}"
-    return Method(family, _grid_label(settings), prepare, texture_bytes(settings.probes),
+    return Method(family(sources.COMPUTE, settings), grid_label(settings), prepare, texture_bytes(settings.probes),
                   about=f"compute-shader solver, {settings.kernel} kernel, blocking run to convergence")
-
-
-class _Edit:
-    """An edit's time to converged probes: untimed (`before`), the scene is edited away and relit; timed,
-    the edit comes back to the scene itself (so the error is the scene's own) and the probes are
-    projected, as the viewer does after the edit. `kind`: `colour` (the largest group's albedo: the
-    relight only) or `lamp` (the brightest emitter moved by a tenth of the scene: new lamp paths on the
-    unchanged geometry, then the relight, as the viewer answers a lamp drag)."""
-
-    def __init__(self, settings: GISettings, kind: str, relighter_factory=None):
-        self.settings, self.kind, self.relighter_factory = settings, kind, relighter_factory
-        self.solvers: dict = {}
-
-    def _edited(self, scene: Scene) -> Scene:
-        if self.kind == "colour":
-            group = scene.largest_group()
-            return scene.with_albedo(group, scene.group_albedo(group)[::-1] * 0.5)
-        from viewer.ui.scene_edits import emitter_group
-
-        group = emitter_group(scene)
-        if group is None:
-            return scene.with_sun(None)
-        lo, hi = scene.bounds
-        move = np.eye(4)
-        move[0, 3] = 0.1 * float(hi[0] - lo[0])
-        return scene.transformed_group(group, move)
-
-    def before(self, scene: Scene) -> None:
-        from viewer.physical.gi import PhysicalGI
-
-        if scene.name not in self.solvers:
-            relighter = self.relighter_factory() if self.relighter_factory else None
-            solver = PhysicalGI(self.settings, relighter) if relighter else PhysicalGI(self.settings)
-            solver.update(scene)
-            self.solvers[scene.name] = solver
-        self.solvers[scene.name].update(self._edited(scene), stale_geometry=True)
-
-    def __call__(self, scene: Scene, points) -> ProbeGrid:
-        solver = self.solvers[scene.name]
-        solver.update(scene, stale_geometry=True)
-        return solver.probe_grid(include_emitted=True)
-
-
-def edit_method(settings: GISettings, kind: str, backend: str) -> Method:
-    def prepare() -> Produce:
-        if backend == "numpy":
-            return _Edit(settings, kind)
-        from viewer.gpu.compute_relight import ComputeRelight
-
-        ctx, programs = _gl()
-        return _Edit(settings, kind, lambda: ComputeRelight(ctx, programs))
-
-    what = {"colour": "a colour edit (the relight)", "lamp": "a lamp move (lamp paths + relight)"}[kind]
-    return Method(f"{backend}-edit", f"{_grid_label(settings)} {kind}", prepare, texture_bytes(settings.probes),
-                  about=f"{backend} solver, time from {what} to converged probes")
 
 
 # ---- baselines and Mitsuba -------------------------------------------------------------------------
@@ -287,7 +244,7 @@ def neural_method(path: Path, root: Path = ROOT) -> Method:
         label = str(path.resolve().relative_to(root))
     except ValueError:
         label = str(path)
-    return Method("neural", label, prepare, texture_bytes(card.probes), path.stat().st_size,
+    return Method(sources.NEURAL.name, label, prepare, texture_bytes(card.probes), path.stat().st_size,
                   about=f"ONNX network, {card.data.get('parameters', '?')} parameters, {card.probes}^3 probes")
 
 
@@ -319,90 +276,14 @@ def register_provider(provider: Callable[[bool], Iterable[Method]]) -> None:
         PROVIDERS.append(provider)
 
 
-class _ScreenEdit:
-    """An edit's time to converged GI on screen: the viewer itself, headless (viewer/bench/headless.py, the
-    renderer's lightmap weights on their worker as in the window), from the edit made as the panels make
-    it (SceneEdits) to the settled full-resolution frame: the GI source's probes in, the indirect lightmap
-    baked and gathered from them (viewer/bench/edits.py times the same, with the first frame beside).
-    Untimed (`before`), the scene is edited away and settled; timed, the edit comes back. The error is the
-    source's field of the scene itself, computed once untimed: the compute source's is the physical GI's
-    (the two relights agree to 1e-3), the neural source's the network's. `kind`: `colour` (the largest
-    group's albedo) or `lamp` (the lamp moved by a twentieth of the scene: new geometry for the renderer)."""
-
-    def __init__(self, source: str, kind: str):
-        self.source, self.kind = source, kind
-        self.viewer = None
-        self.scene_name = None
-        self.field: ProbeGrid | None = None
-        atexit.register(self.release)
-
-    def release(self) -> None:
-        if self.viewer is not None:
-            self.viewer.release()
-            self.viewer = None
-
-    def _open(self, scene: Scene) -> None:
-        from viewer.bench.headless import HeadlessViewer
-
-        self.release()
-        self.viewer = HeadlessViewer(self.source, DEFAULT, scene)
-        self.viewer.renderer.background_bake = True
-        self.viewer.settle()
-        self.scene_name = scene.name
-        if self.viewer.session.edits.light.group is None and self.kind == "lamp":
-            raise MethodUnavailable("the scene has no lamp to move")
-        if self.source == "neural":
-            from viewer.neural.field import NeuralField
-
-            self.field = NeuralField().solve(scene, include_emitted=True)
-        else:
-            self.field = solve(scene, DEFAULT, include_emitted=True)
-
-    def _edit(self, away: bool) -> None:
-        edits = self.viewer.session.edits
-        if self.kind == "colour":
-            base = edits.base
-            group = base.largest_group()
-            rgb = base.group_albedo(group)
-            edits.set_albedo(group, rgb[::-1] * 0.5 if away else rgb)
-        else:
-            lo, hi = edits.base.bounds
-            offset = np.zeros(3)
-            offset[0] = 0.05 * float(hi[0] - lo[0]) if away else 0.0
-            edits.set_light(offset=offset)
-        self.viewer.settle()
-
-    def before(self, scene: Scene) -> None:
-        if self.scene_name != scene.name:
-            self._open(scene)
-        self._edit(away=True)
-
-    def __call__(self, scene: Scene, points) -> ProbeGrid:
-        self._edit(away=False)
-        return self.field
-
-
-def screen_edit_method(source: str, kind: str) -> Method:
-    def prepare() -> Produce:
-        if source == "neural":
-            from viewer.neural.field import DEFAULT_MODEL
-
-            if not DEFAULT_MODEL.exists():
-                raise MethodUnavailable(f"no model at {DEFAULT_MODEL}")
-        _gl()   # a GL context can be made here
-        return _ScreenEdit(source, kind)
-
-    what = {"colour": "a colour edit", "lamp": "a lamp move"}[kind]
-    return Method("screen-edit", f"{source} {kind}", prepare, texture_bytes(DEFAULT.probes),
-                  about=f"the viewer with the {source} GI source, time from {what} to the settled frame on screen")
-
-
 def registry(quick: bool = False) -> dict[str, Method]:
     """Every method, in report order. Quick: a handful that together take well under a minute."""
+    from viewer.bench.edit_methods import edit_method, screen_edit_method
+
     if quick:
         small = GISettings(voxels=16, probes=8)
         methods = [ambient_method(), *(mitsuba_points_method(d) for d in (16, 64, 256)),
-                   numpy_method(GISettings(voxels=8, probes=8)), compute_method(small),
+                   solver_method(GISettings(voxels=8, probes=8)), compute_method(small),
                    edit_method(small, "colour", "compute"), mitsuba_probes_method(8, 64)]
     else:
         # The numpy solver at 64^3 voxels would hold a 27730^2 transition matrix (6 GB) and take hours:
@@ -411,11 +292,12 @@ def registry(quick: bool = False) -> dict[str, Method]:
         methods = [ambient_method()]
         methods += [compute_method(s) for s in solver_grid()]
         methods += [compute_method(replace(DEFAULT, kernel="paper"))]
-        methods += [numpy_method(replace(DEFAULT, voxels=16)), numpy_method(DEFAULT),
-                    numpy_method(replace(DEFAULT, voxels=16, kernel="paper"))]
-        methods += [edit_method(DEFAULT, kind, backend) for backend in ("compute", "numpy")
+        methods += [solver_method(replace(DEFAULT, voxels=16)), solver_method(DEFAULT),
+                    solver_method(replace(DEFAULT, voxels=16, kernel="paper"))]
+        methods += [edit_method(DEFAULT, kind, backend) for backend in (sources.COMPUTE.name, sources.SOLVER.name)
                     for kind in ("colour", "lamp")]
-        methods += [screen_edit_method(source, kind) for source in ("compute", "neural") for kind in ("colour", "lamp")]
+        methods += [screen_edit_method(source, kind) for source in (sources.COMPUTE.name, sources.NEURAL.name)
+                    for kind in ("colour", "lamp")]
         methods += [mitsuba_points_method(d) for d in (16, 64, 256, 1024)]
         methods += [mitsuba_probes_method(m, d) for m, d in ((8, 64), (16, 64), (16, 256), (24, 256), (32, 256))]
     for provider in PROVIDERS:

@@ -24,22 +24,24 @@ GOAL = 0.05
 """The product's accuracy goal (relative RMSE against Mitsuba, docs/ACCURACY.md)."""
 STYLES = {
     "ambient": ("o", "#7f7f7f"), "compute": ("s", "#1f77b4"), "compute-paper": ("s", "#9ecae1"),
-    "numpy": ("D", "#2ca02c"), "numpy-paper": ("D", "#98df8a"), "neural": ("^", "#d62728"),
+    "solver": ("D", "#2ca02c"), "solver-paper": ("D", "#98df8a"), "neural": ("^", "#d62728"),
     "paper-family": ("v", "#ff9896"), "mitsuba-probes": ("P", "#9467bd"), "mitsuba": ("x", "#8c564b"),
-    "compute-edit": ("*", "#08306b"), "numpy-edit": ("*", "#00441b"), "screen-edit": ("X", "#ff7f0e"),
+    "compute-edit": ("*", "#08306b"), "solver-edit": ("*", "#00441b"), "screen-edit": ("X", "#ff7f0e"),
 }
-"""Marker and colour per method family; a family not listed here gets the next of EXTRA_STYLES."""
+"""Marker and colour per method family (the viewer's sources by their names in viewer.sources; rows read
+from an older CSV carry them too, viewer.bench.run.read_rows); a family not listed here gets the next of
+EXTRA_STYLES."""
 EXTRA_STYLES = [("*", "#e377c2"), ("h", "#bcbd22"), ("p", "#17becf")]
 SAME = 0.01
 """Errors within 1% of each other count as the same accuracy when saying what beats a default."""
-VIEWER_FAMILIES = ("compute", "compute-paper", "numpy", "numpy-paper", "neural")
+VIEWER_FAMILIES = ("compute", "compute-paper", "solver", "solver-paper", "neural")
 """The GI sources the viewer itself offers (its panel and `sample --method`)."""
-EDIT_FAMILIES = ("compute-edit", "numpy-edit", "screen-edit")
+EDIT_FAMILIES = ("compute-edit", "solver-edit", "screen-edit")
 """Time from an edit to converged probes on a scene whose geometry is already traced (`screen-edit`: to
 the settled frame in the viewer, the renderer's lightmap included): drawn on the charts, kept off the
 fronts (they are not a way to light a scene from nothing), and set against the Mitsuba bake of the same
 error in their own table."""
-DEFAULTS = {"compute": "N32 M24 conv", "numpy": "N32 M24 conv", "neural": "models/probenet.onnx"}
+DEFAULTS = {"compute": "N32 M24 conv", "solver": "N32 M24 conv", "neural": "models/probenet.onnx"}
 """The product's GI sources at their shipped defaults (viewer.physical.gi.GISettings, the shipped model)."""
 
 
@@ -332,11 +334,11 @@ TITLE = "# Benchmark: every GI method, time and memory against error"
 
 def against_mitsuba(rows: list[dict], scenes: list[str]) -> str:
     """Markdown: per scene, the physical GI's time from a new scene and from an edit to converged probes
-    (relit on the CPU, `numpy`, and in compute shaders, `compute`),
+    (relit on the CPU, `solver`, and in compute shaders, `compute`),
     next to the Mitsuba bake of the probes whose error is equal or larger (the slowest such bake: the
     one closest to our accuracy), measured in the same run, and how many times faster ours is."""
-    ours = [(f, DEFAULTS[f], "new scene") for f in ("numpy", "compute")]
-    ours += [(f, f"{DEFAULTS['compute']} {kind}", kind + " edit") for f in ("compute-edit", "numpy-edit")
+    ours = [(f, DEFAULTS[f], "new scene") for f in ("solver", "compute")]
+    ours += [(f, f"{DEFAULTS['compute']} {kind}", kind + " edit") for f in ("compute-edit", "solver-edit")
              for kind in ("colour", "lamp")]
     ours += [("screen-edit", f"{source} {kind}", f"{kind} edit on screen, {source} source")
              for source in ("compute", "neural") for kind in ("colour", "lamp")]

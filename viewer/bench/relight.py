@@ -33,8 +33,8 @@ MARKER = "<!-- bench-relight -->"
 
 
 def _edits(scene):
-    """(a colour edit, the lamp moved by a tenth of the scene), as viewer.bench.methods times them."""
-    from viewer.bench.methods import _Edit
+    """(a colour edit, the lamp moved by a tenth of the scene), as viewer.bench.edit_methods times them."""
+    from viewer.bench.edit_methods import _Edit
 
     settings = gi.GISettings()
     return _Edit(settings, "colour")._edited(scene), _Edit(settings, "lamp")._edited(scene)

@@ -105,10 +105,14 @@ def scene_sources(names: list[str], quick: bool) -> list[str]:
 # ---- the CSV ----------------------------------------------------------------------------------------
 
 def read_rows(path: Path) -> list[dict]:
+    """The CSV's rows, a method named before the GI sources had one name each under its name now (the CPU
+    solver's `numpy` rows read as `solver`): a run finds them measured, the charts draw them as one."""
+    from viewer.sources import renamed
+
     if not path.exists():
         return []
     with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
+        return [{**row, "method": renamed(row["method"])} for row in csv.DictReader(fh)]
 
 
 def upgrade(path: Path) -> None:
@@ -235,8 +239,13 @@ def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
 
 
 def select(methods: dict, patterns: list[str] | None) -> dict:
+    """The methods whose name matches one of the globs; a glob may name a source by its old name
+    (`numpy:*` is `solver:*`)."""
+    from viewer.sources import renamed
+
     if not patterns:
         return methods
+    patterns = [renamed(p) for p in patterns]
     return {n: m for n, m in methods.items() if any(fnmatch.fnmatchcase(n, p) for p in patterns)}
 
 
