@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer import sources as gi_sources
 from viewer.bench.report import replace_block
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -128,8 +129,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m viewer.bench.edits", description=__doc__.splitlines()[0])
     parser.add_argument("scene", nargs="?", default="cornell")
     parser.add_argument("--other", default="paper-test", help="the scene `new scene` opens (by turns with SCENE)")
-    parser.add_argument("--sources", nargs="+", default=["compute", "neural"],
-                        choices=("solver", "compute", "neural"))
+    parser.add_argument("--sources", nargs="+", default=[gi_sources.COMPUTE.name, gi_sources.NEURAL.name],
+                        choices=gi_sources.solving())
     parser.add_argument("--edits", nargs="+", default=list(EDITS), choices=EDITS)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--write", action="store_true", help="put the table into docs/PERFORMANCE.md")

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer import sources as gi_sources
 from viewer.bench.report import replace_block
 from viewer.physical.gi import GISettings
 from viewer.memory import Usage, children_mb
@@ -53,8 +54,8 @@ class SoakSettings:
     """N: scenes per GI source, solves, lamp frames and dropped files."""
     warmup: int = 5
     """Steps before the one growth is measured from."""
-    sources: tuple[str, ...] = ("compute", "solver", "neural")
-    """GI sources the `scenes` part runs, one after another."""
+    sources: tuple[str, ...] = gi_sources.solving()
+    """GI sources the `scenes` part runs, one after another (viewer.sources: those that solve)."""
     voxels: int = 16
     probes: int = 8
     directions: int = 128
@@ -97,15 +98,15 @@ def soak_scenes(soak: Soak, source: str) -> None:
     s, files = soak.settings, scene_files()
     viewer = HeadlessViewer(source, s.gi)
     try:
-        if viewer.physical.gi.source != source:
-            print(f"scenes  {source}: not available here ({viewer.physical.gi.unavailable.get(source, '')})", flush=True)
+        if viewer.gi.source != source:
+            print(f"scenes  {source}: not available here ({viewer.gi.unavailable.get(source, '')})", flush=True)
             return
         viewer.settle()
         for step in range(1, s.steps + 1):
             viewer.load(files[step % len(files)])
             soak.record("scenes", source, step, viewer.session.name, viewer.usage(s.held))
-            if source == "solver":   # its solves run in a worker process: that one's memory too, as it is
-                soak.record("scenes", "solver worker", step, viewer.session.name, Usage(children_mb()))
+            if source == gi_sources.SOLVER.name:   # its solves run in a worker process: that one's memory too
+                soak.record("scenes", f"{source} worker", step, viewer.session.name, Usage(children_mb()))
     finally:
         viewer.release()
 
@@ -209,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     settings = SoakSettings(steps=args.steps, warmup=min(args.warmup, args.steps),
-                            sources=tuple(s for s in args.sources.split(",") if s), voxels=args.voxels,
+                            sources=tuple(gi_sources.renamed(s) for s in args.sources.split(",") if s), voxels=args.voxels,
                             probes=args.probes, directions=args.directions, held=not args.resident)
     soak = Soak(settings)
     print(f"soak: {settings}; load average {os.getloadavg()[0]:.1f}", flush=True)

@@ -13,7 +13,8 @@ import time
 
 from viewer.bench.stability import report
 from viewer.bench.stability.common import RunConfig, format_table
-from viewer.bench.stability.methods import METHODS
+from viewer.bench.stability.methods import METHODS, method_names
+from viewer.sources import ALIASES
 
 STUDIES = tuple(report.TITLES)
 
@@ -22,13 +23,13 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m viewer.bench.stability", description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer scenes, steps and resolutions (minutes)")
     parser.add_argument("--only", nargs="+", choices=STUDIES, metavar="NAME", help=f"only these: {', '.join(STUDIES)}")
-    parser.add_argument("--methods", nargs="+", choices=tuple(METHODS), metavar="NAME",
+    parser.add_argument("--methods", nargs="+", choices=(*METHODS, *ALIASES), metavar="NAME",
                         help=f"only these methods: {', '.join(METHODS)}")
     parser.add_argument("--no-write", dest="write", action="store_false", help="print only; leave docs/ alone")
     parser.add_argument("--charts-only", dest="charts_only", action="store_true",
                         help="redraw the charts and blocks from the saved results (docs/data/stability/*.json)")
     args = parser.parse_args(argv)
-    config = RunConfig(quick=args.quick, methods=tuple(args.methods or METHODS))
+    config = RunConfig(quick=args.quick, methods=tuple(method_names(args.methods or METHODS)))
     if args.write:
         report.write_methods(METHODS)
     for name in args.only or STUDIES:

@@ -41,14 +41,14 @@ class StudyResult:
     """Curves for the chart that the table does not hold (label -> values)."""
 
 
-STYLES = {"physical": dict(color="C0", marker="o"), "paper": dict(color="C1", marker="s"),
+STYLES = {"solver": dict(color="C0", marker="o"), "paper": dict(color="C1", marker="s"),
           "compute": dict(color="C2", marker="x", ls="--"), "ambient": dict(color="C3", marker="^"),
           "mitsuba-probes": dict(color="C4", marker="d", ls=":"), "neural": dict(color="C5", marker="*"),
           "Mitsuba (truth)": dict(color="k", marker=".")}
 
 
 def style(method: str) -> dict:
-    """Matplotlib keywords of a method, the same in every chart (compute dashed: it lies on physical)."""
+    """Matplotlib keywords of a method, the same in every chart (compute dashed: it lies on solver)."""
     return STYLES.get(method.split(" ")[0] if method not in STYLES else method, dict(marker="o"))
 
 

@@ -138,7 +138,7 @@ def _neural(scene: Scene, settings: MethodSettings) -> ProbeGrid:
 
 
 METHODS: dict[str, Method] = {
-    "physical": Method(_numpy("physical"), "numpy solver, form factor with visibility (the reference solver)"),
+    "solver": Method(_numpy("physical"), "numpy solver, form factor with visibility (the reference solver)"),
     "paper": Method(_numpy("paper"), "numpy solver, the paper's eq. 25 kernel (receiver cosine, no visibility)"),
     "compute": Method(_compute, "compute-shader solver (GLSL, physical kernel), as the viewer runs it"),
     "ambient": Method(_ambient, "constant ambient: Mitsuba's mean incident radiance as one SH DC term",
@@ -149,7 +149,15 @@ METHODS: dict[str, Method] = {
                      "voxels and probes its card names (24^3 and 24^3 since 2026-11-25)", leak_reduction=False,
                      resolution=False),
 }
-"""Every method the studies run, in report order."""
+"""Every method the studies run, in report order; the viewer's GI sources under their names in viewer.sources
+(the CPU solver was `physical` here before: `method_names` and report.load still read that)."""
+
+
+def method_names(names) -> list[str]:
+    """Method names as a user or a saved result wrote them, under their names now (`physical` is `solver`)."""
+    from viewer.sources import renamed
+
+    return [renamed(name) for name in names]
 
 
 def size_label(name: str, voxels: int, probes: int) -> str:

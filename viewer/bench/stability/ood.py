@@ -6,7 +6,7 @@ outside (`steps`): room proportions, colours, lights
 (size and placement) and shapes; plus rooms drawn with the training ranges themselves (`in
 distribution`: the same generator, seeds the training set never used) as the baseline. Per room:
 relative RMSE against Mitsuba at free-space points (as the other studies) for `neural` and, as the
-yardstick whose error does not depend on any training set, `physical` at the network's voxels and
+yardstick whose error does not depend on any training set, `solver` at the network's voxels and
 probes. The distance of each room from the training set, two ways (`distance`): how far its drawn
 parameters lie outside the trained ranges on the varied axis, in range widths, and how far its network
 input lies from the nearest training scene's, in units of the training set's own neighbour distance.
@@ -47,7 +47,7 @@ TRAINED = PRESETS[DOMAIN.ranges]
 """The ranges its rooms were drawn from: the steps below move one axis of them at a time."""
 VOXELS, PROBES = (CARD.voxels, CARD.probes) if CARD is not None else (16, 16)
 """The network's voxel and probe resolutions (the yardstick runs at them too)."""
-METHODS_HERE = ("neural", "physical", "compute")
+METHODS_HERE = ("neural", "solver", "compute")
 """The methods this study runs when asked for (the others are either no yardstick or, like
 `mitsuba-probes`, thousands of Mitsuba probes per room)."""
 POINTS = 250
@@ -227,7 +227,7 @@ def run(config: RunConfig) -> StudyResult:
     result.notes.append(
         f"{len(rooms)} rooms ({baseline} in distribution, {(len(rooms) - baseline) // len(set(rooms[baseline:]))} "
         f"per step), seeded; {points_count} free-space points each, Mitsuba {directions} directions per point; "
-        f"`physical` at {VOXELS}^3 voxels and {PROBES}^3 probes, the network's. Errors: relative RMSE of the SH at "
+        f"`solver` at {VOXELS}^3 voxels and {PROBES}^3 probes, the network's. Errors: relative RMSE of the SH at "
         "the points, of all the incident light (as the other studies) and of its indirect part (what the renderer "
         "shades from the probes). Outside the ranges: the varied axis's drawn values (room half extents; albedos "
         f"and HSV saturations; light half extents; object count) past the ranges `{DOMAIN.ranges}` the shipped "

@@ -77,7 +77,7 @@ def run(config: RunConfig) -> StudyResult:
     except MethodUnavailable as exc:
         through_gl = False
         result.notes.append(f"packed with numpy, not through GL: {exc}")
-    methods = [m for m in config.methods if m in ("physical", "compute")]
+    methods = [m for m in config.methods if m in ("solver", "compute")]
     for radiance in radiances:
         scene = scenes.lit_room(radiance=radiance, name=f"lit-room-{radiance:g}")
         for include_emitted in (False, True):

@@ -86,9 +86,16 @@ def load(name: str) -> StudyResult | None:
     path = DATA / f"{name}.json"
     if not path.exists():
         return None
+    from viewer.sources import renamed
+
     record = json.loads(path.read_text())
-    return StudyResult(record["name"], [tuple(c) for c in record["columns"]], record["rows"], record["notes"],
-                       record["summary"], record["series"])
+    # Results saved when the CPU solver was `physical` here draw under its name now (viewer.sources): in a
+    # row's method, in the columns named after a method (`physical all`) and in the curves' labels.
+    columns = [(renamed(key), renamed(header), form) for key, header, form in record["columns"]]
+    rows = [{renamed(k): renamed(v) if k == "method" and isinstance(v, str) else v for k, v in row.items()}
+            for row in record["rows"]]
+    series = {renamed(label): curves for label, curves in record["series"].items()}
+    return StudyResult(record["name"], columns, rows, record["notes"], record["summary"], series)
 
 
 def write(result: StudyResult, chart) -> None:

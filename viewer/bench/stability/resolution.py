@@ -2,7 +2,7 @@
 
 Two scenes: the Cornell box (large smooth walls, boxes a few voxels wide) and `thin_shelf` (a shelf 0.02
 thick across the lit room: thinner than a voxel at every N here, with a shadow under it). The numpy
-solver (`physical`) is solved once per N and projected at every M; at 64^3 voxels its sparse transition
+solver (`solver`) is solved once per N and projected at every M; at 64^3 voxels its sparse transition
 matrix would need ~10 GB, so the compute-shader solver (the same transport, probes within 0.1% of the
 numpy ones, docs/PERFORMANCE.md) takes that row, keeping its visibility table across the M.
 `mitsuba-probes` (path-traced probes, interpolated) is the floor that the probe grid alone sets at each
@@ -78,12 +78,12 @@ def run(config: RunConfig) -> StudyResult:
     for scene in (scene_files.load("cornell"), scenes.thin_shelf()):
         points = free_space_points(scene, POINTS, margin=0.06, seed=1)   # as viewer.bench.accuracy: cached truth
         truth = reference.probe_sh(scene, points, directions=4096)
-        if "physical" in config.methods:
+        if "solver" in config.methods:
             for n in voxel_sizes:
                 start = time.perf_counter()
-                method = "physical" if n <= NUMPY_LIMIT else "compute"
+                method = "solver" if n <= NUMPY_LIMIT else "compute"
                 try:
-                    grids = (numpy_grids if method == "physical" else compute_grids)(scene, n, probe_sizes)
+                    grids = (numpy_grids if method == "solver" else compute_grids)(scene, n, probe_sizes)
                 except MethodUnavailable as exc:
                     result.notes.append(f"{n}^3 voxels skipped: {exc}")
                     continue
@@ -108,7 +108,7 @@ def run(config: RunConfig) -> StudyResult:
 
 def summarize(result: StudyResult) -> None:
     for scene in dict.fromkeys(r["scene"] for r in result.rows):
-        rows = [r for r in result.rows if r["scene"] == scene and r["method"] in ("physical", "compute")]
+        rows = [r for r in result.rows if r["scene"] == scene and r["method"] in ("solver", "compute")]
         for goal in GOALS:
             good = sorted((r for r in rows if r["rmse"] <= goal), key=lambda r: (r["voxels"] ** 3 + r["probes"] ** 3))
             result.summary.append(f"{scene}: " + (f"the smallest grids within {100 * goal:.0f}% are {good[0]['voxels']}^3 "

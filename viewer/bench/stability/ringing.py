@@ -91,7 +91,7 @@ def run(config: RunConfig) -> StudyResult:
 
 def summarize(result: StudyResult) -> None:
     for r in result.rows:
-        if r["method"] in ("physical", "mitsuba-probes") and r["emitter"].startswith("small") and r["dering"] in (0.0, 1.0):
+        if r["method"] in ("solver", "mitsuba-probes") and r["emitter"].startswith("small") and r["dering"] in (0.0, 1.0):
             result.summary.append(
                 f"small lamp, {r['light']}, `{r['method']}`, dering {r['dering']:g}: {100 * r['probes_negative']:.1f}% of "
                 f"probes have a normal with negative irradiance, worst {r['worst']:+.3f} of the probe's mean.")

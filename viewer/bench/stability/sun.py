@@ -31,7 +31,7 @@ COLUMNS = [("scene", "room", "{}"), ("window", "window", "{}"), ("voxels", "voxe
            ("sun_power", "sunlight on the voxels / through the window", "{:.2f}"),
            ("sunny_floor", "floor points that see the sun (exact)", "{:.3f}"),
            ("false_escapes", "... that the tracer wrongly lets see it", "{:.3f}"), ("probes", "probes", "{}"),
-           ("with_sun", "physical, all light, with the sun", "{:.3f}"), ("without_sun", "all light, no sun", "{:.3f}"),
+           ("with_sun", "solver, all light, with the sun", "{:.3f}"), ("without_sun", "all light, no sun", "{:.3f}"),
            ("indirect_with_sun", "indirect light, with the sun", "{:.3f}"),
            ("indirect_without_sun", "indirect light, no sun", "{:.3f}")]
 ERRORS = {(True, True): "with_sun", (False, True): "without_sun", (True, False): "indirect_with_sun",
@@ -175,7 +175,7 @@ def chart(result: StudyResult, path) -> None:
     left.set(xlabel="voxels per axis", ylabel="sunlight on the voxels / through the window",
              title="Sunlight the first bounce lets in (1 is right)")
     right.set(xlabel="voxels per axis (probes 16^3 at 16, 24^3 at 32)",
-              ylabel="relative RMSE vs Mitsuba (indirect light)", title="physical, indirect light, sun on / off")
+              ylabel="relative RMSE vs Mitsuba (indirect light)", title="solver, indirect light, sun on / off")
     for ax in (left, right):
         ax.set_xscale("log", base=2)
         ax.set_xticks([16, 32, 64], ["16", "32", "64"])
