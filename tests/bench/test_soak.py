@@ -73,13 +73,13 @@ def test_scene_swaps_in_the_viewer_keep_memory_and_gl_objects_flat():
 
     viewer = HeadlessViewer("compute", SMALL, size=(160, 90))
     try:
-        if viewer.physical.gi.source != "compute":
-            pytest.skip(viewer.physical.gi.unavailable["compute"])
+        if viewer.gi.source != "compute":
+            pytest.skip(viewer.gi.unavailable["compute"])
         for step in range(WARMUP + STEPS):
             if step == WARMUP:
                 before = viewer.usage(trim=True)
             viewer.load(SCENES[step % 2])
-            assert viewer.session.name == SCENES[step % 2].stem and "converged" in viewer.physical.gi.status()[0]
+            assert viewer.session.name == SCENES[step % 2].stem and "converged" in viewer.gi.status()[0]
         assert_flat(before, viewer.usage(trim=True), f"{STEPS} scene swaps")
     finally:
         viewer.release()
