@@ -159,7 +159,7 @@ def solving() -> tuple[str, ...]:
 def sample_choices() -> tuple[str, ...]:
     """`sample --method`'s choices: its default, the CPU solver, first (as `--help` has always listed it)."""
     names = solving()
-    return tuple(sorted(names, key=lambda n: n != "solver"))
+    return tuple(sorted(names, key=lambda n: n != SOLVER.name))
 
 
 # ---- the built-in sources ---------------------------------------------------------------------------
