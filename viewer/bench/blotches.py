@@ -30,9 +30,9 @@ Probes come from the compute solver at the GISettings defaults, indirect light o
 
 from __future__ import annotations
 
-import argparse
 
 import numpy as np
+from viewer.cli_parsing import add_scenes, tool_parser
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 def off_axis(normals: np.ndarray) -> np.ndarray:
@@ -227,8 +227,8 @@ def line(r: dict) -> str:
 def main(argv=None) -> int:
     from viewer.gpu.context import create_context
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", nargs="+", default=["cornell", "paper-test"])
+    parser = tool_parser(__doc__)
+    add_scenes(parser, flag="--scenes")
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--spp", type=int, default=256)
     parser.add_argument("--points", type=int, default=4000)

@@ -18,7 +18,6 @@ of docs/ACCURACY.md; the chosen configuration is trained again for --final-epoch
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -34,6 +33,7 @@ from viewer.bench.accuracy import PUBLIC_BOX, relative_rmse
 from viewer.bench.points import free_space_points
 from viewer.neural.field import NeuralField
 from viewer.rays.voxels import voxelize
+from viewer.cli_parsing import add_data, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 EVALUATION_SCENES = ("cornell", "paper-test", "paper-train-1", "paper-train-2", "paper-train-3",
@@ -170,8 +170,8 @@ def plot(results: list[dict], chosen: dict, path: Path) -> None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m viewer.training.sweep", description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
+    parser = tool_parser(__doc__, prog="python -m viewer.training.sweep")
+    add_data(parser)
     parser.add_argument("--epochs", type=int, default=24)
     parser.add_argument("--final-epochs", type=int, default=60)
     parser.add_argument("--runs", type=Path, default=Path("runs/sweep"))
