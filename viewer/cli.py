@@ -38,7 +38,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", parser_class=ArgumentParser)
 
     view = sub.add_parser("view", help="the interactive viewer (default)")
-    view.add_argument("scene", nargs="?", default="cornell")
+    view.add_argument("scene", nargs="?", default="cornell",
+                      help="a built-in scene name, a scene file or a baked grid .npz (default: %(default)s)")
     view_arguments(view)
 
     sample = sub.add_parser("sample", help="incident-radiance SH at points, as the renderer sees it")

@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gi", choices=GI_CHOICES, default="compute",
                         help="indirect light source at start (compute: the compute-shader solver)")
     parser.add_argument("--view", choices=VIEW_CHOICES, default="final", help="what the view shows at start")
-    parser.add_argument("--size", default="1280x720", help="window size WxH")
+    parser.add_argument("--size", default="1280x720", metavar="WxH", help="window size (default: %(default)s)")
     add_gi_flags(parser)
     parser.add_argument("--screenshot", help="save the rendered image (no panels) here once it has settled "
                                              "(GI done, full resolution), then quit")
