@@ -5,7 +5,6 @@ share one parser."""
 
 import ast
 import dataclasses
-import sys
 from argparse import Namespace
 from pathlib import Path
 

@@ -3,7 +3,8 @@ from the settings dataclasses, their docstrings the help), and the parser of the
 and viewer/training.
 
 It sits beside viewer.errors, under the commands (viewer/cli.py, viewer/app.py, viewer/capture.py, the
-tools), and never imports them. Cheap to import: no GL, imgui or Mitsuba.
+tools), and never imports them. Cheap to import: no GL, imgui, Mitsuba or numba (the GI settings are
+imported when their flags are made).
 """
 
 from __future__ import annotations
@@ -17,9 +18,12 @@ import sys
 import textwrap
 from functools import lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from viewer.errors import ArgumentParser, InputError
-from viewer.physical.gi import GISettings
+
+if TYPE_CHECKING:
+    from viewer.physical.gi import GISettings
 
 # ---- values ---------------------------------------------------------------------------------------------
 
@@ -120,12 +124,16 @@ GI_LIMITS = {"voxels": (4, 256), "probes": (2, 128), "bounces": (0, 100000), "di
 def add_gi_flags(parser: argparse.ArgumentParser) -> None:
     """A flag for every GISettings field (`--voxels N`, `--probes M`, `--kernel`, `--bounces`,
     `--directions`, `--gather-rays`, `--dering`, `--invalid-backface-fraction`, `--normals`)."""
+    from viewer.physical.gi import GISettings   # here: the tools' parsers need no numba
+
     add_dataclass_flags(parser, GISettings, names=GI_FLAG_NAMES, choices=GI_CHOICES, metavars=GI_METAVARS)
 
 
 def gi_settings(args) -> GISettings:
     """The GISettings of the GI flags on args (defaults for the missing ones); a value out of range is
     bad input (InputError)."""
+    from viewer.physical.gi import GISettings
+
     settings = dataclass_from_args(GISettings, args)
     for name, (low, high) in GI_LIMITS.items():
         value = getattr(settings, name)
