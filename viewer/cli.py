@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer import capture as captures  # no GL import until a capture runs
 from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
+from viewer import capture as captures  # no GL import until a capture runs
 from viewer.cli_parsing import add_dataclass_flags, add_gi_flags, gi_settings
 from viewer.errors import ArgumentParser, InputError, exit_status
 from viewer.gpu.render_settings import RenderSettings
@@ -54,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="a built-in scene name, a scene file or a baked grid .npz (default: %(default)s)")
     capture.add_argument("--out", required=True, metavar="FILE",
                          help="the picture to write: .png or .jpg, or .npy for the linear HDR radiance")
-    capture.add_argument("--size", default="1280x720", metavar="WxH", help="image size (default: %(default)s)")
+    capture.add_argument("--size", default="1280x720", help="WxH")
     capture.add_argument("--gi", choices=("off", "compute", "solver", "neural"), default="solver")
     capture.add_argument("--view", choices=VIEWS, default="final")
     capture.add_argument("--msaa", type=int, default=4, metavar="N", help="multisample count (default: %(default)s)")
@@ -90,6 +90,11 @@ def main(argv: list[str] | None = None) -> int:
 def run_command(args) -> int:
     return {"view": run_view, "sample": run_sample, "capture": run_capture,
             "bench": run_bench, "bake": run_bake}[args.command](args)
+
+
+def run_capture(args) -> int:
+    """`capture [SCENE] --out FILE.png ...`: the picture the flags ask for (viewer.capture)."""
+    return captures.run_capture(captures.capture_request(args))
 
 
 def load_points(path: str) -> np.ndarray:
@@ -160,11 +165,6 @@ def neural_field(args):
         return NeuralField(getattr(args, "model", None) or DEFAULT_MODEL)
     except ModelError as exc:
         raise InputError(f"--method neural: {exc}") from None
-
-
-def run_capture(args) -> int:
-    """`capture [SCENE] --out FILE.png ...`: the picture the flags ask for (viewer.capture)."""
-    return captures.run_capture(captures.capture_request(args))
 
 
 def run_bench(args) -> int:
