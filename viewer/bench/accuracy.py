@@ -16,7 +16,6 @@ from viewer.reference import mitsuba as reference
 from viewer import scene as scenes
 from viewer.bench.points import free_space_points
 from viewer.bench.report import replace_block
-from viewer.cli_parsing import add_out, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 PUBLIC_BOX = ROOT.parent / "shared" / "scenes" / "cornellbox-original" / "CornellBox-Original.obj"
@@ -35,6 +34,8 @@ def evaluate(scene, settings: gi.GISettings, points: np.ndarray, truth: np.ndarr
 
 
 def main(argv=None):
+    from viewer.cli_parsing import add_out, tool_parser
+
     parser = tool_parser(__doc__)
     parser.add_argument("--quick", action="store_true", help="one configuration per scene")
     parser.add_argument("--points", type=int, default=500)

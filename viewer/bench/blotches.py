@@ -30,9 +30,7 @@ Probes come from the compute solver at the GISettings defaults, indirect light o
 
 from __future__ import annotations
 
-
 import numpy as np
-from viewer.cli_parsing import add_scenes, tool_parser
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 def off_axis(normals: np.ndarray) -> np.ndarray:
@@ -225,6 +223,7 @@ def line(r: dict) -> str:
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_scenes, tool_parser
     from viewer.gpu.context import create_context
 
     parser = tool_parser(__doc__)

@@ -24,7 +24,6 @@ from viewer.gpu.compute_solver import ComputeSettings, ComputeSolver
 from viewer.gpu.context import create_context, describe
 from viewer.gpu.programs import ProgramLibrary
 from viewer.rays.voxels import voxelize
-from viewer.cli_parsing import add_out, add_repeats, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 COLUMNS = ("voxels", "kernel", "K", "bitset MiB", "first light ms", "visibility ms", "ms / bounce",
@@ -92,6 +91,8 @@ def table(rows: list[dict]) -> str:
 
 
 def main(argv=None):
+    from viewer.cli_parsing import add_out, add_repeats, tool_parser
+
     parser = tool_parser(__doc__)
     parser.add_argument("--scene", default="cornell")
     parser.add_argument("--voxels", type=int, nargs="+", default=[16, 32, 64])

@@ -30,7 +30,6 @@ from pathlib import Path
 import numpy as np
 
 from viewer.bench.report import replace_block
-from viewer.cli_parsing import add_repeats, add_write, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- bench-edits -->"
@@ -125,6 +124,8 @@ def table(results: dict[str, dict[str, list[float]]], scene: str, repeats: int) 
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_repeats, add_write, tool_parser
+
     parser = tool_parser(__doc__, prog="python -m viewer.bench.edits")
     parser.add_argument("scene", nargs="?", default="cornell")
     parser.add_argument("--other", default="paper-test", help="the scene `new scene` opens (by turns with SCENE)")

@@ -36,7 +36,6 @@ from viewer.gpu.offscreen import OffscreenRenderer
 from viewer.gpu.pass_timer import PassTimer
 from viewer.gpu.renderer import RenderSettings
 from viewer.gpu.targets import DisplayTarget
-from viewer.cli_parsing import CAPTURE_SIZES, add_write, parse_size, tool_parser
 
 VIEWS = ("final", "direct", "indirect", "albedo")
 ROOT = Path(__file__).resolve().parents[2]
@@ -192,6 +191,8 @@ def machine(ctx, loads) -> str:
 
 
 def main(argv=None):
+    from viewer.cli_parsing import CAPTURE_SIZES, add_write, parse_size, tool_parser
+
     parser = tool_parser(__doc__)
     parser.add_argument("--scene", default="cornell")
     parser.add_argument("--size", default="1280x720")

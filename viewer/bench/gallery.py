@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 
 from viewer.bench.report import replace_block
-from viewer.cli_parsing import tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = ("cornell", "paper-test")
@@ -155,6 +154,8 @@ def write_report(path: Path, rows: list[dict], args, host: str) -> None:
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import tool_parser
+
     parser = tool_parser(__doc__)
     parser.add_argument("--size", type=int, default=256, help="image width and height in pixels")
     parser.add_argument("--spp", type=int, default=1024, help="Mitsuba samples per pixel (1024: the reference's own noise stays well below the differences measured)")

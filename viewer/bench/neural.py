@@ -31,7 +31,6 @@ from viewer import scene as scenes
 from viewer.bench.report import replace_block
 from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI, open_session
 from viewer.scene import Scene
-from viewer.cli_parsing import add_repeats, add_scenes, add_write, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- bench-neural -->"
@@ -185,6 +184,8 @@ def table(results: dict, model: str) -> list[str]:
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_repeats, add_scenes, add_write, tool_parser
+
     parser = tool_parser(__doc__)
     add_scenes(parser)
     parser.add_argument("--probes", type=int, nargs="+", default=[16, 24])

@@ -26,7 +26,6 @@ from viewer.probes import sh
 from viewer import scene as scenes
 from viewer.bench.report import replace_block
 from viewer.probes.grid import ProbeGrid
-from viewer.cli_parsing import add_repeats, add_scenes, add_write, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- bench-relight -->"
@@ -113,6 +112,8 @@ def tracer_speed(scene, repeats: int) -> dict[str, float]:
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_repeats, add_scenes, add_write, tool_parser
+
     parser = tool_parser(__doc__)
     add_scenes(parser)
     add_repeats(parser, 5)

@@ -33,7 +33,6 @@ from viewer.bench.report import replace_block
 from viewer.physical.gi import GISettings
 from viewer.memory import Usage, children_mb
 from viewer.scene import ASSETS
-from viewer.cli_parsing import add_write, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 PUBLIC_BOX = ROOT.parent / "shared" / "scenes" / "cornellbox-original" / "CornellBox-Original.obj"
@@ -189,6 +188,8 @@ def table(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from viewer.cli_parsing import add_write, tool_parser
+
     parser = tool_parser(__doc__, prog="python -m viewer.bench.soak")
     d = SoakSettings()
     parser.add_argument("--steps", type=int, default=d.steps, help="N: steps per part (and per GI source)")

@@ -20,7 +20,6 @@ from viewer.bench.report import replace_block
 from viewer.physical.gi import GISettings
 from viewer.rays.raymarch import Tracer
 from viewer.rays.voxels import voxelize
-from viewer.cli_parsing import add_out, add_repeats, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 STAGES = ("voxelize", "direct light", "transition matrix", "bounces", "probe projection", "total")
@@ -55,6 +54,8 @@ def one_run(scene, n: int, m: int) -> dict[str, float]:
 
 
 def main(argv=None):
+    from viewer.cli_parsing import add_out, add_repeats, tool_parser
+
     parser = tool_parser(__doc__)
     parser.add_argument("--scene", default="cornell")
     parser.add_argument("--voxels", type=int, nargs="+", default=[16, 32])

@@ -27,7 +27,6 @@ import numpy as np
 
 from viewer.probes.grid import ProbeGrid
 from viewer.training import dataset, truth
-from viewer.cli_parsing import add_out, tool_parser
 
 
 def relative_rmse(estimate: np.ndarray, reference: np.ndarray, valid: np.ndarray) -> float:
@@ -129,6 +128,8 @@ def table(rows: list[dict], resolution: str, rooms: int, truth_directions: int) 
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_out, tool_parser
+
     p = tool_parser(__doc__, prog="python -m viewer.bench.targets")
     p.add_argument("--rooms", type=int, default=20, help="validation rooms measured (default 20)")
     p.add_argument("--seed", type=int, default=14, help="dataset seed the rooms are drawn with (default 14)")

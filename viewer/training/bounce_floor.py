@@ -26,7 +26,6 @@ import numpy as np
 from viewer.neural import encoding
 from viewer.physical.gi import GISettings, PhysicalGI
 from viewer.rays.voxels import voxelize
-from viewer.cli_parsing import add_data, add_out, tool_parser
 
 GATHERS = ("bounce input", "exact one bounce", "converged surface light")
 NETWORK = "network (as it is)"
@@ -70,6 +69,7 @@ def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, vox
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_data, add_out, tool_parser
     from viewer.training.dataset import load_example, room_refs
     from viewer.training.samples import ENCODING_VOXELS, load_split
 

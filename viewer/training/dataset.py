@@ -57,7 +57,6 @@ from viewer.reference.mitsuba import ReferenceUnavailable
 from viewer.scene import Camera, DirectionalLight, Scene, SceneError, load
 from viewer.training import procedural, truth as truths
 from viewer.neural.ranges import PRESETS
-from viewer.cli_parsing import tool_parser
 
 FORMAT = 2
 """2: rooms in shards, targets float16, filled on loading. 1: one file per room (read, no longer made)."""
@@ -264,6 +263,8 @@ def write_obj(scene: Scene, path: Path) -> None:
 # ---- command line --------------------------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
+    from viewer.cli_parsing import tool_parser
+
     p = tool_parser(
         prog="python -m viewer.training.dataset",
         description="Generate the neural GI dataset in parallel on Ray: procedural rooms (train/, val/) and "

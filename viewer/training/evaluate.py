@@ -31,7 +31,6 @@ from viewer import scene as scenes
 from viewer.bench.accuracy import PUBLIC_BOX, relative_rmse
 from viewer.bench.points import free_space_points
 from viewer.bench.stability.methods import truth_sh
-from viewer.cli_parsing import add_out, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 POINTS = 500
@@ -153,6 +152,8 @@ def summary(rows: list[dict], method: str) -> dict:
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_out, tool_parser
+
     parser = tool_parser(__doc__, prog="python -m viewer.training.evaluate")
     parser.add_argument("--model", type=Path, default=ROOT / "models" / "probenet.onnx")
     parser.add_argument("--val", type=int, default=20, help="validation rooms (never trained on)")

@@ -22,7 +22,6 @@ from viewer.neural.domain import Domain
 from viewer.neural.field import OUTPUTS, file_sha256
 from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
 from viewer.training.samples import ENCODING_VOXELS
-from viewer.cli_parsing import add_out, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 TOLERANCE = 1e-4
@@ -110,6 +109,7 @@ def export(run: Path, out: Path, resolution: int, inputs: np.ndarray, training: 
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_out, tool_parser
     from viewer.scene import load
 
     parser = tool_parser(__doc__, prog="python -m viewer.training.export")

@@ -37,7 +37,6 @@ import numpy as np
 from viewer.neural import encoding
 from viewer.probes.grid import fill_invalid
 from viewer.rays.voxels import voxelize
-from viewer.cli_parsing import add_data, tool_parser
 
 ENCODING_VOXELS = 24
 """Voxel resolution the encoder reads, recorded in the model card: the probe lattice's (24^3), so that a
@@ -288,6 +287,8 @@ def _stored(value) -> np.dtype:
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_data, tool_parser
+
     parser = tool_parser(__doc__, prog="python -m viewer.training.samples")
     add_data(parser)
     parser.add_argument("--probes", type=int, default=24)

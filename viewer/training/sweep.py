@@ -33,7 +33,6 @@ from viewer.bench.accuracy import PUBLIC_BOX, relative_rmse
 from viewer.bench.points import free_space_points
 from viewer.neural.field import NeuralField
 from viewer.rays.voxels import voxelize
-from viewer.cli_parsing import add_data, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 EVALUATION_SCENES = ("cornell", "paper-test", "paper-train-1", "paper-train-2", "paper-train-3",
@@ -170,6 +169,8 @@ def plot(results: list[dict], chosen: dict, path: Path) -> None:
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_data, tool_parser
+
     parser = tool_parser(__doc__, prog="python -m viewer.training.sweep")
     add_data(parser)
     parser.add_argument("--epochs", type=int, default=24)

@@ -32,7 +32,6 @@ from viewer.bench.report import replace_block
 from viewer.training import paper_models as pm
 from viewer.training.paper_inputs import PAPER_VOXELS, adaptive_pool, voxel_list
 from viewer.training.samples import Samples, encoded_split, load_split, room_of, training_split
-from viewer.cli_parsing import add_data, add_out, tool_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 LAMBDA = 1e-5
@@ -208,6 +207,8 @@ def load_data(root: Path) -> dict[str, Split]:
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_data, add_out, tool_parser
+
     parser = tool_parser(__doc__, prog="python -m viewer.training.table1")
     add_data(parser)
     parser.add_argument("--epochs", type=int, default=200)

@@ -28,7 +28,6 @@ from torch.nn import functional as F
 from viewer.neural import encoding
 from viewer.training.models import REFLECTED, TOTAL, VALIDITY, ProbeNet, ProbeNetConfig, parameter_count
 from viewer.training.samples import Samples, load_split, training_split
-from viewer.cli_parsing import add_data, add_out, tool_parser
 
 ODD_IN = {0: [3, 4, 7], 2: [2, 5, 7]}
 """SH coefficients that change sign when the x axis (or the z axis) is mirrored (DESIGN.md order:
@@ -338,6 +337,8 @@ def plot_history(history: History, path: Path, title: str = "") -> None:
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_data, add_out, tool_parser
+
     parser = tool_parser(__doc__, prog="python -m viewer.training.train")
     add_data(parser)
     add_out(parser, required=True, help="run directory (resumed if it exists)")

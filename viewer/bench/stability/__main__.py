@@ -13,12 +13,13 @@ import time
 from viewer.bench.stability import report
 from viewer.bench.stability.common import RunConfig, format_table
 from viewer.bench.stability.methods import METHODS
-from viewer.cli_parsing import tool_parser
 
 STUDIES = tuple(report.TITLES)
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import tool_parser
+
     parser = tool_parser(__doc__, prog="python -m viewer.bench.stability")
     parser.add_argument("--quick", action="store_true", help="fewer scenes, steps and resolutions (minutes)")
     parser.add_argument("--only", nargs="+", choices=STUDIES, metavar="NAME", help=f"only these: {', '.join(STUDIES)}")
