@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from viewer.gpu.render_settings import RenderSettings
 from viewer.physical.gi import GISettings
-from viewer.scene import DirectionalLight
+from viewer.scene import Camera, DirectionalLight
 
 GI_MODES = ("off", "compute", "solver", "neural")
 MAX_SIZE = 8192
@@ -35,8 +35,8 @@ class CaptureRequest:
     """Where the indirect light comes from: one of GI_MODES (`off`: direct light only)."""
     view: str = "final"
     """What the picture shows: one of the renderer's views (viewer.gpu.render_settings.VIEWS)."""
-    camera: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
-    """(origin, target) of the camera; None: the view the viewer opens the scene with."""
+    camera: Camera | tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    """A Camera, or the (origin, target) of one with `fov`; None: the view the viewer opens the scene with."""
     fov: float | None = None
     """Vertical field of view in degrees (0..180); None: the camera's own."""
     render: RenderSettings = field(default_factory=RenderSettings)

@@ -203,12 +203,13 @@ def run_capture(request: CaptureRequest, probe_source: ProbeSource | None = None
     fov = request.fov
     if fov is not None and not 0.0 < float(fov) < 180.0:
         raise CaptureError(f"--fov {fov}: expected degrees between 0 and 180")
-    if request.camera is not None:
+    camera = request.camera
+    if camera is not None and not isinstance(camera, Camera):   # (origin, target)
         try:
-            camera = look_at(*request.camera, float(fov) if fov is not None else scene.camera.fov)
+            camera = look_at(*camera, float(fov) if fov is not None else scene.camera.fov)
         except ValueError as exc:
-            raise CaptureError(f"--camera: {exc}") from None
-    else:  # the viewer's opening view: the file's camera, else one framing the scene
+            raise CaptureError(str(exc)) from None
+    elif camera is None:  # the viewer's opening view: the file's camera, else one framing the scene
         from viewer.ui.camera_controller import home_camera
 
         camera = home_camera(scene, request.scene)
