@@ -104,11 +104,11 @@ def add_dataclass_flags(parser: argparse.ArgumentParser, cls, fields=None, names
                             help=field_help(cls, name), **kind)
 
 
-def dataclass_from_args(cls, args, fields=None, **changes):
-    """An instance of `cls` with the values of args that name its fields (defaults for the others)."""
-    values = {f.name: getattr(args, f.name) for f in dataclasses.fields(cls)
-              if (fields is None or f.name in fields) and getattr(args, f.name, None) is not None}
-    return cls(**{**values, **changes})
+def dataclass_from_args(cls, args, fields=None):
+    """An instance of `cls` with the values of args that name its `fields` (default: all of them; the
+    class's defaults for those args lacks or leaves None)."""
+    return cls(**{f.name: getattr(args, f.name) for f in dataclasses.fields(cls)
+                  if (fields is None or f.name in fields) and getattr(args, f.name, None) is not None})
 
 
 GI_FLAG_NAMES = {"normal_mode": "--normals"}
