@@ -23,9 +23,9 @@ from types import SimpleNamespace
 
 import moderngl_window as mglw
 
+from viewer.cli_parsing import gi_settings, parse_size, tool_parser
 from viewer.errors import exit_status
-from viewer.physical.gi import GISettings
-from viewer.ui.options import add_arguments, options_from, parse_size
+from viewer.ui.options import add_arguments, options_from
 
 
 def log(message: str) -> None:
@@ -36,6 +36,7 @@ def log(message: str) -> None:
 def run(args) -> int:
     options = options_from(args)
     parse_size(options.size)
+    gi_settings(options)   # bad GI flags are bad input before a window opens
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         log(f"no display found (DISPLAY and WAYLAND_DISPLAY are unset); rendering {options.scene} headless")
         return render_headless(options)
@@ -79,14 +80,14 @@ def open_window(options):
 
 def render_headless(options) -> int:
     """What the viewer does without a window: a PNG of the scene through EGL (`python -m viewer capture`)."""
-    from viewer.capture import run_capture
+    from viewer.capture import capture_request, run_capture
 
     out = getattr(options, "screenshot", None) or f"{Path(str(options.scene)).stem}.png"
     gi = options.gi if options.gi in ("off", "solver", "compute") else "compute"
-    capture = SimpleNamespace(scene=options.scene, out=out, size=options.size, gi=gi, view=options.view,
-                              camera=None, fov=None, exposure=0.0, sun=None, voxels=options.voxels,
-                              probes=options.probes, kernel=options.kernel, bounces=options.bounces,
-                              directions=options.directions, dering=GISettings().dering)
+    # the viewer's flags that a capture has too (scene, size, view, the GI settings) carry over; the
+    # rest of the picture is the capture's defaults
+    capture = capture_request(SimpleNamespace(scene=options.scene, size=options.size, view=options.view,
+                                              **vars(gi_settings(options))), out=out, gi=gi)
     status = run_capture(capture)
     if status == 0:
         log(f"wrote {os.path.abspath(out)}")
@@ -173,8 +174,7 @@ class ViewerApp(mglw.WindowConfig):
         self.viewport = Viewport(self.ctx, self.renderer, self.render_scale, self.preview_scale, samples=self.msaa)
         self.times = FrameTimes(self.ctx)
         gi = GIController(self.ctx, "baked" if baked else options.gi,
-                          GISettings(voxels=options.voxels, probes=options.probes, kernel=options.kernel,
-                                     bounces=options.bounces, directions=options.directions),
+                          gi_settings(options),
                           baked=baked.indirect if baked else None)
         # Frame-time summaries cover the frames since the indirect light last settled.
         self.session = Session(self.renderer, gi, scene or load(options.scene),
@@ -385,7 +385,7 @@ class ViewerApp(mglw.WindowConfig):
 def main(argv: list[str] | None = None) -> int:
     """`python -m viewer.app [SCENE] [flags]`: the viewer alone, as `python -m viewer view` runs it; bad
     input exits with status 2 in one line (viewer.errors), a crash shows its traceback."""
-    parser = argparse.ArgumentParser(prog="python -m viewer.app", description="The interactive GI viewer.")
+    parser = tool_parser(prog="python -m viewer.app", description="The interactive GI viewer.")
     parser.add_argument("scene", nargs="?", default="cornell", help="a built-in scene name or a scene file")
     add_arguments(parser)
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)

@@ -14,40 +14,24 @@ import numpy as np
 
 from viewer import sources
 from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
-from viewer.capture import run_capture
+from viewer import capture as captures  # no GL import until a capture runs
+from viewer.cli_parsing import add_dataclass_flags, add_gi_flags, gi_settings
 from viewer.errors import ArgumentParser, InputError, exit_status
-from viewer.physical.gi import GISettings, Timings
+from viewer.gpu.render_settings import RenderSettings
+from viewer.physical.gi import Timings
 from viewer.ui.options import add_arguments as view_arguments  # no GL or imgui import
 
 
 VIEWS = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
 """The renderer's view modes (viewer.gpu.renderer.VIEWS; listed here so parsing needs no GL)."""
+RENDER_CHOICES = {"tonemap": ("aces", "reinhard", "none"), "voxel_color": ("albedo", "radiance")}
+RENDER_METAVARS = {"exposure": "EV", "light_samples": "N"}
 
 
 def _gi_arguments(p: argparse.ArgumentParser):
-    d = GISettings()
-    p.add_argument("--voxels", type=int, default=d.voxels, help="voxels per axis (N)")
-    p.add_argument("--probes", type=int, default=d.probes, help="probes per axis (M)")
-    p.add_argument("--kernel", choices=("physical", "paper"), default=d.kernel, help="light transition kernel")
-    p.add_argument("--bounces", type=int, default=d.bounces, help="most bounces summed")
-    p.add_argument("--directions", type=int, default=d.directions, help="directions gathered per probe")
-    p.add_argument("--dering", type=float, default=d.dering, help="SH deringing strength 0..1")
-    p.add_argument("--normals", choices=("area", "paper"), default=d.normal_mode,
-                   help="voxel normals: area-weighted, or the paper's eq. 3 (plain mean)")
-    p.add_argument("--sun", help="directional light dx,dy,dz,r,g,b (direction towards the sun, irradiance)")
+    add_gi_flags(p)
+    p.add_argument("--sun", metavar="dx,dy,dz,r,g,b", help="directional light dx,dy,dz,r,g,b (direction towards the sun, irradiance)")
     p.add_argument("--model", help="the neural source's .onnx file (default: models/probenet.onnx)")
-
-
-def gi_settings(args) -> GISettings:
-    for name, low, high in (("voxels", 4, 256), ("probes", 2, 128), ("bounces", 0, 100000),
-                            ("directions", 16, 65536)):
-        value = getattr(args, name)
-        if not low <= value <= high:
-            raise InputError(f"--{name} {value}: must be between {low} and {high}")
-    if not 0.0 <= args.dering <= 1.0:
-        raise InputError(f"--dering {args.dering}: must be between 0 and 1")
-    return GISettings(voxels=args.voxels, probes=args.probes, kernel=args.kernel, bounces=args.bounces,
-                      directions=args.directions, dering=args.dering, normal_mode=args.normals)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -55,7 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", parser_class=ArgumentParser)
 
     view = sub.add_parser("view", help="the interactive viewer (default)")
-    view.add_argument("scene", nargs="?", default="cornell")
+    view.add_argument("scene", nargs="?", default="cornell",
+                      help="a built-in scene name, a scene file or a baked grid .npz (default: %(default)s)")
     view_arguments(view)
 
     sample = sub.add_parser("sample", help="incident-radiance SH at points, as the renderer sees it")
@@ -66,21 +51,21 @@ def build_parser() -> argparse.ArgumentParser:
     _gi_arguments(sample)
 
     capture = sub.add_parser("capture", help="render a PNG headless (EGL)")
-    capture.add_argument("scene", nargs="?", default="cornell")
-    capture.add_argument("--out", required=True, help="PNG file to write")
+    capture.add_argument("scene", nargs="?", default="cornell",
+                         help="a built-in scene name, a scene file or a baked grid .npz (default: %(default)s)")
+    capture.add_argument("--out", required=True, metavar="FILE",
+                         help="the picture to write: .png or .jpg, or .npy for the linear HDR radiance")
     capture.add_argument("--size", default="1280x720", help="WxH")
     capture.add_argument("--gi", choices=sources.chosen_by_name(), default=sources.SOLVER.name)
     capture.add_argument("--view", choices=VIEWS, default="final")
-    capture.add_argument("--tonemap", choices=("aces", "reinhard", "none"), default="aces",
-                         help="tone curve; `none` (clamp) for comparisons with Mitsuba")
-    capture.add_argument("--msaa", type=int, default=4, help="multisample count")
-    capture.add_argument("--light-samples", dest="light_samples", type=int, default=32,
-                         help="shadowed points on the emitters for direct light")
-    capture.add_argument("--voxel-color", dest="voxel_color", choices=("albedo", "radiance"), default="albedo",
-                         help="colour of the voxels view")
-    capture.add_argument("--camera", help="ox,oy,oz,tx,ty,tz")
-    capture.add_argument("--fov", type=float, help="vertical field of view, degrees")
-    capture.add_argument("--exposure", type=float, default=0.0, help="exposure in EV")
+    capture.add_argument("--msaa", type=int, default=4, metavar="N", help="multisample count (default: %(default)s)")
+    capture.add_argument("--camera", metavar="ox,oy,oz,tx,ty,tz",
+                         help="the camera's position and the point it looks at (default: the view the viewer "
+                              "opens the scene with)")
+    capture.add_argument("--fov", type=float, metavar="DEG",
+                         help="vertical field of view in degrees (default: the camera's)")
+    add_dataclass_flags(capture, RenderSettings, fields=captures.RENDER_FIELDS, choices=RENDER_CHOICES,
+                        metavars=RENDER_METAVARS)
     _gi_arguments(capture)
 
     bake = sub.add_parser("bake", help="solve once and write the converged probe grid for other tools")
@@ -106,6 +91,11 @@ def main(argv: list[str] | None = None) -> int:
 def run_command(args) -> int:
     return {"view": run_view, "sample": run_sample, "capture": run_capture,
             "bench": run_bench, "bake": run_bake}[args.command](args)
+
+
+def run_capture(args) -> int:
+    """`capture [SCENE] --out FILE.png ...`: the picture the flags ask for (viewer.capture)."""
+    return captures.run_capture(captures.capture_request(args))
 
 
 def load_points(path: str) -> np.ndarray:

@@ -20,8 +20,9 @@ from viewer.bake.grid import BakedError
 from viewer.scene.types import SceneError
 
 
-class InputError(Exception):
-    """Bad input from the user: reported in one line with exit status 2."""
+class InputError(ValueError):
+    """Bad input from the user: reported in one line with exit status 2. A ValueError, as the stages'
+    own errors for bad input are."""
 
 
 BAD_INPUT = (InputError, SceneError, BakedError)

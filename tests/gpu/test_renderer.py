@@ -15,6 +15,7 @@ from PIL import Image
 
 from pictures import pixel_on_plane
 from viewer.probes import sh
+from viewer.capture import capture_request
 from viewer.gpu.offscreen import OffscreenRenderer, capture, run_capture
 from viewer.gpu.programs import SHADERS, ShaderError
 from viewer.gpu.renderer import VIEWS, RenderSettings, Renderer
@@ -176,14 +177,14 @@ def test_run_capture_checks_its_arguments(tmp_path):
     out = tmp_path / "shot.png"
     args = Namespace(scene="cornell", out=str(out), size="64x48", gi="off", view="normals",
                      camera="0,0,3.9,0,0,0", fov=40.0, exposure=0.0)
-    assert run_capture(args) == 0
+    assert run_capture(capture_request(args)) == 0
     assert Image.open(out).size == (64, 48)
     with pytest.raises(ValueError, match="--size"):
-        run_capture(Namespace(**{**vars(args), "size": "64by48"}))
+        run_capture(capture_request(Namespace(**{**vars(args), "size": "64by48"})))
     with pytest.raises(ValueError, match="--camera"):
-        run_capture(Namespace(**{**vars(args), "camera": "1,2,3"}))
+        run_capture(capture_request(Namespace(**{**vars(args), "camera": "1,2,3"})))
     with pytest.raises(ValueError, match="--view"):
-        run_capture(Namespace(**{**vars(args), "view": "xray"}))
+        run_capture(capture_request(Namespace(**{**vars(args), "view": "xray"})))
 
 
 def test_direct_light_matches_the_path_tracer(ctx, cornell):
@@ -360,7 +361,7 @@ def test_a_capture_without_a_camera_shows_what_the_viewer_opens_with(tmp_path):
     path.with_suffix(".json").unlink()   # its sidecar names a camera: without it, the file has none
     out = tmp_path / "moved.png"
     args = Namespace(scene=str(path), out=str(out), size="64x48", gi="off", view="albedo")
-    assert run_capture(args) == 0
+    assert run_capture(capture_request(args)) == 0
     image = np.asarray(Image.open(out), np.float64)
     assert image[16:32, 24:40].mean() > 40      # the back wall fills the middle
     assert (image.mean(axis=2) > 10).mean() > 0.25   # the framed box, margins around it

@@ -6,7 +6,6 @@ free-space points, for both kernels and a few voxel and probe resolutions.
 
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -35,12 +34,14 @@ def evaluate(scene, settings: gi.GISettings, points: np.ndarray, truth: np.ndarr
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from viewer.cli_parsing import add_out, tool_parser
+
+    parser = tool_parser(__doc__)
     parser.add_argument("--quick", action="store_true", help="one configuration per scene")
     parser.add_argument("--points", type=int, default=500)
     parser.add_argument("--config", action="append", metavar="KERNEL:N:M",
                         help="only these configurations, e.g. physical:32:24 (repeatable)")
-    parser.add_argument("--out", default=str(ROOT / "docs" / "ACCURACY.md"))
+    add_out(parser, str(ROOT / "docs" / "ACCURACY.md"), type=str)
     args = parser.parse_args(argv)
     sources = ["cornell", "paper-test"] + ([str(PUBLIC_BOX)] if PUBLIC_BOX.exists() else [])
     configs = [("physical", 32, 24)] if args.quick else [

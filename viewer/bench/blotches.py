@@ -30,8 +30,6 @@ Probes come from the compute solver at the GISettings defaults, indirect light o
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -225,10 +223,11 @@ def line(r: dict) -> str:
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_scenes, tool_parser
     from viewer.gpu.context import create_context
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", nargs="+", default=["cornell", "paper-test"])
+    parser = tool_parser(__doc__)
+    add_scenes(parser, flag="--scenes")
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--spp", type=int, default=256)
     parser.add_argument("--points", type=int, default=4000)

@@ -11,7 +11,6 @@ writes it as Markdown.
 
 from __future__ import annotations
 
-import argparse
 import os
 import platform
 import time
@@ -92,14 +91,16 @@ def table(rows: list[dict]) -> str:
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from viewer.cli_parsing import add_out, add_repeats, tool_parser
+
+    parser = tool_parser(__doc__)
     parser.add_argument("--scene", default="cornell")
     parser.add_argument("--voxels", type=int, nargs="+", default=[16, 32, 64])
     parser.add_argument("--kernels", nargs="+", default=["physical", "paper"], choices=("physical", "paper"))
     parser.add_argument("--probes", type=int, default=GISettings().probes)
-    parser.add_argument("--repeats", type=int, default=3)
+    add_repeats(parser, 3)
     parser.add_argument("--large-repeats", type=int, default=1, help="repeats from 64^3 voxels on")
-    parser.add_argument("--out", default=str(ROOT / "docs" / "PERFORMANCE_COMPUTE.md"))
+    add_out(parser, str(ROOT / "docs" / "PERFORMANCE_COMPUTE.md"), type=str)
     args = parser.parse_args(argv)
 
     ctx = create_context()

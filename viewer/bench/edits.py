@@ -22,7 +22,6 @@ docs/PERFORMANCE.md.
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import time
@@ -126,14 +125,16 @@ def table(results: dict[str, dict[str, list[float]]], scene: str, repeats: int) 
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m viewer.bench.edits", description=__doc__.splitlines()[0])
+    from viewer.cli_parsing import add_repeats, add_write, tool_parser
+
+    parser = tool_parser(__doc__, prog="python -m viewer.bench.edits")
     parser.add_argument("scene", nargs="?", default="cornell")
     parser.add_argument("--other", default="paper-test", help="the scene `new scene` opens (by turns with SCENE)")
     parser.add_argument("--sources", nargs="+", default=[gi_sources.COMPUTE.name, gi_sources.NEURAL.name],
                         choices=gi_sources.solving())
     parser.add_argument("--edits", nargs="+", default=list(EDITS), choices=EDITS)
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--write", action="store_true", help="put the table into docs/PERFORMANCE.md")
+    add_repeats(parser, 5)
+    add_write(parser, "put the table into docs/PERFORMANCE.md")
     args = parser.parse_args(argv)
     results = {source: time_edits(source, args.scene, args.other, args.repeats, args.edits)
                for source in args.sources}

@@ -19,7 +19,6 @@ numbers: llvmpipe shares the CPU cores with everything else that runs.
 
 from __future__ import annotations
 
-import argparse
 import os
 import platform
 import sys
@@ -33,7 +32,7 @@ from viewer.bench.report import replace_block
 from viewer.physical.gi import GISettings
 from viewer.gpu.compute_relight import solve_probes
 from viewer.gpu.context import create_context, describe
-from viewer.gpu.offscreen import OffscreenRenderer, parse_size
+from viewer.gpu.offscreen import OffscreenRenderer
 from viewer.gpu.pass_timer import PassTimer
 from viewer.gpu.renderer import RenderSettings
 from viewer.gpu.targets import DisplayTarget
@@ -192,7 +191,9 @@ def machine(ctx, loads) -> str:
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from viewer.cli_parsing import CAPTURE_SIZES, add_write, parse_size, tool_parser
+
+    parser = tool_parser(__doc__)
     parser.add_argument("--scene", default="cornell")
     parser.add_argument("--size", default="1280x720")
     parser.add_argument("--frames", type=int, default=15)
@@ -204,9 +205,9 @@ def main(argv=None):
                         help="frame times while the compute solver converges, as in the viewer")
     parser.add_argument("--budget", type=float, nargs="*",
                         help="with --progressive: the solver's ms per frame to try (default: the viewer's)")
-    parser.add_argument("--write", action="store_true", help="put the tables into docs/PERFORMANCE.md")
+    add_write(parser, "put the tables into docs/PERFORMANCE.md")
     args = parser.parse_args(argv)
-    size = parse_size(args.size)
+    size = parse_size(args.size, *CAPTURE_SIZES, example="640x480")
     scene = scenes.load(args.scene)
     ctx = create_context()
     loads = [os.getloadavg()[0]]

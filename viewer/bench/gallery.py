@@ -11,7 +11,6 @@ on linear HDR radiance from both, through the one tone map below, never on the v
 
 from __future__ import annotations
 
-import argparse
 import os
 import platform
 import time
@@ -161,7 +160,9 @@ def write_report(path: Path, rows: list[dict], args, host: str) -> None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from viewer.cli_parsing import tool_parser
+
+    parser = tool_parser(__doc__)
     parser.add_argument("--size", type=int, default=256, help="image width and height in pixels")
     parser.add_argument("--spp", type=int, default=1024, help="Mitsuba samples per pixel (1024: the reference's own noise stays well below the differences measured)")
     parser.add_argument("--scenes", nargs="+", default=list(SCENES))

@@ -17,7 +17,6 @@ retrained model would cost. `--write` puts the tables into docs/PERFORMANCE.md.
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import tempfile
@@ -185,16 +184,18 @@ def table(results: dict, model: str) -> list[str]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("scenes", nargs="*", default=["cornell", "paper-test"])
+    from viewer.cli_parsing import add_repeats, add_scenes, add_write, tool_parser
+
+    parser = tool_parser(__doc__)
+    add_scenes(parser)
     parser.add_argument("--probes", type=int, nargs="+", default=[16, 24])
     parser.add_argument("--voxels", type=int, nargs="+", help="voxels per axis the encoding reads (default: the "
                                                                "card's, and the probes' when they differ)")
-    parser.add_argument("--repeats", type=int, default=9)
+    add_repeats(parser, 9)
     parser.add_argument("--model", type=Path, default=DEFAULT_MODEL)
     parser.add_argument("--configs", action="store_true", help="also time ProbeNet sizes at 24^3 (needs torch)")
     parser.add_argument("--configs-only", action="store_true", help="only time the ProbeNet sizes")
-    parser.add_argument("--write", action="store_true", help="write the tables into docs/PERFORMANCE.md")
+    add_write(parser, "write the tables into docs/PERFORMANCE.md")
     args = parser.parse_args(argv)
     neural.CLOCK = time.thread_time   # the stages' CPU time: the machine may be busy with other work
     field = NeuralField(args.model)

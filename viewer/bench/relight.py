@@ -13,7 +13,6 @@ replaced (rays per second on the same probe rays), which is what numba has to ea
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import time
@@ -113,10 +112,12 @@ def tracer_speed(scene, repeats: int) -> dict[str, float]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("scenes", nargs="*", default=["cornell", "paper-test"])
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--write", action="store_true", help="write the tables into docs/PERFORMANCE.md")
+    from viewer.cli_parsing import add_repeats, add_scenes, add_write, tool_parser
+
+    parser = tool_parser(__doc__)
+    add_scenes(parser)
+    add_repeats(parser, 5)
+    add_write(parser, "write the tables into docs/PERFORMANCE.md")
     args = parser.parse_args(argv)
     from viewer.physical import relight
     from viewer.gpu.compute_relight import ComputeRelight

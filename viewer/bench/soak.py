@@ -21,7 +21,6 @@ docs/STABILITY.md; tests/bench/test_soak.py holds what must hold.
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import tempfile
@@ -190,7 +189,9 @@ def table(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m viewer.bench.soak", description=__doc__.splitlines()[0])
+    from viewer.cli_parsing import add_write, tool_parser
+
+    parser = tool_parser(__doc__, prog="python -m viewer.bench.soak")
     d = SoakSettings()
     parser.add_argument("--steps", type=int, default=d.steps, help="N: steps per part (and per GI source)")
     parser.add_argument("--warmup", type=int, default=d.warmup, help="growth is measured from this step on")
@@ -201,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--directions", type=int, default=d.directions)
     parser.add_argument("--resident", action="store_true",
                         help="read resident memory as it is (default: after free heap memory is handed back)")
-    parser.add_argument("--write", action="store_true", help="put the table into docs/STABILITY.md")
+    add_write(parser, "put the table into docs/STABILITY.md")
     args = parser.parse_args(argv)
     parts = [p for p in args.parts.split(",") if p]
     unknown = set(parts) - set(PARTS)

@@ -7,7 +7,6 @@ Prints the median of the repeats per stage and writes docs/PERFORMANCE.md's solv
 
 from __future__ import annotations
 
-import argparse
 import platform
 import time
 from pathlib import Path
@@ -55,12 +54,14 @@ def one_run(scene, n: int, m: int) -> dict[str, float]:
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from viewer.cli_parsing import add_out, add_repeats, tool_parser
+
+    parser = tool_parser(__doc__)
     parser.add_argument("--scene", default="cornell")
     parser.add_argument("--voxels", type=int, nargs="+", default=[16, 32])
     parser.add_argument("--probes", type=int, default=GISettings().probes)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", default=str(ROOT / "docs" / "PERFORMANCE.md"))
+    add_repeats(parser, 3)
+    add_out(parser, str(ROOT / "docs" / "PERFORMANCE.md"), type=str)
     args = parser.parse_args(argv)
     scene = scenes.load(args.scene)
     table = []

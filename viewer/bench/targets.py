@@ -18,7 +18,6 @@ the solver's bias is then sqrt(e^2 - floor^2). Seconds are wall-clock per room o
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -129,14 +128,16 @@ def table(rows: list[dict], resolution: str, rooms: int, truth_directions: int) 
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m viewer.bench.targets", description=__doc__.splitlines()[0])
+    from viewer.cli_parsing import add_out, tool_parser
+
+    p = tool_parser(__doc__, prog="python -m viewer.bench.targets")
     p.add_argument("--rooms", type=int, default=20, help="validation rooms measured (default 20)")
     p.add_argument("--seed", type=int, default=14, help="dataset seed the rooms are drawn with (default 14)")
     p.add_argument("--ranges", default="v2", help="procedural ranges preset (default v2)")
     p.add_argument("--probes", default="24,16", help="probe resolutions (default 24,16)")
     p.add_argument("--low", default="16,64", help="Mitsuba directions per probe of the candidates (default 16,64)")
     p.add_argument("--truth-directions", type=int, default=1024, help="Mitsuba directions of the truth")
-    p.add_argument("--out", type=Path, default=Path("docs/data/targets.json"))
+    add_out(p, Path("docs/data/targets.json"))
     p.add_argument("--tables-only", action="store_true", help="print the tables of --out again, measuring nothing")
     args = p.parse_args(argv)
     resolutions = [int(v) for v in args.probes.split(",")]

@@ -56,18 +56,14 @@ def gl_bytes(matrix: np.ndarray) -> bytes:
     return np.ascontiguousarray(np.asarray(matrix, np.float32).T).tobytes()
 
 
-def parse_camera(text: str, fov: float | None = None, up=(0.0, 1.0, 0.0)) -> Camera:
-    """`ox,oy,oz,tx,ty,tz` (origin, then the point looked at) for the command line."""
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        values = []
-    if len(values) != 6 or not np.all(np.isfinite(values)):
-        raise ValueError(f"--camera {text!r}: expected six numbers ox,oy,oz,tx,ty,tz")
-    origin, target = np.array(values[:3]), np.array(values[3:])
+def look_at(origin, target, fov: float | None = None, up=(0.0, 1.0, 0.0)) -> Camera:
+    """A camera at `origin` looking at `target` (`--camera ox,oy,oz,tx,ty,tz`, parsed by
+    viewer.cli_parsing.parse_camera), with `up` unless it looks straight up or down."""
+    origin, target = np.asarray(origin, np.float64), np.asarray(target, np.float64)
     if np.linalg.norm(target - origin) < 1e-9:
-        raise ValueError(f"--camera {text!r}: the origin and the target are the same point")
+        raise ValueError("the camera's origin and target are the same point")
     forward = (target - origin) / np.linalg.norm(target - origin)
     if abs(float(forward @ np.asarray(up))) > 0.999:  # looking straight up or down: pick another up
         up = (0.0, 0.0, -1.0) if forward[1] < 0 else (0.0, 0.0, 1.0)
-    return Camera(tuple(values[:3]), tuple(values[3:]), tuple(up), float(fov) if fov else Camera.fov)
+    return Camera(tuple(float(v) for v in origin), tuple(float(v) for v in target), tuple(up),
+                  float(fov) if fov else Camera.fov)

@@ -2,7 +2,8 @@
 
     image = capture(scene, probes, "out.png", size=(640, 480), view="final")
 
-`capture` is what `python -m viewer capture` runs (via `run_capture`), and what tests and benchmarks use.
+`capture` is what `python -m viewer capture` runs (via `run_capture`, which renders a CaptureRequest), and
+what tests and benchmarks use.
 An `.npy` output path saves the linear HDR radiance (H, W, 3) float32 instead of a PNG, for numeric
 comparisons with the path-traced reference.
 """
@@ -19,7 +20,8 @@ import moderngl
 import numpy as np
 
 from viewer import sources
-from viewer.gpu.camera import parse_camera
+from viewer.gpu.camera import look_at
+from viewer.gpu.capture_request import MAX_SIZE, CaptureError, CaptureRequest
 from viewer.gpu.context import create_context
 from viewer.gpu.renderer import VIEWS, RenderSettings, Renderer
 from viewer.gpu.shadows import MAX_LIGHT_SAMPLES
@@ -27,12 +29,8 @@ from viewer.gpu.targets import DisplayTarget, HdrTarget
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Camera, Scene
 
-MAX_SIZE = 8192
-
-
-class CaptureError(ValueError):
-    """Bad capture input (size, camera, view, GI mode, output path): one line, exit status 2."""
-
+__all__ = ["CaptureError", "CaptureRequest", "MAX_SIZE", "OffscreenRenderer", "ProbeSource", "capture",
+           "run_capture", "save", "solver_probes"]
 
 ProbeSource = Callable[[Scene, str, moderngl.Context], "ProbeGrid | None"]
 """(scene, gi mode, GL context) -> the indirect-light ProbeGrid for that mode (None: GI off). The
@@ -150,32 +148,18 @@ def save(image: np.ndarray, path: str | Path) -> None:
         Image.fromarray(image).save(path)
 
 
-# ---- command line ----------------------------------------------------------------------------------
+# ---- a CaptureRequest ------------------------------------------------------------------------------
 
-def parse_size(text: str) -> tuple[int, int]:
-    """`WxH` -> (W, H)."""
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise CaptureError(f"--size {text!r}: expected WxH, e.g. 640x480") from None
-    if not (0 < width <= MAX_SIZE and 0 < height <= MAX_SIZE):
-        raise CaptureError(f"--size {text!r}: each side must be 1..{MAX_SIZE}")
-    return width, height
-
-
-def solver_probes(args) -> ProbeSource:
-    """The probe source for a `--gi` source of viewer.sources that solves (the compute-shader solver on the
-    capture's own context, the numpy solver, the network of `--model`), with the GI settings found on args
-    (voxels, probes, kernel, bounces, directions, dering; defaults otherwise), indirect light only."""
+def solver_probes(request: CaptureRequest) -> ProbeSource:
+    """The probe source for a `gi` source of viewer.sources that solves (the compute-shader solver on the
+    capture's own context, the numpy solver, the network of the request's model), with the request's GI
+    settings, indirect light only."""
     def source(scene: Scene, gi: str, ctx) -> ProbeGrid | None:
-        from viewer.physical.gi import GISettings
-
-        names = ("voxels", "probes", "kernel", "bounces", "directions", "dering")
-        settings = GISettings(**{name: getattr(args, name) for name in names if getattr(args, name, None) is not None})
+        settings = request.gi_settings
         spec = sources.SOURCES.get(gi)
         if spec is None or spec.solve is None:
             raise CaptureError(f"--gi {gi}: unknown GI source")
-        options = sources.SolveOptions(include_emitted=False, ctx=ctx, model=getattr(args, "model", None))
+        options = sources.SolveOptions(include_emitted=False, ctx=ctx, model=request.model)
         try:
             return spec.solve(scene, settings, options)[0]
         except sources.SourceError as exc:
@@ -183,57 +167,44 @@ def solver_probes(args) -> ProbeSource:
     return source
 
 
-def run_capture(args, probe_source: ProbeSource | None = None) -> int:
-    """`python -m viewer capture`. Reads from args (a missing attribute takes its default):
+def run_capture(request: CaptureRequest, probe_source: ProbeSource | None = None) -> int:
+    """Render `request` (`python -m viewer capture`, built by viewer.capture) and write its picture.
 
-    scene (name or file, default cornell), out (.png/.jpg, or .npy for linear HDR; required),
-    size ("WxH" or (W, H); 512x512), gi (a source of viewer.sources.chosen_by_name(); off), view (one of VIEWS; final),
-    camera ("ox,oy,oz,tx,ty,tz"; the one the viewer opens the scene with), fov (degrees; that camera's),
-    exposure (EV; 0),
-    tonemap (aces|reinhard|none; aces), msaa (samples; 4), light_samples (32), sun ("dx,dy,dz,r,g,b"),
-    voxel_color (albedo|radiance; albedo) and the GI settings of `solver_probes`.
-
-    probe_source builds the ProbeGrid for a `--gi` mode other than off (default: `solver_probes`).
+    probe_source builds the ProbeGrid for a `gi` mode other than off (default: `solver_probes`).
     Bad input raises CaptureError or scene.SceneError (both ValueErrors) with a one-line message.
     Returns the exit status 0.
     """
-    from viewer.scene import load, parse_sun
+    from viewer.scene import load
 
-    value = lambda name, default=None: default if getattr(args, name, None) is None else getattr(args, name)
-    out = value("out")
+    out = request.out
     if not out:
         raise CaptureError("capture needs --out FILE.png")
-    sun = value("sun")
-    scene = load(value("scene", "cornell"), sun=parse_sun(sun) if isinstance(sun, str) else sun)
-    size = value("size", (512, 512))
-    size = parse_size(size) if isinstance(size, str) else (int(size[0]), int(size[1]))
-    gi = value("gi", "off")
+    scene = load(request.scene, sun=request.sun)
+    size = (int(request.size[0]), int(request.size[1]))
+    if not (0 < size[0] <= MAX_SIZE and 0 < size[1] <= MAX_SIZE):
+        raise CaptureError(f"--size {size[0]}x{size[1]}: each side must be 1..{MAX_SIZE}")
+    gi = request.gi
     if gi not in sources.chosen_by_name():
         raise CaptureError(f"--gi {gi!r}: expected one of {', '.join(sources.chosen_by_name())}")
-    view = value("view", "final")
+    view = request.view
     if view not in VIEWS:
         raise CaptureError(f"--view {view!r}: expected one of {', '.join(VIEWS)}")
-    fov = value("fov")
+    fov = request.fov
     if fov is not None and not 0.0 < float(fov) < 180.0:
         raise CaptureError(f"--fov {fov}: expected degrees between 0 and 180")
-    camera = value("camera")
-    if isinstance(camera, str):
+    camera = request.camera
+    if camera is not None and not isinstance(camera, Camera):   # (origin, target)
         try:
-            camera = parse_camera(camera, float(fov) if fov is not None else scene.camera.fov)
+            camera = look_at(*camera, float(fov) if fov is not None else scene.camera.fov)
         except ValueError as exc:
             raise CaptureError(str(exc)) from None
     elif camera is None:  # the viewer's opening view: the file's camera, else one framing the scene
         from viewer.ui.camera_controller import home_camera
 
-        camera = home_camera(scene, value("scene", "cornell"))
+        camera = home_camera(scene, request.scene)
         if fov is not None:
             camera = replace(camera, fov=float(fov))
-    try:
-        settings = RenderSettings(exposure=float(value("exposure", 0.0)), tonemap=value("tonemap", "aces"),
-                                  light_samples=int(value("light_samples", 32)),
-                                  voxel_color=value("voxel_color", "albedo"))
-    except ValueError as exc:
-        raise CaptureError(f"capture: {exc}") from None
+    settings = replace(request.render)   # the renderer may change its settings: not the request's
     if not 0 <= settings.light_samples <= MAX_LIGHT_SAMPLES:
         raise CaptureError(f"--light-samples {settings.light_samples}: expected 0..{MAX_LIGHT_SAMPLES}")
     suffix = Path(out).suffix.lower()
@@ -247,11 +218,11 @@ def run_capture(args, probe_source: ProbeSource | None = None) -> int:
     try:
         probes = None
         if sources.SOURCES[gi].solve is not None:   # off solves nothing: direct light only
-            probes = (probe_source or solver_probes(args))(scene, gi, ctx)
+            probes = (probe_source or solver_probes(request))(scene, gi, ctx)
         solved = time.perf_counter()
-        voxels, radiance = _debug_voxels(scene, view, settings, value("voxels", 32))
+        voxels, radiance = _debug_voxels(scene, view, settings, request.gi_settings.voxels)
         capture(scene, probes, out, size=size, view=view, camera=camera, settings=settings, voxels=voxels,
-                voxel_radiance=radiance, samples=int(value("msaa", 4)), ctx=ctx)
+                voxel_radiance=radiance, samples=int(request.msaa), ctx=ctx)
     finally:
         ctx.release()
     print(f"capture: {out} ({size[0]}x{size[1]}, view {view}, gi {gi}); probes {solved - start:.2f} s, "

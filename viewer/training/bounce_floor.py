@@ -17,7 +17,6 @@ network's own reflected light (as it answers, no gain) beside.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -70,16 +69,17 @@ def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, vox
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_data, add_out, tool_parser
     from viewer.training.dataset import load_example, room_refs
     from viewer.training.samples import ENCODING_VOXELS, load_split
 
-    parser = argparse.ArgumentParser(prog="python -m viewer.training.bounce_floor", description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
+    parser = tool_parser(__doc__, prog="python -m viewer.training.bounce_floor")
+    add_data(parser)
     parser.add_argument("--rooms", type=int, default=20)
     parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--full", action="store_true", help="1-cell patches on the probes' own lattice")
     parser.add_argument("--model", type=Path, help="also the network's reflected light (an .onnx with its card)")
-    parser.add_argument("--out", type=Path, help="JSON file for the per-room errors")
+    add_out(parser, help="JSON file for the per-room errors")
     args = parser.parse_args(argv)
     field = None
     if args.model:

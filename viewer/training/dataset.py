@@ -263,7 +263,9 @@ def write_obj(scene: Scene, path: Path) -> None:
 # ---- command line --------------------------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    from viewer.cli_parsing import tool_parser
+
+    p = tool_parser(
         prog="python -m viewer.training.dataset",
         description="Generate the neural GI dataset in parallel on Ray: procedural rooms (train/, val/) and "
                     "the fixed paper scenes (paper/), each with ground-truth probe SH over scene.bounds, in "

@@ -19,7 +19,6 @@ answers at the points are cached on disk (~/.cache/gi-viewer/reference).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -153,7 +152,9 @@ def summary(rows: list[dict], method: str) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m viewer.training.evaluate", description=__doc__.splitlines()[0])
+    from viewer.cli_parsing import add_out, tool_parser
+
+    parser = tool_parser(__doc__, prog="python -m viewer.training.evaluate")
     parser.add_argument("--model", type=Path, default=ROOT / "models" / "probenet.onnx")
     parser.add_argument("--val", type=int, default=20, help="validation rooms (never trained on)")
     parser.add_argument("--dark", type=int, default=4, help="rooms with every surface 0.01-0.04")
@@ -168,7 +169,7 @@ def main(argv=None) -> int:
     parser.add_argument("--perfect-probes", type=int, help="the lattice of --perfect (default: the model's)")
     parser.add_argument("--only", nargs="+", metavar="SCENE", help="only these of the scenes (by name)")
     parser.add_argument("--noise", action="store_true", help="measure the truth's own noise (a second seed)")
-    parser.add_argument("--out", type=Path, help="write the rows and the summary as JSON")
+    add_out(parser, help="write the rows and the summary as JSON")
     args = parser.parse_args(argv)
     field, neural = neural_method(args.model)
     methods = {"neural": neural}

@@ -8,7 +8,6 @@ The export is checked before the card is written: onnxruntime's output must equa
 
 from __future__ import annotations
 
-import argparse
 import json
 import platform
 import sys
@@ -110,12 +109,13 @@ def export(run: Path, out: Path, resolution: int, inputs: np.ndarray, training: 
 
 
 def main(argv=None) -> int:
+    from viewer.cli_parsing import add_out, tool_parser
     from viewer.scene import load
 
-    parser = argparse.ArgumentParser(prog="python -m viewer.training.export", description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__, prog="python -m viewer.training.export")
     parser.add_argument("run", type=Path)
     parser.add_argument("--name", default="probenet")
-    parser.add_argument("--out", type=Path, default=ROOT / "models")
+    add_out(parser, ROOT / "models")
     parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--metrics", type=Path, help="JSON of measured metrics to put on the card")
     args = parser.parse_args(argv)

@@ -20,7 +20,6 @@ so the rooms a running dataset command adds later are encoded when they are pack
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import os
@@ -288,8 +287,10 @@ def _stored(value) -> np.dtype:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m viewer.training.samples", description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
+    from viewer.cli_parsing import add_data, tool_parser
+
+    parser = tool_parser(__doc__, prog="python -m viewer.training.samples")
+    add_data(parser)
     parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--splits", default="paper,val,train")

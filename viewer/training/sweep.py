@@ -18,7 +18,6 @@ of docs/ACCURACY.md; the chosen configuration is trained again for --final-epoch
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -170,8 +169,10 @@ def plot(results: list[dict], chosen: dict, path: Path) -> None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m viewer.training.sweep", description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
+    from viewer.cli_parsing import add_data, tool_parser
+
+    parser = tool_parser(__doc__, prog="python -m viewer.training.sweep")
+    add_data(parser)
     parser.add_argument("--epochs", type=int, default=24)
     parser.add_argument("--final-epochs", type=int, default=60)
     parser.add_argument("--runs", type=Path, default=Path("runs/sweep"))

@@ -18,7 +18,6 @@ mean and std, pooled length), so that the benchmark can run it through onnxrunti
 
 from __future__ import annotations
 
-import argparse
 import warnings
 import json
 import sys
@@ -208,11 +207,13 @@ def load_data(root: Path) -> dict[str, Split]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m viewer.training.table1", description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
+    from viewer.cli_parsing import add_data, add_out, tool_parser
+
+    parser = tool_parser(__doc__, prog="python -m viewer.training.table1")
+    add_data(parser)
     parser.add_argument("--epochs", type=int, default=200)
     parser.add_argument("--families", default=",".join(pm.FAMILIES + ("probenet",)))
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "TABLE1.md")
+    add_out(parser, ROOT / "docs" / "TABLE1.md")
     parser.add_argument("--results", type=Path, default=ROOT / "docs" / "data" / "table1.json")
     parser.add_argument("--models", type=Path, default=ROOT / "runs" / "table1",
                         help="where the trained families are exported for the benchmark")

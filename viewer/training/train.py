@@ -14,7 +14,6 @@ again), `history.json`, `data.json` (what it trained on) and `loss.png`.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
@@ -338,9 +337,11 @@ def plot_history(history: History, path: Path, title: str = "") -> None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m viewer.training.train", description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/gi-v2"))
-    parser.add_argument("--out", type=Path, required=True, help="run directory (resumed if it exists)")
+    from viewer.cli_parsing import add_data, add_out, tool_parser
+
+    parser = tool_parser(__doc__, prog="python -m viewer.training.train")
+    add_data(parser)
+    add_out(parser, required=True, help="run directory (resumed if it exists)")
     parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--width", type=int, default=ProbeNetConfig.width)
     parser.add_argument("--hidden", type=int, default=ProbeNetConfig.hidden)

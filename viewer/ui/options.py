@@ -1,6 +1,6 @@
-"""The viewer's command-line flags (`python -m viewer [view] ...`, `python -m viewer.app ...`), their
-defaults, and the window size they give. Cheap to import: no GL or imgui (viewer/cli.py adds these flags
-to its `view` command)."""
+"""The viewer's command-line flags (`python -m viewer [view] ...`, `python -m viewer.app ...`) and their
+defaults (the window's size is parsed by viewer.cli_parsing.parse_size). Cheap to import: no GL or imgui
+(viewer/cli.py adds these flags to its `view` command)."""
 
 from __future__ import annotations
 
@@ -8,24 +8,19 @@ import argparse
 from types import SimpleNamespace
 
 from viewer import sources
-from viewer.errors import InputError
-from viewer.physical.gi import GISettings
+from viewer.cli_parsing import add_gi_flags
+from viewer.errors import ArgumentParser
 
 VIEW_CHOICES = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The viewer's own flags (cheap to call: no GL or imgui import)."""
-    d = GISettings()
     parser.add_argument("--gi", choices=sources.chosen_by_name(), default=sources.DEFAULT,
                         help="indirect light source at start (compute: the compute-shader solver)")
     parser.add_argument("--view", choices=VIEW_CHOICES, default="final", help="what the view shows at start")
-    parser.add_argument("--size", default="1280x720", help="window size WxH")
-    parser.add_argument("--voxels", type=int, default=d.voxels, help="voxels per axis")
-    parser.add_argument("--probes", type=int, default=d.probes, help="probes per axis")
-    parser.add_argument("--bounces", type=int, default=d.bounces, help="most bounces summed")
-    parser.add_argument("--kernel", choices=("physical", "paper"), default=d.kernel)
-    parser.add_argument("--directions", type=int, default=d.directions, help="directions gathered per probe")
+    parser.add_argument("--size", default="1280x720", metavar="WxH", help="window size (default: %(default)s)")
+    add_gi_flags(parser)
     parser.add_argument("--screenshot", help="save the rendered image (no panels) here once it has settled "
                                              "(GI done, full resolution), then quit")
     parser.add_argument("--screenshot-window", help="with --screenshot: also save the whole window, panels "
@@ -49,20 +44,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def options_from(args) -> SimpleNamespace:
     """The command line's namespace with every viewer flag present (defaults for missing ones)."""
-    parser = argparse.ArgumentParser(add_help=False)
+    parser = ArgumentParser(add_help=False)
     parser.add_argument("scene", nargs="?", default="cornell")
     add_arguments(parser)
     options = vars(parser.parse_args([]))
     options.update({k: v for k, v in vars(args).items() if v is not None})
     return SimpleNamespace(**options)
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """--size WxH -> (width, height); anything else is bad input."""
-    try:
-        width, height = (int(v) for v in str(text).lower().split("x"))
-    except ValueError:
-        raise InputError(f"--size {text!r}: expected WxH, e.g. 1280x720") from None
-    if not (64 <= width <= 16384 and 64 <= height <= 16384):
-        raise InputError(f"--size {text!r}: each side must be 64..16384")
-    return width, height

@@ -7,7 +7,6 @@ Charts go to docs/images/stability, CSV to docs/data/stability; Mitsuba results 
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import time
 
@@ -20,7 +19,9 @@ STUDIES = tuple(report.TITLES)
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m viewer.bench.stability", description=__doc__.splitlines()[0])
+    from viewer.cli_parsing import tool_parser
+
+    parser = tool_parser(__doc__, prog="python -m viewer.bench.stability")
     parser.add_argument("--quick", action="store_true", help="fewer scenes, steps and resolutions (minutes)")
     parser.add_argument("--only", nargs="+", choices=STUDIES, metavar="NAME", help=f"only these: {', '.join(STUDIES)}")
     parser.add_argument("--methods", nargs="+", choices=(*METHODS, *ALIASES), metavar="NAME",
