@@ -1,7 +1,7 @@
 """The network's input across edits: `viewer.neural.encoding.encode`'s numbers for one probe lattice, where an
 edit recomputes only what it changes.
 
-Geometry changes rarely and light often (DESIGN.md). `encode` spends most of its time on the direct
+Geometry changes rarely and light often (docs/ARCHITECTURE.md). `encode` spends most of its time on the direct
 light (every emitting patch against every probe, its shadows traced: `encoding.patch_visibility`) and
 on splatting the voxels onto the lattice. An `Encoder` keeps, for the voxel geometry it last saw
 (positions, normals, areas) and the occluders it was given (`encoding.occluders`):

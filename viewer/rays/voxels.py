@@ -1,8 +1,8 @@
 """Scene -> VoxelGrid: an N^3 grid over the scene, with only the occupied voxels stored.
 
 Each stored voxel carries the paper's attributes (eq. 2: position, albedo, emission; eq. 4: hash id
-`x + y*N + z*N*N`, see DESIGN.md for the typo in the paper) plus the normal and the surface area it
-covers. A cell that holds surfaces facing different ways (a room corner, both sides of a thin wall)
+`x + y*N + z*N*N`, see docs/ARCHITECTURE.md for the typo in the paper) plus the normal and the surface
+area it covers. A cell that holds surfaces facing different ways (a room corner, both sides of a thin wall)
 stores one voxel per facing: the six signed axes bin the surface normals. A single averaged normal
 would cancel out on a thin wall and point nowhere useful in a corner, and light transport needs a
 meaningful facing per patch; the paper's per-cell view is `cells()`.

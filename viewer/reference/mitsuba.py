@@ -1,6 +1,7 @@
 """Ground truth from Mitsuba 3: incident-radiance SH at probes, surface irradiance, path-traced images.
 
-An independent path tracer the rest of the pipeline is measured against (DESIGN.md, "Ground truth").
+An independent path tracer the rest of the pipeline is measured against (docs/ARCHITECTURE.md, "Ground
+truth").
 Only tests, benchmarks and the command line import this module; the numpy core never does. Mitsuba is
 an optional extra (`pip install mitsuba`, or `pip install gi-viewer[reference]`): importing this module
 works without it, the first call says what to install.
@@ -296,7 +297,7 @@ def _indirect_irradiance_terms(dr, lane: _Lane) -> list:
 
 def _basis(d) -> list:
     """`viewer.probes.sh.basis` in plain arithmetic, so that it runs inside a Dr.Jit kernel (same order and
-    constants, DESIGN.md; tests check the two agree)."""
+    constants, docs/ARCHITECTURE.md; tests check the two agree)."""
     x, y, z = d[0], d[1], d[2]
     return [0.282095 + 0.0 * x, 0.488603 * y, 0.488603 * z, 0.488603 * x, 1.092548 * x * y,
             1.092548 * y * z, 0.315392 * (3 * z * z - 1), 1.092548 * x * z, 0.546274 * (x * x - y * y)]

@@ -8,7 +8,7 @@ from a field of `Ranges` (viewer.neural.ranges: `Ranges()` is the first dataset'
 issue 14's), so an out-of-distribution study can draw scenes outside the training ranges with
 `random_scene(rng, name, Ranges(room_scale=(1.3, 1.6)))`.
 
-Conventions (DESIGN.md): y up; walls face into the room, closed objects outwards; an emitter is a
+Conventions (docs/ARCHITECTURE.md): y up; walls face into the room, closed objects outwards; an emitter is a
 rectangle that emits from its counter-clockwise front face, into the room; every object is its own
 group. The room is centred on the origin with half extents (hx, hy, hz) drawn per axis, so `cornell`
 is the room (1, 1, 1).

@@ -31,7 +31,7 @@ from viewer.training.models import REFLECTED, TOTAL, VALIDITY, ProbeNet, ProbeNe
 from viewer.training.samples import Samples, load_split, training_split
 
 ODD_IN = {0: [3, 4, 7], 2: [2, 5, 7]}
-"""SH coefficients that change sign when the x axis (or the z axis) is mirrored (DESIGN.md order:
+"""SH coefficients that change sign when the x axis (or the z axis) is mirrored (docs/ARCHITECTURE.md order:
 00, 1-1 (y), 10 (z), 11 (x), 2-2 (xy), 2-1 (yz), 20, 21 (xz), 22 (x^2 - y^2))."""
 NORMAL_CHANNEL = {0: 1, 2: 3}
 COORD_CHANNEL = {0: 15, 2: 17}
