@@ -34,10 +34,10 @@ MARKER = "<!-- bench-relight -->"
 
 def _edits(scene):
     """(a colour edit, the lamp moved by a tenth of the scene), as viewer.bench.methods times them."""
-    from viewer.bench.methods import _Edit
+    from viewer.bench.methods import Edit
 
     settings = gi.GISettings()
-    return _Edit(settings, "colour")._edited(scene), _Edit(settings, "lamp")._edited(scene)
+    return Edit(settings, "colour").edited(scene), Edit(settings, "lamp").edited(scene)
 
 
 def _timed(function, repeats: int) -> tuple[float, float]:

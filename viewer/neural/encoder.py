@@ -63,7 +63,7 @@ class _Geometry:
         cells = m ** 3
         # the same splat as `encode`, its eight corners as the eight entries of each voxel's column (eight
         # distinct cells): the same numbers to round-off
-        corners = encoding._splat(voxels.position, lo, spacing, m)
+        corners = encoding.splat(voxels.position, lo, spacing, m)
         rows = np.stack([index for index, _ in corners], axis=1).ravel()
         weights = np.stack([weight for _, weight in corners], axis=1).ravel()
         self.splat = sparse.csc_matrix((weights, rows, np.arange(0, len(rows) + 1, len(corners))),

@@ -122,7 +122,7 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: dda.Cells 
     cell = np.clip(np.floor((voxels.position - lo) / spacing).astype(np.int64), 0, m - 1)
     flat = (cell[:, 0] * m + cell[:, 1]) * m + cell[:, 2]
     cells = m ** 3
-    corners = _splat(voxels.position, lo, spacing, m)
+    corners = splat(voxels.position, lo, spacing, m)
 
     def gather(values: np.ndarray) -> np.ndarray:
         """Trilinear splat onto the cell centres: voxels and lattice cells rarely line up (cubic
@@ -162,7 +162,7 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: dda.Cells 
     return Encoding(inputs=inputs.reshape(3, CHANNELS, m, m, m), scale=scale.astype(np.float32), lo=lo, hi=hi)
 
 
-def _splat(points: np.ndarray, lo: np.ndarray, spacing: np.ndarray, m: int):
+def splat(points: np.ndarray, lo: np.ndarray, spacing: np.ndarray, m: int):
     """[(flat cell index (P,), weight (P,))] for the 8 cell centres around each point (weights sum to
     1; clamped at the lattice's faces, so a wall on the scene's bounds stays in the boundary layer)."""
     u = np.clip((points - lo) / spacing - 0.5, 0.0, m - 1)
@@ -345,7 +345,7 @@ class Bounce:
         self.position, self.normal, self.area = voxels.position, voxels.normal, voxels.area
         self.m, spacing = m, (hi - lo) / m
         front = voxels.position + 0.5 * voxels.voxel_size * voxels.normal
-        self._front = _splat(front, lo, spacing, m)
+        self._front = splat(front, lo, spacing, m)
         facing = facings(voxels.normal)
         block = np.floor((voxels.position - lo) / (spacing * patch)).astype(np.int64)
         _, patch = np.unique(np.column_stack([block, facing]), axis=0, return_inverse=True)
@@ -358,7 +358,7 @@ class Bounce:
         coarse = max(m // lattice, 2)
         self._points = ProbeGrid.positions_for(lo, hi, coarse).reshape(-1, 3)
         rows = np.arange(m ** 3)
-        corners = _splat(ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3), lo, (hi - lo) / coarse, coarse)
+        corners = splat(ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3), lo, (hi - lo) / coarse, coarse)
         self._spread = sparse.csr_matrix(
             (np.concatenate([w for _, w in corners]), (np.tile(rows, 8), np.concatenate([i for i, _ in corners]))),
             shape=(m ** 3, coarse ** 3))
