@@ -234,7 +234,7 @@ def run_capture(args, probe_source: ProbeSource | None = None) -> int:
         except ValueError as exc:
             raise CaptureError(str(exc)) from None
     elif camera is None:  # the viewer's opening view: the file's camera, else one framing the scene
-        from viewer.ui.camera_controller import home_camera
+        from viewer.scene.camera import home_camera
 
         camera = home_camera(scene, value("scene", "cornell"))
         if fov is not None:
