@@ -7,7 +7,7 @@ import pytest
 from viewer.physical import gi
 from viewer.probes import sh
 from viewer.physical import transport
-from viewer.bench.points import free_space_points
+from viewer.evaluation.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.leaking import wall_points
 from viewer.bench.stability.precision import clipped_volumes, compare

@@ -27,7 +27,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from viewer.reference import mitsuba as reference
-from viewer.bench.points import free_space_points
+from viewer.evaluation.points import free_space_points
 from viewer.physical.gi import GISettings, solve
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene

@@ -29,7 +29,7 @@ import numpy as np
 from viewer.neural import encoding
 from viewer.neural import field as neural
 from viewer import scene as scenes
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI, open_session
 from viewer.scene import Scene
 

@@ -25,7 +25,7 @@ from viewer.rays import dda
 from viewer.physical import gi
 from viewer.probes import sh
 from viewer import scene as scenes
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 from viewer.probes.grid import ProbeGrid
 
 ROOT = Path(__file__).resolve().parents[2]

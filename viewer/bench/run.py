@@ -196,7 +196,7 @@ def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
     from viewer.reference import mitsuba as reference
     from viewer import scene as scenes
     from viewer.bench.methods import MethodUnavailable
-    from viewer.bench.points import free_space_points
+    from viewer.evaluation.points import free_space_points
 
     upgrade(paths.csv)
     done = {key(r) for r in read_rows(paths.csv)}

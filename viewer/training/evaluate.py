@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from viewer import scene as scenes
-from viewer.bench.accuracy import PUBLIC_BOX, relative_rmse
-from viewer.bench.points import free_space_points
-from viewer.bench.stability.methods import truth_sh
+from viewer.evaluation.error import PUBLIC_BOX, relative_rmse
+from viewer.evaluation.points import free_space_points
+from viewer.evaluation.truth import truth_sh
 
 ROOT = Path(__file__).resolve().parents[2]
 POINTS = 500

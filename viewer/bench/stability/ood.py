@@ -21,11 +21,12 @@ from pathlib import Path
 import numpy as np
 
 from viewer.physical import gi
-from viewer.bench.accuracy import relative_rmse
-from viewer.bench.points import free_space_points
+from viewer.evaluation.error import relative_rmse
+from viewer.evaluation.points import free_space_points
 from viewer.bench.stability.common import RunConfig, StudyResult, try_method
 from viewer.bench.stability.distance import ROOT, outside, scene_encoding, training_distances
-from viewer.bench.stability.methods import MethodSettings, truth_sh
+from viewer.bench.stability.methods import MethodSettings
+from viewer.evaluation.truth import truth_sh
 from viewer.neural.domain import Domain
 from viewer.neural.domain import outside as guard
 from viewer.training.procedural import PRESETS, Ranges, random_scene

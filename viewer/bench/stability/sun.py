@@ -21,10 +21,10 @@ from dataclasses import replace
 import numpy as np
 
 from viewer.physical import gi
-from viewer.bench.accuracy import relative_rmse
-from viewer.bench.points import free_space_points
+from viewer.evaluation.error import relative_rmse
+from viewer.evaluation.points import free_space_points
 from viewer.bench.stability.common import RunConfig, StudyResult
-from viewer.bench.stability.methods import truth_sh
+from viewer.evaluation.truth import truth_sh
 from viewer.training.procedural import Ranges, random_scene
 
 COLUMNS = [("scene", "room", "{}"), ("window", "window", "{}"), ("voxels", "voxels", "{}"),
