@@ -13,7 +13,8 @@ Memory is what the renderer keeps for the result: the probe textures (M^3 probes
 context, a broken model) raises `MethodUnavailable` from `prepare`; the benchmark notes it and goes on.
 
 More entries come from providers (`register_provider`), each scanning for model files: the neural
-entries (models/, runs/sweep/) and the paper's model families (runs/table1/, `paper_families`).
+entries (models/, runs/sweep/) and the paper's model families (runs/table1/, `paper_families`, registered
+by the benchmark's command).
 """
 
 from __future__ import annotations
@@ -303,15 +304,11 @@ def neural_methods(quick: bool = False) -> Iterable[Method]:
 
 # ---- the registry -----------------------------------------------------------------------------------
 
-def _paper_families(quick: bool) -> Iterable[Method]:
-    from viewer.bench.paper_families import paper_family_methods
-
-    return paper_family_methods(quick)
-
-
-PROVIDERS: list[Callable[[bool], Iterable[Method]]] = [neural_methods, _paper_families]
+PROVIDERS: list[Callable[[bool], Iterable[Method]]] = [neural_methods]
 """Functions quick -> methods, asked each time the registry is built: the shipped and swept ProbeNets,
-and the paper's families (Table 1) where `python -m viewer.training.table1` has exported them."""
+and what others register, such as the paper's families (Table 1) where `python -m viewer.training.table1`
+has exported them (viewer/bench/run.py registers `paper_families.paper_family_methods`: that module builds
+on this one)."""
 
 
 def register_provider(provider: Callable[[bool], Iterable[Method]]) -> None:

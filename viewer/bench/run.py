@@ -244,7 +244,9 @@ def run(args) -> int:
     from viewer import scene as scenes
     from viewer.bench import methods as registry
     from viewer.bench import pareto
+    from viewer.bench.paper_families import paper_family_methods
 
+    registry.register_provider(paper_family_methods)
     methods = select(registry.registry(args.quick), args.only)
     if args.list:
         for name, m in methods.items():

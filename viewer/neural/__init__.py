@@ -5,4 +5,5 @@
     field.py     NeuralField / NeuralGI: the model file, onnxruntime, the card
     domain.py    the domain guard: is this scene like the rooms the network was trained on?
     ranges.py    the ranges of the procedural training rooms (what the guard compares against)
+    paper_inputs.py  the paper's network input (voxel list, pooling): its Table 1 families read it
 """
