@@ -10,8 +10,9 @@ import pytest
 
 from viewer.scene import meshes
 from viewer.probes import sh
-from viewer.training import dataset, dataset_cli, generate, procedural, shards, truth
-from viewer.training.procedural import CORNELL_POWER, OBJECT_KINDS, WALL_NAMES, Ranges, random_scene
+from viewer.evaluation import procedural
+from viewer.training import dataset, dataset_cli, generate, shards, truth
+from viewer.evaluation.procedural import CORNELL_POWER, OBJECT_KINDS, WALL_NAMES, Ranges, random_scene
 from scenes import assert_same_room, covered, group_faces, wall_samples
 from viewer.rays.voxels import voxelize
 

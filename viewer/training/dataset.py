@@ -55,7 +55,8 @@ import numpy as np
 
 from viewer.probes.grid import fill_invalid
 from viewer.scene import Camera, DirectionalLight, Scene, load
-from viewer.training import procedural, truth as truths
+from viewer.evaluation import procedural
+from viewer.training import truth as truths
 from viewer.neural.ranges import PRESETS
 
 FORMAT = 2

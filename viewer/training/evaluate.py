@@ -52,7 +52,8 @@ def dark_ranges(preset: str):
 
 def evaluation_scenes(val: int, dark: int, seed: int, preset: str) -> list[tuple[str, scenes.Scene]]:
     """(kind, scene) for every scene of the evaluation, deterministic."""
-    from viewer.training import dataset, procedural
+    from viewer.evaluation import procedural
+    from viewer.training import dataset
 
     out = [("public", scenes.load("paper-test"))]
     if PUBLIC_BOX.exists():

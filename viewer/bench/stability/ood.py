@@ -1,6 +1,6 @@
 """Out of distribution: the neural field's error against a scene's distance from its training set.
 
-Rooms are drawn with `viewer.training.procedural.random_scene` and the ranges the shipped model was
+Rooms are drawn with `viewer.evaluation.procedural.random_scene` and the ranges the shipped model was
 trained on (its card's domain, viewer.neural.domain) moved one axis at a time, from inside them to well
 outside (`steps`): room proportions, colours, lights
 (size and placement) and shapes; plus rooms drawn with the training ranges themselves (`in
@@ -29,7 +29,7 @@ from viewer.bench.stability.methods import MethodSettings
 from viewer.evaluation.truth import truth_sh
 from viewer.neural.domain import Domain
 from viewer.neural.domain import outside as guard
-from viewer.training.procedural import PRESETS, Ranges, random_scene
+from viewer.evaluation.procedural import PRESETS, Ranges, random_scene
 
 def shipped_card():
     """The shipped model's card (viewer.neural.field.ModelCard), or None without a model."""

@@ -2,7 +2,7 @@
 
 `random_scene(rng, name, ranges)` draws one scene: a box room open at the front (z = +depth, as in
 `cornell`), walls in whites and greys with now and then a saturated colour, up to a few objects on the
-floor or stacked, area lights (viewer.training.lights), and sometimes a window with the sun shining
+floor or stacked, area lights (viewer.evaluation.lights), and sometimes a window with the sun shining
 through it; with the wide ranges also thin partitions and glowing objects. Every number it draws comes
 from a field of `Ranges` (viewer.neural.ranges: `Ranges()` is the first dataset's, `PRESETS["v2"]`
 issue 14's), so an out-of-distribution study can draw scenes outside the training ranges with
@@ -23,9 +23,9 @@ import numpy as np
 from viewer.scene import meshes
 from viewer.scene.meshes import X_AXIS, Y_AXIS, Mesh, rotate, scale, transformed, translate
 from viewer.scene import Camera, DirectionalLight, Scene
-from viewer.training.frames import Frame, room_frames
-from viewer.training.lights import CORNELL_POWER  # noqa: F401 - re-exported (tests, studies)
-from viewer.training.lights import WALL_GAP, draw_lights, draw_window, glow_objects, rectangle_light
+from viewer.evaluation.frames import Frame, room_frames
+from viewer.evaluation.lights import CORNELL_POWER  # noqa: F401 - re-exported (tests, studies)
+from viewer.evaluation.lights import WALL_GAP, draw_lights, draw_window, glow_objects, rectangle_light
 from viewer.neural.ranges import OBJECT_KINDS, PRESETS, Ranges  # noqa: F401 - re-exported
 
 OBJECT_GAP = 0.03

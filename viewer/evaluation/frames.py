@@ -1,7 +1,7 @@
 """A wall of a procedural room as a frame: centre, inward normal, in-plane axes and half extents.
 
-Apart from viewer/training/procedural.py, which builds the rooms, because the lights
-(viewer/training/lights.py) are placed on the same frames and the rooms place the lights.
+Apart from viewer/evaluation/procedural.py, which builds the rooms, because the lights
+(viewer/evaluation/lights.py) are placed on the same frames and the rooms place the lights.
 """
 
 from __future__ import annotations
