@@ -33,9 +33,9 @@ RANKS = {
     "gpu": 7,                         # the renderer, the compute shaders, headless capture
     "memory": 8,                      # resident memory and live GL objects
     "ui": 9, "capture": 9, "sources": 9,  # the window's pieces, the headless capture, the GI sources
-    "app": 10,                        # the window, and its headless fallback through capture
+    "app": 10,                        # the window; without a display it falls back to capture
     "bench": 11, "training": 11,      # the tools: measure everything, train the network
-    "cli": 12,                        # the command line: nothing below imports it
+    "cli": 12,                        # the command line (`python -m viewer bench` too): nothing imports it
     "__main__": 13,
 }
 """A package may import its own rank and below. The ranks follow the pipeline: a scene is voxelized,
