@@ -16,7 +16,7 @@ from viewer.physical import gi
 from viewer.reference import mitsuba as reference
 from viewer import scene as scenes
 from viewer.evaluation.points import free_space_points
-from viewer.evaluation.error import PUBLIC_BOX, relative_rmse  # noqa: F401 - also this table's
+from viewer.evaluation.error import PUBLIC_BOX, relative_rmse
 from viewer.evaluation.report import replace_block
 
 ROOT = Path(__file__).resolve().parents[2]
