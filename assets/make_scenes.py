@@ -5,7 +5,7 @@
 Every number of every scene is in this file; the generated files are never edited by hand. The mesh
 primitives and transforms come from `viewer/scene/meshes.py` (shared with the procedural training scenes).
 
-Conventions (shared/DESIGN.md): y up, Lambertian, MTL `Kd` = albedo, `Ke` = emitted radiance, emitters
+Conventions (docs/ARCHITECTURE.md): y up, Lambertian, MTL `Kd` = albedo, `Ke` = emitted radiance, emitters
 one-sided from the counter-clockwise front face. Every object is its own `usemtl` group with its own
 material (same name), so each can be recoloured alone. Walls face into the box, closed objects face
 outwards, ceiling lights face down.

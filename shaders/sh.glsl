@@ -1,5 +1,6 @@
 // Real orthonormal spherical harmonics, bands 0..2 (9 coefficients per colour channel).
-// Order and constants as in viewer/probes/sh.py and DESIGN.md: (l,m) = 00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22,
+// Order and constants as in viewer/probes/sh.py and docs/ARCHITECTURE.md:
+// (l,m) = 00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22,
 // for a unit direction in world axes pointing from the probe towards where the light comes from.
 
 #ifndef PI

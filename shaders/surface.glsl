@@ -2,7 +2,7 @@
 // diffuse light from the SH probe grid, and the emitters' own radiance. Writes linear HDR radiance
 // (or a debug quantity, see view_mode) to a float target; present.glsl tone-maps it.
 //
-//   outgoing = albedo / pi * (E_direct + E_indirect) + emission      (Lambertian, DESIGN.md)
+//   outgoing = albedo / pi * (E_direct + E_indirect) + emission      (Lambertian, docs/ARCHITECTURE.md)
 //
 // The probe grid holds indirect incident radiance only (no emitters, no sun), so direct light is not
 // counted twice.

@@ -70,9 +70,9 @@ def assert_same_room(a: Scene, params_a: dict, b: Scene, params_b: dict) -> None
 
 
 def wall_samples(params: dict, name: str, count: int):
-    """A count x count grid of points over one wall of a drawn room (viewer.training.procedural), and
+    """A count x count grid of points over one wall of a drawn room (viewer.evaluation.procedural), and
     which of them lie in the window's hole: (the wall's frame, points (count^2, 3), hole (count^2,))."""
-    from viewer.training import procedural
+    from viewer.evaluation import procedural
 
     u = (np.arange(count) + 0.5) / count * 2 - 1
     grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)

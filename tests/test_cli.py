@@ -1,4 +1,5 @@
-"""`python -m viewer sample`: the contract the evaluation tools rely on (DESIGN.md, Command line)."""
+"""`python -m viewer sample`: the contract the evaluation tools rely on (docs/ARCHITECTURE.md, "Command
+line")."""
 
 import subprocess
 import sys

@@ -103,9 +103,9 @@ def test_the_old_names_still_find_the_cpu_solver():
 def test_the_benchmark_takes_its_old_method_names(tmp_path):
     """`--only 'numpy:*'` picks the CPU solver's rows, and a CSV written when the method was `numpy` counts
     as measured for `solver` (the benchmark resumes from its CSV)."""
-    from viewer.bench import methods, run
+    from viewer.bench import method_table, run
 
-    table = methods.registry(quick=True)
+    table = method_table.registry(quick=True)
     chosen = run.select(table, ["numpy:*"])
     assert chosen and all(m.family == "solver" for m in chosen.values())
     csv = tmp_path / "benchmark.csv"

@@ -4,7 +4,7 @@ Without a display (no DISPLAY / WAYLAND_DISPLAY), or when no window can be opene
 renders the scene headless through EGL to `<scene>.png` instead (viewer.capture).
 
 The window is a moderngl-window `WindowConfig` (`ViewerApp`, its class attributes are its settings) on
-the glfw backend: the pyglet backend never delivers file drops on X11 (../shared/DESIGN.md). The pieces
+the glfw backend: the pyglet backend never delivers file drops on X11 (docs/ARCHITECTURE.md). The pieces
 live in viewer/ui/: its flags (options), the imgui renderer and input, panels, frame-time graph, camera
 controller, the 3D viewport, background loading, the GI sources, and what it does on its own for tests
 and benchmarks (unattended).

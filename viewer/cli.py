@@ -1,4 +1,4 @@
-"""The command line: `python -m viewer [capture|sample|bake|bench] ...` (see ../shared/DESIGN.md).
+"""The command line: `python -m viewer [capture|sample|bake|bench] ...` (see docs/ARCHITECTURE.md).
 
 Exit status 0 on success, 2 for bad input (one line on stderr, no traceback), 1 for an internal error.
 """

@@ -1,4 +1,4 @@
-"""Bad input, and the exit status a command gives for it (../shared/DESIGN.md, "Command line").
+"""Bad input, and the exit status a command gives for it (docs/ARCHITECTURE.md, "Command line").
 
 Each stage raises its own error for the bad input it finds (`viewer.scene.types.SceneError` for a scene
 file, `viewer.bake.grid.BakedError` for a baked grid); `InputError` is for a bad command-line value. Every

@@ -1,7 +1,7 @@
 """Where the viewer's data files are: the shader files, the shipped models and the built-in scenes.
 
 The repository keeps them in the top-level folders `shaders/`, `models/` and `assets/scenes/` (the layout
-of ../shared/DESIGN.md), which is where a checkout finds them: running from source, or installed with
+of docs/ARCHITECTURE.md), which is where a checkout finds them: running from source, or installed with
 `pip install -e .`. A wheel cannot reach outside its package, so pyproject.toml maps the same folders
 into it as `viewer/_data/shaders`, `viewer/_data/models` and `viewer/_data/scenes`, found here through
 importlib.resources. Every module that reads a data file asks this one.

@@ -101,6 +101,11 @@ class Source:
     """Older names that still find it, for what users and files wrote before (the benchmark called the
     CPU solver `numpy`, its stability suite `physical`)."""
 
+    def indirect(self, scene: "Scene", settings: GISettings, model: Path | str | None = None) -> "ProbeGrid | None":
+        """The blocking solve of the indirect light only, as the renderer shades it from the probes (the
+        viewer's worker thread runs this for a source without an adapter of its own)."""
+        return self.solve(scene, settings, SolveOptions(include_emitted=False, model=model))[0]
+
 
 SOURCES: dict[str, Source] = {}
 """Name -> Source, in the panel's order."""

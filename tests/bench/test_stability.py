@@ -7,7 +7,7 @@ import pytest
 from viewer.physical import gi
 from viewer.probes import sh
 from viewer.physical import transport
-from viewer.bench.points import free_space_points
+from viewer.evaluation.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.leaking import wall_points
 from viewer.bench.stability.precision import clipped_volumes, compare
@@ -104,7 +104,7 @@ def test_distance_from_the_training_set_is_zero_inside_the_ranges_and_grows_outs
     drawn like them."""
     from viewer.bench.stability.distance import VIEWS, EncodingDistance, scene_encoding
     from viewer.bench.stability.ood import TRAINED, range_distance
-    from viewer.training.procedural import Ranges, random_scene
+    from viewer.evaluation.procedural import Ranges, random_scene
 
     rooms = [random_scene(np.random.default_rng([7, k]), f"room-{k}") for k in range(7)]
     long_room, long_params = random_scene(np.random.default_rng(8), "long",
@@ -127,7 +127,7 @@ def test_the_ood_study_moves_past_the_shipped_models_own_ranges():
     ranges on each axis, whichever preset they are: every room of a step lies outside on its axis."""
     from viewer.bench.stability import ood
     from viewer.neural.field import DEFAULT_MODEL, ModelCard, ModelError
-    from viewer.training.procedural import PRESETS, random_scene
+    from viewer.evaluation.procedural import PRESETS, random_scene
 
     try:
         assert ood.DOMAIN == ModelCard.read(DEFAULT_MODEL).domain

@@ -15,8 +15,8 @@ from PIL import Image
 
 from pictures import pixel_on_plane
 from viewer.probes import sh
-from viewer.capture import capture_request
-from viewer.gpu.offscreen import OffscreenRenderer, capture, run_capture
+from viewer.capture import capture_request, run_capture
+from viewer.gpu.offscreen import OffscreenRenderer, capture
 from viewer.gpu.programs import SHADERS, ShaderError
 from viewer.gpu.renderer import VIEWS, RenderSettings, Renderer
 from viewer.gpu.targets import DisplayTarget, HdrTarget

@@ -11,7 +11,7 @@ from scenes import box, ceiling_lamp
 from viewer.neural import field as neural
 from viewer.neural.domain import Domain, measure, outside, warning
 from viewer.scene import DirectionalLight, Scene, load
-from viewer.training.procedural import PRESETS, random_scene
+from viewer.evaluation.procedural import PRESETS, random_scene
 
 ROOT = Path(__file__).resolve().parents[2]
 V1, V2 = Domain.from_preset("v1"), Domain.from_preset("v2")

@@ -8,7 +8,7 @@ from scenes import box, ceiling_lamp
 from viewer.neural import encoding
 from viewer.neural.encoder import Encoder
 from viewer.scene import DirectionalLight, Scene, load
-from viewer.training.procedural import PRESETS, random_scene
+from viewer.evaluation.procedural import PRESETS, random_scene
 from viewer.rays.voxels import voxelize
 
 VOXELS = 16

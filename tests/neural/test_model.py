@@ -46,7 +46,7 @@ def test_meets_its_card_on_the_paper_test_scene(field):
     """Relative RMSE against Mitsuba at the card's free-space points, no worse than the card says."""
     from viewer.reference import mitsuba as reference
     from viewer.bench.accuracy import relative_rmse
-    from viewer.bench.points import free_space_points
+    from viewer.evaluation.points import free_space_points
 
     card = json.loads(MODEL.with_suffix(".json").read_text())
     claimed = card["metrics"]["relative_rmse_vs_mitsuba"]["paper-test"]

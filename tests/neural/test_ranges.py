@@ -10,8 +10,8 @@ import numpy as np
 
 from scenes import assert_same_room, covered, group_faces, wall_samples
 from viewer.scene import meshes
-from viewer.training import procedural
-from viewer.training.procedural import CORNELL_POWER, WALL_NAMES, random_scene
+from viewer.evaluation import procedural
+from viewer.evaluation.procedural import CORNELL_POWER, WALL_NAMES, random_scene
 from viewer.neural.ranges import LIGHT_SURFACES, PRESETS, V2
 
 SEEDS = range(60)

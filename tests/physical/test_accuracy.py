@@ -10,7 +10,7 @@ from viewer.physical import gi
 from viewer.reference import mitsuba as reference
 from viewer import scene as scenes
 from viewer.bench.accuracy import relative_rmse
-from viewer.bench.points import free_space_points
+from viewer.evaluation.points import free_space_points
 
 PUBLIC_BOX = Path(__file__).resolve().parents[3] / "shared" / "scenes" / "cornellbox-original" / "CornellBox-Original.obj"
 

@@ -9,7 +9,7 @@ from viewer.physical import geometry
 from viewer.physical import retrace
 from viewer.physical.gi import GISettings, PhysicalGI
 from viewer.scene import load
-from viewer.training.procedural import PRESETS, random_scene
+from viewer.evaluation.procedural import PRESETS, random_scene
 from viewer.rays.voxel_faces import FaceVoxels
 
 SETTINGS = geometry.GeometrySettings(voxels=24, probes=12, gather_rays=32, directions=128)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from viewer.scene import load
-from viewer.training.procedural import PRESETS, random_scene
+from viewer.evaluation.procedural import PRESETS, random_scene
 from viewer.rays.voxel_faces import FaceVoxels
 from viewer.rays.voxels import voxelize_with_faces
 

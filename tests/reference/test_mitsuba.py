@@ -224,8 +224,8 @@ def test_numpy_core_does_not_import_mitsuba():
 
 def test_scalar_variant_fallback_agrees():
     """scalar_rgb (no LLVM) runs the same estimator one lane at a time: the furnace still reads 2."""
-    code = ("import numpy as np\nfrom viewer import reference, sh\n"
-            "from tests.test_reference import FURNACE\n"
+    code = ("import numpy as np\nfrom viewer.reference import mitsuba as reference\nfrom viewer.probes import sh\n"
+            "from tests.reference.test_mitsuba import FURNACE\n"
             "c = reference.probe_sh(FURNACE, [[0.1, 0.2, 0.3]], directions=512, cache=False)\n"
             "print(reference.variant(), float(sh.irradiance(c[0], [0.0, 1.0, 0.0])[0] / (2 * np.pi)))\n")
     env = dict(os.environ, GI_VIEWER_MITSUBA_VARIANT="scalar_rgb")

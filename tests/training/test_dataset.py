@@ -10,8 +10,9 @@ import pytest
 
 from viewer.scene import meshes
 from viewer.probes import sh
-from viewer.training import dataset, generate, procedural, shards, truth
-from viewer.training.procedural import CORNELL_POWER, OBJECT_KINDS, WALL_NAMES, Ranges, random_scene
+from viewer.evaluation import procedural
+from viewer.training import dataset, dataset_cli, generate, shards, truth
+from viewer.evaluation.procedural import CORNELL_POWER, OBJECT_KINDS, WALL_NAMES, Ranges, random_scene
 from scenes import assert_same_room, covered, group_faces, wall_samples
 from viewer.rays.voxels import voxelize
 
@@ -327,9 +328,9 @@ def test_solver_truth_splits_direct_and_reflected_light():
 
 def test_command_line_help_and_bad_input(capsys):
     with pytest.raises(SystemExit) as exit_info:
-        dataset.main(["--help"])
+        dataset_cli.main(["--help"])
     assert exit_info.value.code == 0
     assert "--probes" in capsys.readouterr().out
-    assert dataset.main(["--out", "/tmp/never", "--probes", "8,x"]) == 2
+    assert dataset_cli.main(["--out", "/tmp/never", "--probes", "8,x"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--probes" in err[0]

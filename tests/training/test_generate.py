@@ -14,7 +14,7 @@ import pytest
 pytest.importorskip("ray", reason="the dataset command runs on Ray (pip install ray)")
 
 from viewer.physical import gi  # noqa: E402
-from viewer.training import dataset, generate, shards, truth  # noqa: E402
+from viewer.training import dataset, dataset_cli, generate, shards, truth  # noqa: E402
 
 ARGS = ["--train", "3", "--val", "1", "--splits", "val,train", "--seed", "3", "--probes", "8,4", "--voxels", "16",
         "--directions", "32", "--shard-size", "2", "--workers", "2"]
@@ -30,7 +30,7 @@ def room_arrays(ref: str) -> dict[str, np.ndarray]:
 def made(tmp_path_factory):
     """The command, run once: 1 val room and 3 train rooms in shards of 2, on two local Ray workers."""
     root = tmp_path_factory.mktemp("gi-v2-tiny")
-    assert dataset.main(["--out", str(root), *ARGS]) == 0
+    assert dataset_cli.main(["--out", str(root), *ARGS]) == 0
     return root, {ref.partition("#")[2]: room_arrays(ref) for split in ("val", "train")
                   for ref in dataset.room_refs(root, split)}
 
@@ -109,7 +109,7 @@ def test_other_settings_are_refused(made, tmp_path):
 
     root = tmp_path / "copy"
     shutil.copytree(made[0], root)
-    assert dataset.main(["--out", str(root), *ARGS, "--ranges", "v1"]) == 2
+    assert dataset_cli.main(["--out", str(root), *ARGS, "--ranges", "v1"]) == 2
 
 
 def test_physical_targets_are_the_solvers_probes():

@@ -4,7 +4,7 @@ the benchmark (numpy + onnxruntime), and an exported family answers in the bench
 import numpy as np
 import pytest
 
-from viewer.training.paper_inputs import PAPER_PROBES, adaptive_pool
+from viewer.neural.paper_inputs import PAPER_PROBES, adaptive_pool
 
 torch = pytest.importorskip("torch", reason="the train extra (torch) is needed")
 

@@ -12,7 +12,8 @@ import pytest
 from scenes import box
 from viewer.physical.gi import GISettings
 from viewer.scene import Camera, DirectionalLight, load
-from viewer.ui.camera_controller import OrbitCamera, framing_camera
+from viewer.scene.camera import framing_camera
+from viewer.ui.camera_controller import OrbitCamera
 from viewer.ui.scene_edits import SceneEdits, emitter_group
 
 imgui = pytest.importorskip("imgui_bundle").imgui

@@ -14,16 +14,11 @@ import numpy as np
 from viewer.physical import gi
 from viewer.reference import mitsuba as reference
 from viewer import scene as scenes
-from viewer.bench.points import free_space_points
-from viewer.bench.report import replace_block
+from viewer.evaluation.points import free_space_points
+from viewer.evaluation.error import PUBLIC_BOX, relative_rmse
+from viewer.evaluation.report import replace_block
 
 ROOT = Path(__file__).resolve().parents[2]
-PUBLIC_BOX = ROOT.parent / "shared" / "scenes" / "cornellbox-original" / "CornellBox-Original.obj"
-
-
-def relative_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
-    """sqrt(mean((est - ref)^2)) / sqrt(mean(ref^2)) over all points, SH coefficients and channels."""
-    return float(np.sqrt(np.mean((estimate - truth) ** 2)) / np.sqrt(np.mean(truth ** 2)))
 
 
 def evaluate(scene, settings: gi.GISettings, points: np.ndarray, truth: np.ndarray) -> tuple[float, float]:

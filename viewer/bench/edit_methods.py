@@ -16,7 +16,7 @@ from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 
 
-class _Edit:
+class Edit:
     """An edit's time to converged probes: untimed (`before`), the scene is edited away and relit; timed,
     the edit comes back to the scene itself (so the error is the scene's own) and the probes are
     projected, as the viewer does after the edit. `kind`: `colour` (the largest group's albedo: the
@@ -27,7 +27,7 @@ class _Edit:
         self.settings, self.kind, self.relighter_factory = settings, kind, relighter_factory
         self.solvers: dict = {}
 
-    def _edited(self, scene: Scene) -> Scene:
+    def edited(self, scene: Scene) -> Scene:
         if self.kind == "colour":
             group = scene.largest_group()
             return scene.with_albedo(group, scene.group_albedo(group)[::-1] * 0.5)
@@ -49,7 +49,7 @@ class _Edit:
             solver = PhysicalGI(self.settings, relighter) if relighter else PhysicalGI(self.settings)
             solver.update(scene)
             self.solvers[scene.name] = solver
-        self.solvers[scene.name].update(self._edited(scene), stale_geometry=True)
+        self.solvers[scene.name].update(self.edited(scene), stale_geometry=True)
 
     def __call__(self, scene: Scene, points) -> ProbeGrid:
         solver = self.solvers[scene.name]
@@ -63,11 +63,11 @@ def edit_method(settings: GISettings, kind: str, backend: str) -> Method:
 
     def prepare() -> Produce:
         if not source.needs.gl:
-            return _Edit(settings, kind)
+            return Edit(settings, kind)
         from viewer.gpu.compute_relight import ComputeRelight
 
         ctx, programs = shared_gl()
-        return _Edit(settings, kind, lambda: ComputeRelight(ctx, programs))
+        return Edit(settings, kind, lambda: ComputeRelight(ctx, programs))
 
     what = {"colour": "a colour edit (the relight)", "lamp": "a lamp move (lamp paths + relight)"}[kind]
     return Method(f"{source.name}-edit", f"{grid_label(settings)} {kind}", prepare, texture_bytes(settings.probes),

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from viewer import sources as gi_sources
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 
 ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- bench-edits -->"

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from viewer import scene as scenes
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 from viewer.physical.gi import GISettings
 from viewer.gpu.compute_relight import solve_probes
 from viewer.gpu.context import create_context, describe

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from viewer import sources
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = ("cornell", "paper-test")

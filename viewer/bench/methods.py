@@ -1,4 +1,5 @@
-"""Every way the benchmark can produce a scene's light field, in one registry: name -> Method.
+"""The benchmark's methods: every way it can produce a scene's light field (the table of them, name ->
+Method, is viewer.bench.method_table).
 
 A method answers the question `python -m viewer sample` answers: the incident-radiance SH (all the light,
 emitted included, as Mitsuba sees it) wherever the renderer could ask. Most produce a `ProbeGrid`
@@ -16,8 +17,8 @@ The viewer's own GI sources are named as viewer.sources names them (`compute`, `
 rows written when the CPU solver was called `numpy` read as `solver` (viewer.bench.run). The edits' time
 to converged probes and to the settled frame are in viewer.bench.edit_methods.
 
-More entries come from providers (`register_provider`), each scanning for model files: the neural
-entries (models/, runs/sweep/) and the paper's model families (runs/table1/, `paper_families`).
+The neural entries scan for model files (models/, runs/sweep/); the paper's model families
+(runs/table1/, viewer.bench.paper_families) are registered with the table by the benchmark's command.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ import numpy as np
 
 from viewer import sources
 from viewer.reference import mitsuba as reference
-from viewer.bench.points import free_space_points
+from viewer.evaluation.points import free_space_points
 from viewer.physical.gi import GISettings
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
@@ -256,50 +257,3 @@ def neural_methods(quick: bool = False) -> Iterable[Method]:
             yield neural_method(path)
         except ModelError as exc:
             print(f"bench: skipping {path}: {exc}", file=sys.stderr, flush=True)
-
-
-# ---- the registry -----------------------------------------------------------------------------------
-
-def _paper_families(quick: bool) -> Iterable[Method]:
-    from viewer.bench.paper_families import paper_family_methods
-
-    return paper_family_methods(quick)
-
-
-PROVIDERS: list[Callable[[bool], Iterable[Method]]] = [neural_methods, _paper_families]
-"""Functions quick -> methods, asked each time the registry is built: the shipped and swept ProbeNets,
-and the paper's families (Table 1) where `python -m viewer.training.table1` has exported them."""
-
-
-def register_provider(provider: Callable[[bool], Iterable[Method]]) -> None:
-    if provider not in PROVIDERS:
-        PROVIDERS.append(provider)
-
-
-def registry(quick: bool = False) -> dict[str, Method]:
-    """Every method, in report order. Quick: a handful that together take well under a minute."""
-    from viewer.bench.edit_methods import edit_method, screen_edit_method
-
-    if quick:
-        small = GISettings(voxels=16, probes=8)
-        methods = [ambient_method(), *(mitsuba_points_method(d) for d in (16, 64, 256)),
-                   solver_method(GISettings(voxels=8, probes=8)), compute_method(small),
-                   edit_method(small, "colour", "compute"), mitsuba_probes_method(8, 64)]
-    else:
-        # The numpy solver at 64^3 voxels would hold a 27730^2 transition matrix (6 GB) and take hours:
-        # 64^3 runs on the compute solver only. At 32^3 its bounces cost little beside the transition
-        # matrix and the probe projection, so its bounce sweep would repeat one time four times.
-        methods = [ambient_method()]
-        methods += [compute_method(s) for s in solver_grid()]
-        methods += [compute_method(replace(DEFAULT, kernel="paper"))]
-        methods += [solver_method(replace(DEFAULT, voxels=16)), solver_method(DEFAULT),
-                    solver_method(replace(DEFAULT, voxels=16, kernel="paper"))]
-        methods += [edit_method(DEFAULT, kind, backend) for backend in (sources.COMPUTE.name, sources.SOLVER.name)
-                    for kind in ("colour", "lamp")]
-        methods += [screen_edit_method(source, kind) for source in (sources.COMPUTE.name, sources.NEURAL.name)
-                    for kind in ("colour", "lamp")]
-        methods += [mitsuba_points_method(d) for d in (16, 64, 256, 1024)]
-        methods += [mitsuba_probes_method(m, d) for m, d in ((8, 64), (16, 64), (16, 256), (24, 256), (32, 256))]
-    for provider in PROVIDERS:
-        methods += list(provider(quick))
-    return {m.name: m for m in methods}

@@ -28,7 +28,7 @@ import numpy as np
 from viewer.neural import encoding
 from viewer.neural import field as neural
 from viewer import scene as scenes
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI, open_session
 from viewer.scene import Scene
 
@@ -111,7 +111,7 @@ def measure(scene: Scene, field: NeuralField, probes: int, voxels: int, repeats:
 
 def _before(scene: Scene, field: NeuralField, probes: int, voxels: int) -> dict[str, float]:
     """One update as the neural source ran before the incremental encoder: everything from scratch."""
-    from viewer.neural.field import _one_blas_thread, clock_now
+    from viewer.neural.field import one_blas_thread, clock_now
     from viewer.rays.voxels import voxelize
 
     wall = time.perf_counter()
@@ -120,7 +120,7 @@ def _before(scene: Scene, field: NeuralField, probes: int, voxels: int) -> dict[
     blockers = encoding.occluders(scene, grid)   # with the voxels, as NeuralGI lists them
     lo, hi = scene.bounds
     voxelized = clock_now()
-    with _one_blas_thread():
+    with one_blas_thread():
         enc = encoding.encode(grid, scene.sun, lo, hi, probes, blockers)
     encoded = clock_now()
     out = field.session.run(None, {field.input_name: enc.inputs})[0]

@@ -17,7 +17,7 @@ import numpy as np
 from viewer.bench.methods import ROOT, Method, MethodUnavailable, texture_bytes
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
-from viewer.training.paper_inputs import PAPER_PROBES, PAPER_VOXELS, adaptive_pool, voxel_list
+from viewer.neural.paper_inputs import PAPER_PROBES, PAPER_VOXELS, adaptive_pool, voxel_list
 
 MODELS = ROOT / "runs" / "table1"
 LABELS = {"mlp": "MLP", "resnet10": "ResNet-10", "rnn": "RNN", "cnn": "CNN", "cnn-mlp": "CNN-MLP"}

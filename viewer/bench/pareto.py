@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 
 GOAL = 0.05
 """The product's accuracy goal (relative RMSE against Mitsuba, docs/ACCURACY.md)."""

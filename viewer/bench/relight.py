@@ -24,7 +24,7 @@ from viewer.rays import dda
 from viewer.physical import gi
 from viewer.probes import sh
 from viewer import scene as scenes
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 from viewer.probes.grid import ProbeGrid
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -33,10 +33,10 @@ MARKER = "<!-- bench-relight -->"
 
 def _edits(scene):
     """(a colour edit, the lamp moved by a tenth of the scene), as viewer.bench.edit_methods times them."""
-    from viewer.bench.edit_methods import _Edit
+    from viewer.bench.edit_methods import Edit
 
     settings = gi.GISettings()
-    return _Edit(settings, "colour")._edited(scene), _Edit(settings, "lamp")._edited(scene)
+    return Edit(settings, "colour").edited(scene), Edit(settings, "lamp").edited(scene)
 
 
 def _timed(function, repeats: int) -> tuple[float, float]:

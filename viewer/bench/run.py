@@ -1,7 +1,7 @@
 """`python -m viewer bench [SCENES...]`: every method's time and error against Mitsuba, as CSV, charts
 and docs/BENCHMARK.md.
 
-For every scene and every method of `viewer.bench.methods.registry()`: the milliseconds to produce the GI
+For every scene and every method of `viewer.bench.method_table.registry()`: the milliseconds to produce the GI
 from the loaded scene (median of 3 runs; one run for methods over SLOW_SECONDS), the relative RMSE of its
 incident-radiance SH against a high-sample Mitsuba reference at free-space points, and the memory the
 renderer keeps (probe textures, model). One CSV row per (scene, method, setting), appended as soon as it
@@ -200,7 +200,7 @@ def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
     from viewer.reference import mitsuba as reference
     from viewer import scene as scenes
     from viewer.bench.methods import MethodUnavailable
-    from viewer.bench.points import free_space_points
+    from viewer.evaluation.points import free_space_points
 
     upgrade(paths.csv)
     done = {key(r) for r in read_rows(paths.csv)}
@@ -251,9 +251,11 @@ def select(methods: dict, patterns: list[str] | None) -> dict:
 
 def run(args) -> int:
     from viewer import scene as scenes
-    from viewer.bench import methods as registry
+    from viewer.bench import method_table as registry
     from viewer.bench import pareto
+    from viewer.bench.paper_families import paper_family_methods
 
+    registry.register_provider(paper_family_methods)
     methods = select(registry.registry(args.quick), args.only)
     if args.list:
         for name, m in methods.items():

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from viewer import sources as gi_sources
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 from viewer.physical.gi import GISettings
 from viewer.memory import Usage, children_mb
 from viewer.scene import ASSETS

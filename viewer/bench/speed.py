@@ -16,7 +16,7 @@ import numpy as np
 from viewer.physical import projection
 from viewer.physical import transport
 from viewer import scene as scenes
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 from viewer.physical.gi import GISettings
 from viewer.rays.raymarch import Tracer
 from viewer.rays.voxels import voxelize

@@ -1,6 +1,6 @@
 """What one headless picture is (CaptureRequest), and the error for a bad one (CaptureError).
 
-viewer.gpu.offscreen.run_capture renders a request; the command line (`python -m viewer capture`, the
+viewer.capture.render renders a request; the command line (`python -m viewer capture`, the
 viewer without a window: viewer.capture) builds one from its flags. This module imports no GL, so a
 command can build a request without paying for it.
 """
@@ -22,7 +22,7 @@ class CaptureError(ValueError):
 
 @dataclass(frozen=True)
 class CaptureRequest:
-    """One picture of a scene, rendered headless (viewer.gpu.offscreen.run_capture)."""
+    """One picture of a scene, rendered headless (viewer.capture.render)."""
 
     out: str
     """The file written: .png or .jpg, or .npy for the linear HDR radiance (H, W, 3) float32."""

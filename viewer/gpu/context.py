@@ -1,7 +1,7 @@
 """A headless OpenGL 4.3+ context through EGL (no display needed; Mesa llvmpipe on machines without a GPU).
 
 Everything that needs a GL context lives under `viewer.gpu`; this module is the one place that makes
-one without a window (the window's context comes from moderngl-window). DESIGN.md, "The GL stack on
+one without a window (the window's context comes from moderngl-window). docs/ARCHITECTURE.md, "The GL stack on
 these machines": without `backend="egl"` moderngl looks for an X display.
 """
 

@@ -160,10 +160,10 @@ def _landing(s, k, points, normals, tangents, bitangents, rows, columns, shift, 
     oy = points[s, 1] + lift * normals[s, 1]
     oz = points[s, 2] + lift * normals[s, 2]
     dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
-    face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, cells, none)
+    face, t = dda.march(ox, oy, oz, dx, dy, dz, np.inf, cells, none)
     side = 0
     if face == dda.BACKFACE:
-        face, t = dda._march(ox, oy, oz, dx, dy, dz, np.inf, flipped, none)
+        face, t = dda.march(ox, oy, oz, dx, dy, dz, np.inf, flipped, none)
         side = 1
     if face < 0 or face_tile[face] < 0:
         return ESCAPED

@@ -10,32 +10,20 @@ comparisons with the path-traced reference.
 
 from __future__ import annotations
 
-import sys
 import time
-from dataclasses import replace
 from pathlib import Path
-from typing import Callable
 
 import moderngl
 import numpy as np
 
-from viewer import sources
-from viewer.gpu.camera import look_at
-from viewer.gpu.capture_request import MAX_SIZE, CaptureError, CaptureRequest
+from viewer.gpu.capture_request import MAX_SIZE, CaptureError
 from viewer.gpu.context import create_context
 from viewer.gpu.renderer import VIEWS, RenderSettings, Renderer
-from viewer.gpu.shadows import MAX_LIGHT_SAMPLES
 from viewer.gpu.targets import DisplayTarget, HdrTarget
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Camera, Scene
 
-__all__ = ["CaptureError", "CaptureRequest", "MAX_SIZE", "OffscreenRenderer", "ProbeSource", "capture",
-           "run_capture", "save", "solver_probes"]
-
-ProbeSource = Callable[[Scene, str, moderngl.Context], "ProbeGrid | None"]
-"""(scene, gi mode, GL context) -> the indirect-light ProbeGrid for that mode (None: GI off). The
-context lets a GPU solver run on the same context the renderer uses."""
-
+__all__ = ["CaptureError", "MAX_SIZE", "OffscreenRenderer", "capture", "save"]
 
 class OffscreenRenderer:
     """A renderer with its own headless context and targets of one size: a display target (the 8-bit
@@ -146,99 +134,3 @@ def save(image: np.ndarray, path: str | Path) -> None:
     else:
         from PIL import Image
         Image.fromarray(image).save(path)
-
-
-# ---- a CaptureRequest ------------------------------------------------------------------------------
-
-def solver_probes(request: CaptureRequest) -> ProbeSource:
-    """The probe source for a `gi` source of viewer.sources that solves (the compute-shader solver on the
-    capture's own context, the numpy solver, the network of the request's model), with the request's GI
-    settings, indirect light only."""
-    def source(scene: Scene, gi: str, ctx) -> ProbeGrid | None:
-        settings = request.gi_settings
-        spec = sources.SOURCES.get(gi)
-        if spec is None or spec.solve is None:
-            raise CaptureError(f"--gi {gi}: unknown GI source")
-        options = sources.SolveOptions(include_emitted=False, ctx=ctx, model=request.model)
-        try:
-            return spec.solve(scene, settings, options)[0]
-        except sources.SourceError as exc:
-            raise CaptureError(f"--gi {gi}: {exc}") from None
-    return source
-
-
-def run_capture(request: CaptureRequest, probe_source: ProbeSource | None = None) -> int:
-    """Render `request` (`python -m viewer capture`, built by viewer.capture) and write its picture.
-
-    probe_source builds the ProbeGrid for a `gi` mode other than off (default: `solver_probes`).
-    Bad input raises CaptureError or scene.SceneError (both ValueErrors) with a one-line message.
-    Returns the exit status 0.
-    """
-    from viewer.scene import load
-
-    out = request.out
-    if not out:
-        raise CaptureError("capture needs --out FILE.png")
-    scene = load(request.scene, sun=request.sun)
-    size = (int(request.size[0]), int(request.size[1]))
-    if not (0 < size[0] <= MAX_SIZE and 0 < size[1] <= MAX_SIZE):
-        raise CaptureError(f"--size {size[0]}x{size[1]}: each side must be 1..{MAX_SIZE}")
-    gi = request.gi
-    if gi not in sources.chosen_by_name():
-        raise CaptureError(f"--gi {gi!r}: expected one of {', '.join(sources.chosen_by_name())}")
-    view = request.view
-    if view not in VIEWS:
-        raise CaptureError(f"--view {view!r}: expected one of {', '.join(VIEWS)}")
-    fov = request.fov
-    if fov is not None and not 0.0 < float(fov) < 180.0:
-        raise CaptureError(f"--fov {fov}: expected degrees between 0 and 180")
-    camera = request.camera
-    if camera is not None and not isinstance(camera, Camera):   # (origin, target)
-        try:
-            camera = look_at(*camera, float(fov) if fov is not None else scene.camera.fov)
-        except ValueError as exc:
-            raise CaptureError(str(exc)) from None
-    elif camera is None:  # the viewer's opening view: the file's camera, else one framing the scene
-        from viewer.ui.camera_controller import home_camera
-
-        camera = home_camera(scene, request.scene)
-        if fov is not None:
-            camera = replace(camera, fov=float(fov))
-    settings = replace(request.render)   # the renderer may change its settings: not the request's
-    if not 0 <= settings.light_samples <= MAX_LIGHT_SAMPLES:
-        raise CaptureError(f"--light-samples {settings.light_samples}: expected 0..{MAX_LIGHT_SAMPLES}")
-    suffix = Path(out).suffix.lower()
-    if suffix not in (".png", ".jpg", ".jpeg", ".npy"):
-        raise CaptureError(f"--out {out}: expected a .png (or .jpg, or .npy for linear HDR radiance)")
-    if not Path(out).resolve().parent.is_dir():
-        raise CaptureError(f"--out {out}: the folder {Path(out).parent} does not exist")
-
-    start = time.perf_counter()
-    ctx = create_context()
-    try:
-        probes = None
-        if sources.SOURCES[gi].solve is not None:   # off solves nothing: direct light only
-            probes = (probe_source or solver_probes(request))(scene, gi, ctx)
-        solved = time.perf_counter()
-        voxels, radiance = _debug_voxels(scene, view, settings, request.gi_settings.voxels)
-        capture(scene, probes, out, size=size, view=view, camera=camera, settings=settings, voxels=voxels,
-                voxel_radiance=radiance, samples=int(request.msaa), ctx=ctx)
-    finally:
-        ctx.release()
-    print(f"capture: {out} ({size[0]}x{size[1]}, view {view}, gi {gi}); probes {solved - start:.2f} s, "
-          f"render {time.perf_counter() - solved:.2f} s", file=sys.stderr)
-    return 0
-
-
-def _debug_voxels(scene: Scene, view: str, settings: RenderSettings, resolution: int):
-    """Voxels (and their solved radiance, when the view colours by it) for the `voxels` view."""
-    if view != "voxels":
-        return None, None
-    from viewer.rays.voxels import voxelize
-
-    voxels = voxelize(scene, int(resolution))
-    if settings.voxel_color != "radiance":
-        return voxels, None
-    from viewer.physical import transport
-
-    return voxels, transport.solve(voxels, scene.sun).radiance

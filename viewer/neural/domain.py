@@ -77,7 +77,7 @@ class Domain:
         low, high = float(room.min()), float(room.max())
         light_low, light_high = ranges.light_half_extent
         # a light's half extent along a side of half extent h is min(light_high, 0.95 h - 0.05)
-        # (viewer.training.lights.rectangle_light): its largest share of that side
+        # (viewer.evaluation.lights.rectangle_light): its largest share of that side
         sides = np.linspace(low, high, 256)
         along = float(np.max(np.minimum(light_high, 0.95 * sides - 0.05) / sides))
         if ranges.light_surfaces:

@@ -1,10 +1,11 @@
 """The network's input across edits: `viewer.neural.encoding.encode`'s numbers for one probe lattice, where an
 edit recomputes only what it changes.
 
-Geometry changes rarely and light often (DESIGN.md). `encode` spends most of its time on the direct
+Geometry changes rarely and light often (docs/ARCHITECTURE.md). `encode` spends most of its time on the direct
 light (every emitting patch against every probe, its shadows traced: `encoding.patch_visibility`) and
 on splatting the voxels onto the lattice. An `Encoder` keeps, for the voxel geometry it last saw
-(positions, normals, areas) and the occluders it was given (`encoding.occluders`):
+(positions, normals, areas) and the occluders it was given (`encoding.occluders`; these two parts are
+viewer/neural/lattice.py):
 
 - the trilinear splat as a sparse matrix (lattice cells x voxels), and what it gives from geometry
   alone: the density and normal features, with the coordinate and extent ones;
@@ -36,12 +37,13 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage, sparse
+from scipy import ndimage
 
 from viewer.rays import dda
 from viewer.neural import encoding
 from viewer.probes import sh
 from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, Encoding
+from viewer.neural.lattice import LatticeGeometry, LatticeShadows
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
 
@@ -49,89 +51,6 @@ SAME_COLOUR = 1e-9
 """Two patches belong to one emitter when their radiances point the same way in RGB to this
 tolerance; an emitter keeps its basis while its patches' radiances stay proportional to it."""
 _serials = itertools.count()
-
-
-class _Geometry:
-    """What the encoding takes from the voxels' geometry alone (positions, normals, areas) on one lattice."""
-
-    def __init__(self, voxels: VoxelGrid, lo: np.ndarray, hi: np.ndarray, points: np.ndarray):
-        self.position, self.normal, self.area = voxels.position, voxels.normal, voxels.area
-        m = round(len(points) ** (1 / 3))
-        spacing = (hi - lo) / m
-        face_area = np.array([spacing[1] * spacing[2], spacing[0] * spacing[2], spacing[0] * spacing[1]])
-        self.cell_area = float(np.mean(face_area))
-        cells = m ** 3
-        # the same splat as `encode`, its eight corners as the eight entries of each voxel's column (eight
-        # distinct cells): the same numbers to round-off
-        corners = encoding._splat(voxels.position, lo, spacing, m)
-        rows = np.stack([index for index, _ in corners], axis=1).ravel()
-        weights = np.stack([weight for _, weight in corners], axis=1).ravel()
-        self.splat = sparse.csc_matrix((weights, rows, np.arange(0, len(rows) + 1, len(corners))),
-                                       shape=(cells, voxels.count))
-        cell = np.clip(np.floor((voxels.position - lo) / spacing).astype(np.int64), 0, m - 1)
-        self.cell = (cell[:, 0] * m + cell[:, 1]) * m + cell[:, 2]
-        self.density = self.splat @ voxels.area
-        self.safe = np.where(self.density > 0, self.density, 1.0)
-        normals = self.splat @ (voxels.area[:, None] * voxels.normal)
-        self.features = np.empty((CHANNELS, cells), np.float32)
-        """The features that geometry alone fixes; the albedo, emission and direct rows are filled per
-        encoding."""
-        self.features[0] = self.density / self.cell_area
-        self.features[1:4] = normals.T / self.cell_area
-        self.features[15:18] = ((points - lo) / (hi - lo) * 2.0 - 1.0).T
-        extent = hi - lo
-        self.features[18:21] = (extent / extent.max())[:, None]
-        self.spacing = spacing
-
-    def fits(self, voxels: VoxelGrid) -> bool:
-        return all(a is b or np.array_equal(a, b) for a, b in (
-            (self.position, voxels.position), (self.normal, voxels.normal), (self.area, voxels.area)))
-
-    def gather(self, values: np.ndarray) -> np.ndarray:
-        """Area-weighted per-voxel values (K, C) splatted onto the lattice cells: (cells, C)."""
-        return self.splat @ (self.area[:, None] * values)
-
-
-class _Shadows:
-    """What the encoding's shadows take from the occluders (`encoding.occluders`; None: nothing casts a
-    shadow) on one lattice: the visibility rays of emitting patches, and the sun's visibility for the
-    last direction asked."""
-
-    def __init__(self, blockers: dda.Cells | None, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray):
-        self.blockers, self.points, self.lo, self.spacing = blockers, points, lo, spacing
-        self._sun: tuple[bytes, np.ndarray] | None = None
-
-    def fits(self, blockers: dda.Cells | None) -> bool:
-        """Whether `blockers` are these occluders: the same object, or equal arrays (a new listing of the
-        same triangles)."""
-        a, b = self.blockers, blockers
-        if a is b:
-            return True
-        if a is None or b is None:
-            return False
-        return all(np.array_equal(x, y) for x, y in zip(a.args(), b.args()))
-
-    def targets(self, position: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """`encoding.shadow_targets` of the emitting patches: (C, 3) where each cluster's ray ends, (E,)
-        each patch's cluster (one cluster at the origin when nothing casts a shadow)."""
-        if self.blockers is None:
-            return np.zeros((min(len(position), 1), 3)), np.zeros(len(position), np.int64)
-        return encoding.shadow_targets(self.blockers, position, normal, self.lo, self.spacing)
-
-    def visibility(self, target: np.ndarray) -> np.ndarray:
-        """(C, P) float32: 1 where probe p sees the end of ray c, as `encoding.patch_visibility` traces
-        it (the same `dda.pairs_clear`, each pair on its own: any subset of the clusters gives their
-        columns of the whole)."""
-        if self.blockers is None:
-            return np.ones((len(target), len(self.points)), np.float32)
-        return np.ascontiguousarray(dda.pairs_clear(self.blockers, self.points, target).T)
-
-    def sun_visibility(self, direction: np.ndarray) -> np.ndarray:
-        """(P,) `encoding.sun_visibility` against these occluders, kept for the last direction asked."""
-        key = direction.tobytes()
-        if self._sun is None or self._sun[0] != key:
-            self._sun = (key, encoding.sun_visibility(self.blockers, self.points, direction))
-        return self._sun[1]
 
 
 @dataclass
@@ -168,8 +87,8 @@ class Encoder:
         self.recomputed: list[str] = []
         """What the last `encode` had to recompute: `geometry`, `shadows` (new occluders), `albedo`,
         `emission`, `emitters` (a basis), `sun`."""
-        self._geometry: _Geometry | None = None
-        self._shadows: _Shadows | None = None
+        self._geometry: LatticeGeometry | None = None
+        self._shadows: LatticeShadows | None = None
         self._albedo = self._emission = None        # the voxels' (K, 3) of the last call
         self._albedo_feature = None                 # (3, cells) float32
         self._emitted = None                        # (cells, 3) splatted emitted radiance x area
@@ -196,10 +115,10 @@ class Encoder:
         self.recomputed = []
         geometry_changed = self._geometry is None or not self._geometry.fits(voxels)
         if geometry_changed:
-            self._geometry = _Geometry(voxels, self.lo, self.hi, self.points)
+            self._geometry = LatticeGeometry(voxels, self.lo, self.hi, self.points)
             self.recomputed.append("geometry")
         if shadows_changed:
-            self._shadows = _Shadows(blockers, self.points, self.lo, self._geometry.spacing)
+            self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing)
             self.emitters = []   # every basis holds the old shadows
             self.recomputed.append("shadows")
         g = self._geometry

@@ -115,7 +115,7 @@ def file_sha256(path: Path) -> str:
 _blas = None
 
 
-def _one_blas_thread():
+def one_blas_thread():
     """BLAS on one thread for the encoding's small products: OpenBLAS's threads spin-wait for each
     other, and when the renderer (or anything else) keeps the second core busy a 36864 x 16 x 3 product
     takes 30 ms instead of 0.4 ms (measured here)."""
@@ -171,11 +171,11 @@ class NeuralField:
         `reuse=False` encodes and runs everything afresh: what a new scene costs."""
         m = resolution or self.resolution
         clock = clock_now()
-        with _one_blas_thread():
+        with one_blas_thread():
             encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m)
             enc = encoder.encode(voxels, sun, blockers)
         encoded = clock_now()
-        out = self._network(encoder, enc.inputs) if reuse else self._run(enc.inputs)  # (3, 19, M, M, M)
+        out = self._network(encoder, enc.inputs) if reuse else self.run(enc.inputs)  # (3, 19, M, M, M)
         ran = clock_now()
         grid = unpack(out, enc.scale, enc.lo, enc.hi, include_emitted)
         if timings is not None:
@@ -199,15 +199,16 @@ class NeuralField:
         stale = [c for c in range(3) if self._output is None or self._output_keys[c] != keys[c]
                  or self._output.shape[2:] != inputs.shape[2:]]
         if len(stale) == 3:
-            self._output = self._run(inputs)
+            self._output = self.run(inputs)
         elif stale:
-            fresh = self._run(np.ascontiguousarray(inputs[stale]))
+            fresh = self.run(np.ascontiguousarray(inputs[stale]))
             self._output[stale] = fresh   # private: the grids unpacked from it hold copies
         self.passes_run = len(stale)
         self._output_keys = keys
         return self._output
 
-    def _run(self, inputs: np.ndarray) -> np.ndarray:
+    def run(self, inputs: np.ndarray) -> np.ndarray:
+        """The network on encoded inputs (passes, CHANNELS, M, M, M): its raw output (passes, 19, M, M, M)."""
         self.passes_run = len(inputs)
         return self.session.run(None, {self.input_name: inputs})[0]
 

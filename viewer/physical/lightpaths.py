@@ -22,7 +22,7 @@ from scipy import sparse
 from viewer.rays import dda
 from viewer.physical.geometry import SURFACE_OFFSET, Geometry, lamp_faces
 from viewer.scene import Scene
-from viewer.rays.voxels import FACINGS, _subdivide
+from viewer.rays.voxels import FACINGS, subdivide
 
 PATCH_VOXELS = 2
 """Edge of a patch (the pieces that share one visibility ray), in voxels. Measured on the eight benchmark
@@ -99,7 +99,7 @@ def build(scene: Scene, geometry: Geometry) -> LightPaths:
         return LightPaths(lights_key(scene, geometry), np.zeros(0, np.int64), sparse.csr_matrix((0, 0)),
                           np.zeros((k, 0), np.float32), np.zeros(0, np.int64), np.zeros((k, 0), np.float32),
                           {"patch": none, "lamp": none})
-    position, area, source = _subdivide(scene.triangles[lamp], 0.5 * h)
+    position, area, source = subdivide(scene.triangles[lamp], 0.5 * h)
     face = lamp[source]
     normal = scene.face_normals[face]
     size = PATCH_VOXELS * h
@@ -143,8 +143,8 @@ def _visible(start, end, cells):
     length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     if length <= 0:
         return True
-    hit, _ = dda._march(start[0], start[1], start[2], d[0] / length, d[1] / length, d[2] / length, length,
-                        cells, dda._NO_CELLS)
+    hit, _ = dda.march(start[0], start[1], start[2], d[0] / length, d[1] / length, d[2] / length, length,
+                        cells, dda.NO_CELLS)
     return hit == dda.MISS
 
 

@@ -50,13 +50,13 @@ def after_moving(before: Geometry, scene: Scene, voxelization: Voxelization,
     if changed.sum() > CHANGED_SHARE * max(occupied, 1):
         return None
     boxes = cell_boxes(changed, cells.lo, cells.h, cells.n)
-    new_index = dda._voxel_of(keys, before.voxel_keys)          # old voxel -> its index now, -1: gone
+    new_index = dda.voxel_of(keys, before.voxel_keys)          # old voxel -> its index now, -1: gone
     slack = 2.0 * np.sqrt(3.0) * cells.h
     settings = before.settings
 
     # gather rays: receivers that kept their key, index and cell keep their rays
     k = grid.count
-    old_index = dda._voxel_of(before.voxel_keys, keys)
+    old_index = dda.voxel_of(before.voxel_keys, keys)
     kept = (old_index == np.arange(k)) & ~changed[keys // 6]
     origins = grid.position + SURFACE_OFFSET * cells.h * grid.normal
     rows = np.flatnonzero(kept)
@@ -177,9 +177,9 @@ def _keep(origins, directions, hits, backface, positions, new_index, slack, boxe
             near = False
             for s in range(boxes.shape[0]):
                 t0, t1 = 0.0, end
-                t0, t1 = dda._slab(ox, dx, boxes[s, 0], boxes[s, 3], t0, t1)
-                t0, t1 = dda._slab(oy, dy, boxes[s, 1], boxes[s, 4], t0, t1)
-                t0, t1 = dda._slab(oz, dz, boxes[s, 2], boxes[s, 5], t0, t1)
+                t0, t1 = dda.slab(ox, dx, boxes[s, 0], boxes[s, 3], t0, t1)
+                t0, t1 = dda.slab(oy, dy, boxes[s, 1], boxes[s, 4], t0, t1)
+                t0, t1 = dda.slab(oz, dz, boxes[s, 2], boxes[s, 5], t0, t1)
                 if t0 <= t1:
                     near = True
                     break

@@ -1,6 +1,6 @@
 """Real orthonormal spherical harmonics, bands 0..2 (L2): 9 coefficients per colour channel.
 
-Order and constants are fixed by ../shared/DESIGN.md: (l, m) = 00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22,
+Order and constants are fixed by docs/ARCHITECTURE.md: (l, m) = 00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22,
 for a unit direction (x, y, z) in world axes pointing from the probe towards where the light comes from.
 """
 
@@ -115,7 +115,8 @@ def convolve_cosine(coefficients: np.ndarray) -> np.ndarray:
 
 
 def irradiance(coefficients: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Irradiance E(n) = integral L(w) max(0, n.w) dw = sum_lm A_l c_lm Y_lm(n) (DESIGN.md, R&H 2001).
+    """Irradiance E(n) = integral L(w) max(0, n.w) dw = sum_lm A_l c_lm Y_lm(n)
+    (docs/ARCHITECTURE.md, R&H 2001).
 
     Exact for the band-limited radiance that the 9 coefficients describe; for a general radiance the
     truncation to L2 misses bands l > 2, whose A_l are small (|A_4| = pi/24, odd l > 1 vanish).

@@ -116,7 +116,7 @@ def _weights(points, normals, lo, spacing, m, probe_weight, offset, lift, floor,
                 tx, ty, tz = (lo[0] + (index[0] + 0.5) * spacing[0] - ox, lo[1] + (index[1] + 0.5) * spacing[1] - oy,
                               lo[2] + (index[2] + 0.5) * spacing[2] - oz)
                 length = np.sqrt(tx * tx + ty * ty + tz * tz)
-                hit, _ = dda._march(ox, oy, oz, tx / length, ty / length, tz / length, length, cells, none)
+                hit, _ = dda.march(ox, oy, oz, tx / length, ty / length, tz / length, length, cells, none)
                 seen[c] = 1.0 if hit == dda.MISS else 0.0
         total = 0.0
         total_seen = 0.0

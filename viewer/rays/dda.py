@@ -31,7 +31,7 @@ one of them (watertight in practice)."""
 _NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
 
 
-def _voxel_of(keys: np.ndarray, key: np.ndarray) -> np.ndarray:
+def voxel_of(keys: np.ndarray, key: np.ndarray) -> np.ndarray:
     """Index of each key in the sorted voxel keys, -1 where absent."""
     where = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
     return np.where(keys[where] == key, where, -1)
@@ -98,14 +98,14 @@ class Cells:
         # each entry's voxel: (cell, the triangle's facing); a triangle that only grazes a cell where
         # none of its pieces landed belongs to the same-facing voxel of a neighbouring cell
         facing = face_facing(scene.face_normals)[triangle]
-        voxel = _voxel_of(voxelization.keys, cell * 6 + facing)
+        voxel = voxel_of(voxelization.keys, cell * 6 + facing)
         for offset in np.argsort(np.abs(_NEIGHBOURS).sum(axis=1)):
             stray = np.nonzero(voxel < 0)[0]
             if not len(stray):
                 break
             c = xyz[stray] + _NEIGHBOURS[offset]
             inside = np.all((c >= 0) & (c < n), axis=1)
-            found = np.where(inside, _voxel_of(voxelization.keys, (c[:, 0] + n * (c[:, 1] + n * c[:, 2])) * 6
+            found = np.where(inside, voxel_of(voxelization.keys, (c[:, 0] + n * (c[:, 1] + n * c[:, 2])) * 6
                                                + facing[stray]), -1)
             voxel[stray] = found
         voxel[voxel < 0] = BACKFACE   # no voxel of that facing nearby: the surface is opaque and dark
@@ -134,9 +134,11 @@ class Cells:
 
 
 # ---- the march (compiled) --------------------------------------------------------------------------------
+# `march` and `slab` are public: other stages' compiled kernels (light paths, retrace, probe weights, the
+# final gather) call them inside their own loops, where numba inlines them.
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _slab(o, d, lo, hi, t0, t1):
+def slab(o, d, lo, hi, t0, t1):
     """The ray's parameter interval [t0, t1] clipped to one axis' slab [lo, hi] (empty: t0 > t1)."""
     if d == 0.0:
         if o < lo or o > hi:
@@ -152,9 +154,9 @@ def _slab(o, d, lo, hi, t0, t1):
 def _enter(ox, oy, oz, dx, dy, dz, lo, h, n):
     """Where a ray enters the grid box: (t, ok), t >= 0 (0 if the origin is inside)."""
     size = h * n
-    t0, t1 = _slab(ox, dx, lo[0], lo[0] + size, 0.0, np.inf)
-    t0, t1 = _slab(oy, dy, lo[1], lo[1] + size, t0, t1)
-    t0, t1 = _slab(oz, dz, lo[2], lo[2] + size, t0, t1)
+    t0, t1 = slab(ox, dx, lo[0], lo[0] + size, 0.0, np.inf)
+    t0, t1 = slab(oy, dy, lo[1], lo[1] + size, t0, t1)
+    t0, t1 = slab(oz, dz, lo[2], lo[2] + size, t0, t1)
     return t0, t0 <= t1
 
 
@@ -174,7 +176,7 @@ def _cell_of(x, lo, h, n):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _march(ox, oy, oz, dx, dy, dz, t_end, cells, cells_out):
+def march(ox, oy, oz, dx, dy, dz, t_end, cells, cells_out):
     """March one ray o + t d, 0 < t <= t_end. Returns (voxel hit or MISS/BACKFACE, t of the hit).
 
     If `cells_out` has room, the march only records the flat index of every cell it visits, in order,
@@ -250,7 +252,8 @@ def _march(ox, oy, oz, dx, dy, dz, t_end, cells, cells_out):
     return MISS, np.inf
 
 
-_NO_CELLS = np.zeros(0, np.int64)
+NO_CELLS = np.zeros(0, np.int64)
+"""`cells_out` for a march that records no cells: it only finds the hit."""
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -264,7 +267,7 @@ def _pairs_clear(a, b, cells):
             if length <= 0:
                 out[i, j] = 1.0
                 continue
-            hit, _ = _march(a[i, 0], a[i, 1], a[i, 2], dx / length, dy / length, dz / length, length, cells, none)
+            hit, _ = march(a[i, 0], a[i, 1], a[i, 2], dx / length, dy / length, dz / length, length, cells, none)
             if hit == MISS:
                 out[i, j] = 1.0
     return out
@@ -276,7 +279,7 @@ def _trace_many(origins, directions, t_end, cells):
     hits = np.empty(count, np.int64)
     none = np.zeros(0, np.int64)
     for r in numba.prange(count):
-        hit, _ = _march(origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0], directions[r, 1],
+        hit, _ = march(origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0], directions[r, 1],
                         directions[r, 2], t_end[r], cells, none)
         hits[r] = hit
     return hits
@@ -289,7 +292,7 @@ def _trace_distances(origins, directions, cells):
     distance = np.empty(count)
     none = np.zeros(0, np.int64)
     for r in numba.prange(count):
-        hit, t = _march(origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0], directions[r, 1],
+        hit, t = march(origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0], directions[r, 1],
                         directions[r, 2], np.inf, cells, none)
         hits[r] = hit
         distance[r] = t
@@ -307,7 +310,7 @@ def _trace_bundles(origins, directions, cells):
     for p in numba.prange(count):
         row = p * stride
         for r in range(rays):
-            hit, _ = _march(origins[p, 0], origins[p, 1], origins[p, 2], directions[row, r, 0],
+            hit, _ = march(origins[p, 0], origins[p, 1], origins[p, 2], directions[row, r, 0],
                             directions[row, r, 1], directions[row, r, 2], np.inf, cells, none)
             hits[p, r] = hit
     return hits
@@ -315,7 +318,7 @@ def _trace_bundles(origins, directions, cells):
 
 @numba.njit(cache=True, nogil=True)
 def _cells_along(ox, oy, oz, dx, dy, dz, length, cells, out):
-    return _march(ox, oy, oz, dx, dy, dz, length, cells, out)
+    return march(ox, oy, oz, dx, dy, dz, length, cells, out)
 
 
 # ---- the tracer's calls ----------------------------------------------------------------------------------

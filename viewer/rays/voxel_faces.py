@@ -20,7 +20,7 @@ import numpy as np
 from scipy import sparse
 
 from viewer.scene import Scene
-from viewer.rays.voxels import (FACINGS, VoxelGrid, Voxelization, _light_samples, _subdivide, face_facing,
+from viewer.rays.voxels import (FACINGS, VoxelGrid, Voxelization, light_samples, subdivide, face_facing,
                            grid_frame)
 
 MOVED_SHARE = 0.5
@@ -98,7 +98,7 @@ class FaceVoxels:
         coords = np.stack([cell % n, (cell // n) % n, cell // n ** 2], axis=1)
         grid = VoxelGrid(lo=self.lo, voxel_size=self.size, resolution=n, coords=coords, position=position,
                          normal=normal, area=area, albedo=faces @ scene.albedo, emission=faces @ scene.emission,
-                         lights=_light_samples(scene, np.flatnonzero(self.kept), self.lo, self.size, n, keys))
+                         lights=light_samples(scene, np.flatnonzero(self.kept), self.lo, self.size, n, keys))
         return Voxelization(grid, faces, keys)
 
 
@@ -113,7 +113,7 @@ def _pairs(triangles: np.ndarray, faces: np.ndarray, normals: np.ndarray, lo: np
     and bins them."""
     if len(faces) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3))
-    centroid, piece_area, source = _subdivide(triangles[faces], 0.25 * size)
+    centroid, piece_area, source = subdivide(triangles[faces], 0.25 * size)
     piece_face = faces[source]
     coords = np.clip(np.floor((centroid - lo) / size).astype(np.int64), 0, resolution - 1)
     cell = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2

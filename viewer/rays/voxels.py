@@ -1,8 +1,8 @@
 """Scene -> VoxelGrid: an N^3 grid over the scene, with only the occupied voxels stored.
 
 Each stored voxel carries the paper's attributes (eq. 2: position, albedo, emission; eq. 4: hash id
-`x + y*N + z*N*N`, see DESIGN.md for the typo in the paper) plus the normal and the surface area it
-covers. A cell that holds surfaces facing different ways (a room corner, both sides of a thin wall)
+`x + y*N + z*N*N`, see docs/ARCHITECTURE.md for the typo in the paper) plus the normal and the surface
+area it covers. A cell that holds surfaces facing different ways (a room corner, both sides of a thin wall)
 stores one voxel per facing: the six signed axes bin the surface normals. A single averaged normal
 would cancel out on a thin wall and point nowhere useful in a corner, and light transport needs a
 meaningful facing per patch; the paper's per-cell view is `cells()`.
@@ -15,10 +15,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from viewer.scene import Scene
+
+if TYPE_CHECKING:  # scipy is imported when a voxelization needs it
+    from scipy import sparse
 
 MAX_LIGHT_SAMPLES = 2048
 FACINGS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
@@ -147,7 +151,7 @@ def _piece_centroids(level: int) -> np.ndarray:
     return tri.mean(axis=1)
 
 
-def _subdivide(tri: np.ndarray, max_edge: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def subdivide(tri: np.ndarray, max_edge: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Split triangles until every edge is <= max_edge: (centroids (P, 3), area (P,), source index (P,))."""
     edges = np.stack([tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]], axis=1)
     longest = np.sqrt((edges ** 2).sum(-1)).max(axis=1)
@@ -219,7 +223,7 @@ def _voxelize(scene: Scene, resolution: int, normal_mode: str):
     areas = scene.face_areas
     keep = areas > 1e-12 * max(float(areas.max()), 1e-30)
     face_ids = np.nonzero(keep)[0]
-    centroid, piece_area, source = _subdivide(scene.triangles[keep], 0.25 * h)
+    centroid, piece_area, source = subdivide(scene.triangles[keep], 0.25 * h)
     piece_face = face_ids[source]
     face_normal = scene.face_normals
 
@@ -255,11 +259,11 @@ def _voxelize(scene: Scene, resolution: int, normal_mode: str):
                            cell_id // resolution ** 2], axis=1)
     grid = VoxelGrid(lo=lo, voxel_size=h, resolution=resolution, coords=vox_coords, position=position,
                      normal=n, area=area, albedo=albedo, emission=emission,
-                     lights=_light_samples(scene, face_ids, lo, h, resolution, keys))
+                     lights=light_samples(scene, face_ids, lo, h, resolution, keys))
     return grid, inverse, piece_face, piece_area, keys
 
 
-def _light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSamples:
+def light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSamples:
     emitting = face_ids[np.any(scene.emission[face_ids] > 0, axis=1)]
     if not len(emitting):
         empty = np.zeros((0, 3))
@@ -267,7 +271,7 @@ def _light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSamp
     # Half a voxel, unless the emitters are large (a glowing wall): then about MAX_LIGHT_SAMPLES pieces,
     # since a large emitter is no longer small next to the voxels anyway.
     total = float(scene.face_areas[emitting].sum())
-    centroid, area, source = _subdivide(scene.triangles[emitting], max(0.5 * h, 2.0 * np.sqrt(total / MAX_LIGHT_SAMPLES)))
+    centroid, area, source = subdivide(scene.triangles[emitting], max(0.5 * h, 2.0 * np.sqrt(total / MAX_LIGHT_SAMPLES)))
     face = emitting[source]
     normal = scene.face_normals[face]
     coords = np.clip(np.floor((centroid - lo) / h).astype(np.int64), 0, resolution - 1)

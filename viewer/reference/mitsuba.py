@@ -1,13 +1,15 @@
 """Ground truth from Mitsuba 3: incident-radiance SH at probes, surface irradiance, path-traced images.
 
-An independent path tracer the rest of the pipeline is measured against (DESIGN.md, "Ground truth").
+An independent path tracer the rest of the pipeline is measured against (docs/ARCHITECTURE.md, "Ground
+truth").
 Only tests, benchmarks and the command line import this module; the numpy core never does. Mitsuba is
 an optional extra (`pip install mitsuba`, or `pip install gi-viewer[reference]`): importing this module
 works without it, the first call says what to install.
 
 The Mitsuba variant is chosen once, on first use: `llvm_ad_rgb` (vectorised, needs libLLVM), else
 `scalar_rgb` (one Python call per sample: correct but very slow). `GI_VIEWER_MITSUBA_VARIANT` forces
-one; `variant()` says which was used.
+one; `variant()` says which was used. The scene conversion is viewer/reference/conversion.py, loading
+Mitsuba viewer/reference/runtime.py; this module is the estimators and the face the rest imports.
 
 Estimator, for incident radiance L(p, w) at a point p (probes and surface points alike):
 
@@ -22,156 +24,21 @@ Le is counted once. Directions are a spherical Fibonacci lattice turned by a ran
 
 from __future__ import annotations
 
-import os
 from typing import NamedTuple
 
 import numpy as np
 
 from viewer.reference import cache as reference_cache
+from viewer.reference.conversion import load_scene, to_mitsuba  # noqa: F401 - part of the face
+from viewer.reference.runtime import (INSTALL_HINT, VARIANTS, ReferenceUnavailable,  # noqa: F401 - the face
+                                      aligned, loaded, variant)
 from viewer.probes import sh
 from viewer.scene import Camera, Scene
 
-INSTALL_HINT = "pip install mitsuba (or the project's extra: pip install 'gi-viewer[reference]')"
-VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
 LANES_PER_LAUNCH = 1 << 21
 """Rays traced per Dr.Jit launch; larger jobs run in batches of whole probes."""
 CACHE_VERSION = "reference-v1"
 """Bump when the estimators change, so cached results computed by older code are not reused."""
-
-_variant: str | None = None
-
-
-class ReferenceUnavailable(RuntimeError):
-    """Mitsuba 3 (or a usable variant of it) is not installed."""
-
-
-# ---- Mitsuba, loaded lazily -------------------------------------------------------------------------
-
-def variant() -> str:
-    """The Mitsuba variant in use, choosing it on the first call (llvm_ad_rgb, else scalar_rgb)."""
-    global _variant
-    mi, dr = _modules()
-    if _variant is None:
-        wanted = os.environ.get("GI_VIEWER_MITSUBA_VARIANT")
-        errors = []
-        for name in ([wanted] if wanted else VARIANTS):
-            try:
-                if name.startswith("llvm") and not dr.has_backend(dr.JitBackend.LLVM):
-                    raise RuntimeError("Dr.Jit found no libLLVM (apt-get install libllvm19)")
-                mi.set_variant(name)
-            except Exception as exc:  # noqa: BLE001 - any failure means: try the next variant
-                errors.append(f"{name}: {exc}")
-                continue
-            _variant = name
-            break
-        else:
-            raise ReferenceUnavailable("no usable Mitsuba variant (" + "; ".join(errors) + ")")
-    elif mi.variant() != _variant:
-        mi.set_variant(_variant)  # someone else switched it: every call here runs in ours
-    return _variant
-
-
-def _modules():
-    try:
-        import drjit as dr
-        import mitsuba as mi
-    except ImportError as exc:
-        raise ReferenceUnavailable(f"the Mitsuba reference needs Mitsuba 3 ({exc}): {INSTALL_HINT}") from None
-    return mi, dr
-
-
-def _mitsuba():
-    name = variant()
-    mi, dr = _modules()
-    return mi, dr, name.startswith("scalar")
-
-
-# ---- Scene -> Mitsuba scene dictionary --------------------------------------------------------------
-
-def to_mitsuba(scene: Scene, max_depth: int = -1) -> dict:
-    """The Scene as a Mitsuba scene dictionary (for `mi.load_dict`), without a sensor.
-
-    - Faces that emit nothing form one mesh; the faces of each distinct emitted radiance form one mesh
-      with an area emitter (Mitsuba evaluates a textured emitter at primitive 0 when it samples it, so
-      per-face emission cannot be a face attribute). Per-face albedo is a face attribute read by a
-      `mesh_attribute` texture, so thousands of colours cost nothing.
-    - No vertex normals: Mitsuba then uses the face normal cross(v1-v0, v2-v0), our CCW front, and its
-      area emitters emit on that side only, as ours do.
-    - The BSDF is a two-sided diffuse: our surfaces reflect on both sides (Mitsuba's `diffuse` alone is
-      black from behind); emission stays one-sided.
-    - The sun is a `directional` emitter; Mitsuba's `direction` is where the light travels, -sun.direction.
-    - Emitters are sampled in proportion to their power (`sampling_weight`); the sun's power is what
-      reaches into the scene's bounds (`_sun_lit_fraction`), not all that crosses its bounding disc.
-    """
-    mi, _, _ = _mitsuba()
-    lo, hi = scene.bounds
-    radius = 0.5 * float(np.linalg.norm(hi - lo))
-    out: dict = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)}}
-    emitting = np.any(scene.emission > 0, axis=1)
-    if np.any(~emitting):
-        out["surfaces"] = _mesh(mi, scene, np.flatnonzero(~emitting), "surfaces", emitter=None)
-    if np.any(emitting):
-        values, which = np.unique(scene.emission[emitting], axis=0, return_inverse=True)
-        faces = np.flatnonzero(emitting)
-        areas = scene.face_areas[faces]
-        for k, radiance in enumerate(values):
-            chosen = which.reshape(-1) == k
-            power = np.pi * float(areas[chosen].sum()) * float(radiance.mean())
-            emitter = {"type": "area", "radiance": {"type": "rgb", "value": radiance.tolist()},
-                       "sampling_weight": max(power, 1e-12)}
-            out[f"emitter_{k:04d}"] = _mesh(mi, scene, faces[chosen], f"emitter_{k:04d}", emitter)
-    if scene.sun is not None and np.any(scene.sun.irradiance > 0):
-        power = float(scene.sun.irradiance.mean()) * np.pi * radius ** 2  # through the bounding disc
-        power *= max(_sun_lit_fraction(mi, scene), 1e-3)
-        out["sun"] = {"type": "directional", "direction": (-scene.sun.direction).tolist(),
-                      "irradiance": {"type": "rgb", "value": scene.sun.irradiance.tolist()},
-                      "sampling_weight": max(power, 1e-12)}
-    return out
-
-
-def _sun_lit_fraction(mi, scene: Scene, count: int = 4096) -> float:
-    """Share of points spread over the scene's bounds that the sun reaches. A sun shining through a
-    small window lights a few percent of a room: weighted by its whole bounding disc it would take nearly
-    every light sample and next-event estimate, and leave the area lights to chance (measured on such a
-    room, 8^3 probes at 256 directions: two seeds differ by 21% relative RMS with the disc's weight, 8%
-    with this one). Any weight keeps the estimate unbiased; this one only moves samples to the light."""
-    if variant().startswith("scalar"):
-        return 1.0
-    lo, hi = scene.bounds
-    points = lo + (hi - lo) * np.random.default_rng(0x5E7).random((count, 3))
-    towards = np.broadcast_to(scene.sun.direction, points.shape)
-    occluders = mi.load_dict({"type": "scene", "surfaces": _mesh(mi, scene, np.arange(len(scene.faces)),
-                                                                 "occluders", None)}, parallel=False)
-    ray = mi.Ray3f(mi.Point3f(*(mi.Float(_aligned(points[:, a])) for a in range(3))),
-                   mi.Vector3f(*(mi.Float(_aligned(towards[:, a])) for a in range(3))))
-    return float(1.0 - np.mean(np.array(occluders.ray_test(ray), bool)))
-
-
-def _mesh(mi, scene: Scene, face_ids: np.ndarray, name: str, emitter: dict | None):
-    """One Mitsuba mesh holding the given faces (their own vertices only), albedo as a face attribute."""
-    used, local = np.unique(scene.faces[face_ids], return_inverse=True)
-    props = mi.Properties()
-    props["bsdf"] = mi.load_dict({"type": "twosided", "material": {
-        "type": "diffuse", "reflectance": {"type": "mesh_attribute", "name": "face_albedo"}}})
-    if emitter is not None:
-        props["emitter"] = mi.load_dict(emitter)
-    mesh = mi.Mesh(name, len(used), len(face_ids), props=props)
-    params = mi.traverse(mesh)
-    positions, indices = params["vertex_positions"], params["faces"]
-    params["vertex_positions"] = type(positions)(scene.vertices[used].astype(np.float32).ravel())
-    params["faces"] = type(indices)(local.reshape(-1).astype(np.uint32))
-    params.update()
-    mesh.add_attribute("face_albedo", 3, scene.albedo[face_ids].astype(np.float32).ravel())
-    return mesh
-
-
-def _load(scene: Scene, max_depth: int = -1, sensor: dict | None = None):
-    mi, _, _ = _mitsuba()
-    description = to_mitsuba(scene, max_depth)
-    if sensor is not None:
-        description["sensor"] = sensor
-    # Serial loading keeps object ids, hence Dr.Jit kernels, the same from run to run (cache hits).
-    return mi.load_dict(description, parallel=False)
 
 
 # ---- incident radiance along rays -------------------------------------------------------------------
@@ -198,7 +65,7 @@ def _estimate(mscene, origins: np.ndarray, directions: np.ndarray, terms, normal
     Light samples come from a randomly shifted 2D lattice per item (stratified light sampling: a
     light's area is covered evenly, not by chance). The per-item sums run in Dr.Jit (`block_sum`), so
     no per-lane array comes back to numpy."""
-    mi, dr, scalar = _mitsuba()
+    mi, dr, scalar = loaded()
     count, per_item, _ = directions.shape
     k = np.arange(per_item)
     # Fibonacci lattice in the unit square ((k + 1/2)/n, k/golden) under a Cranley-Patterson shift.
@@ -214,7 +81,7 @@ def _estimate(mscene, origins: np.ndarray, directions: np.ndarray, terms, normal
     sampler.seed(seed & 0x7FFFFFFF, count * per_item)
 
     def wide(name, kind):
-        return kind(*(mi.Float(_aligned(lanes[name][:, a])) for a in range(lanes[name].shape[1])))
+        return kind(*(mi.Float(aligned(lanes[name][:, a])) for a in range(lanes[name].shape[1])))
 
     lane = _trace(mi, dr, mscene, sampler, wide("o", mi.Point3f), wide("d", mi.Vector3f),
                   wide("u", mi.Point2f), wide("n", mi.Vector3f) if normals is not None else None)
@@ -224,17 +91,6 @@ def _estimate(mscene, origins: np.ndarray, directions: np.ndarray, terms, normal
     sums = [dr.block_sum(t, per_item) for t in terms(dr, lane)]
     dr.eval(*sums)
     return np.stack([np.array(t, np.float64) for t in sums], axis=-1) / per_item
-
-
-def _aligned(values: np.ndarray) -> np.ndarray:
-    """A float32 copy at a 64-byte aligned address. Dr.Jit reads numpy memory in place and writes the
-    pointer's alignment into the kernel, so a chance alignment would change the kernel's hash and
-    miss the kernel cache (~1-15 s of LLVM compilation for a path tracer) from run to run."""
-    buffer = np.empty(len(values) + 16, np.float32)
-    start = (-buffer.ctypes.data % 64) // 4
-    out = buffer[start:start + len(values)]
-    out[:] = values
-    return out
 
 
 def _estimate_scalar(mi, dr, mscene, sampler, lanes, per_item, terms, seed):
@@ -296,7 +152,7 @@ def _indirect_irradiance_terms(dr, lane: _Lane) -> list:
 
 def _basis(d) -> list:
     """`viewer.probes.sh.basis` in plain arithmetic, so that it runs inside a Dr.Jit kernel (same order and
-    constants, DESIGN.md; tests check the two agree)."""
+    constants, docs/ARCHITECTURE.md; tests check the two agree)."""
     x, y, z = d[0], d[1], d[2]
     return [0.282095 + 0.0 * x, 0.488603 * y, 0.488603 * z, 0.488603 * x, 1.092548 * x * y,
             1.092548 * y * z, 0.315392 * (3 * z * z - 1), 1.092548 * x * z, 0.546274 * (x * x - y * y)]
@@ -349,7 +205,7 @@ def probe_sh(scene: Scene, points, directions: int = 1024, spp: int = 1, max_dep
 
 def _probe_sh(scene, points, directions, spp, max_depth, seed, terms=None):
     terms = terms or _probe_terms
-    mscene = _load(scene, max_depth)
+    mscene = load_scene(scene, max_depth)
     per_probe = directions * spp
     out = None
     for start, stop in _batches(len(points), per_probe):
@@ -394,7 +250,7 @@ def irradiance(scene: Scene, points, normals, spp: int = 1024, max_depth: int = 
 
 
 def _irradiance(scene, points, normals, spp, max_depth, seed, indirect_only=False):
-    mscene = _load(scene, max_depth)
+    mscene = load_scene(scene, max_depth)
     lo, hi = scene.bounds
     offset = 1e-5 * max(float(np.linalg.norm(hi - lo)), 1e-6)
     out = np.zeros((len(points), 3))
@@ -444,7 +300,7 @@ def render(scene: Scene, camera: Camera | None = None, width: int = 256, height:
 
 
 def _render(scene, camera, width, height, spp, seed, max_depth):
-    mi, _, _ = _mitsuba()
+    mi, _, _ = loaded()
     lo, hi = scene.bounds
     size = max(float(np.linalg.norm(hi - lo)), 1e-6)
     far = size + float(np.linalg.norm(np.asarray(camera.origin) - 0.5 * (lo + hi)))
@@ -457,7 +313,7 @@ def _render(scene, camera, width, height, spp, seed, max_depth):
                  "rfilter": {"type": "box"}},
         "sampler": {"type": "independent", "sample_count": spp},
     }
-    image = mi.render(_load(scene, max_depth, sensor), spp=spp, seed=seed)
+    image = mi.render(load_scene(scene, max_depth, sensor), spp=spp, seed=seed)
     return np.array(image, np.float32).reshape(height, width, 3)
 
 
@@ -465,6 +321,6 @@ def _cached(kind, scene, arrays, params, use_cache, compute):
     """Results are cached on disk (viewer.reference.cache), keyed by everything they depend on."""
     if not reference_cache.enabled(use_cache):
         return compute()
-    mi, _, _ = _mitsuba()
+    mi, _, _ = loaded()
     tag = f"{CACHE_VERSION}|{kind}|{variant()}|{mi.__version__}"
     return reference_cache.load_or_compute(kind, reference_cache.key(tag, scene, arrays, params), compute)

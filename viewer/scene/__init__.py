@@ -5,6 +5,7 @@
     obj.py       OBJ + MTL -> Scene
     loaders.py   glTF, GLB, PLY (through trimesh) -> Scene
     meshes.py    built-in meshes (boxes, spheres, ...) for procedural scenes
+    camera.py    the camera a scene opens with (its file's own, or one framing it)
 
 `from viewer.scene import Scene, load` is the face every later stage uses.
 """

@@ -1,8 +1,8 @@
 """Mesh primitives for building scenes in code: transforms, closed shapes, overlap tests.
 
 Shared by the built-in scenes (assets/make_scenes.py) and the procedural training scenes
-(viewer.training.procedural). Plain numpy; a mesh is a pair (vertices (V, 3) float64, faces (F, 3)),
-counter-clockwise seen from outside (the front face, DESIGN.md).
+(viewer.evaluation.procedural). Plain numpy; a mesh is a pair (vertices (V, 3) float64, faces (F, 3)),
+counter-clockwise seen from outside (the front face, docs/ARCHITECTURE.md).
 
 Transforms follow Mitsuba's ScalarTransform4f conventions (4x4 matrices acting on column vectors,
 composed T @ R @ S), and `rectangle` / `cube` are Mitsuba's shapes with the same vertex and face order,

@@ -4,7 +4,7 @@
 flat triangle soup: every face carries its albedo, its emitted radiance and the index of the group
 (material or object) it came from, so that a group can be recoloured without reloading the file.
 
-Conventions (../shared/DESIGN.md): the file's own units and axes, y up; an emitter emits from its front
+Conventions (docs/ARCHITECTURE.md): the file's own units and axes, y up; an emitter emits from its front
 face only, the side from which its vertices run counter-clockwise.
 
 The bottom of the scene modules: the file formats (viewer.scene.obj, viewer.scene.loaders) build Scenes, and

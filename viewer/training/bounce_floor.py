@@ -63,7 +63,7 @@ def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, vox
         gain = float((e * t).sum() / max(float((e * e).sum()), 1e-30))
         out[name] = float(np.sqrt(((gain * e - t) ** 2).sum() / max(float((t ** 2).sum()), 1e-30)))
     if field is not None:
-        reflected = field._run(enc.inputs.astype(np.float32))[:, 9:18] * scale
+        reflected = field.run(enc.inputs.astype(np.float32))[:, 9:18] * scale
         out[NETWORK] = float(np.sqrt(((reflected[..., valid] - t) ** 2).sum() / max(float((t ** 2).sum()), 1e-30)))
     return out
 

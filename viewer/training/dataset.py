@@ -3,7 +3,8 @@
     python -m viewer.training.dataset --out data/gi-v2 --train 5000 --val 300 --seed 14 --probes 24,16
 
 The rooms are made in parallel on Ray (viewer.training.generate: `ray.init()` on this machine, or
-`--address` to join a cluster); this module is the format, how to read it back, and the command line.
+`--address` to join a cluster); this module is the format and how to read it back, and
+viewer/training/dataset_cli.py the command line.
 
 Layout under --out (format 2):
     manifest.json             the command, settings, versions, counts, shards, seconds per room, rooms/hour
@@ -53,9 +54,9 @@ from typing import Iterator
 import numpy as np
 
 from viewer.probes.grid import fill_invalid
-from viewer.reference.mitsuba import ReferenceUnavailable
-from viewer.scene import Camera, DirectionalLight, Scene, SceneError, load
-from viewer.training import procedural, truth as truths
+from viewer.scene import Camera, DirectionalLight, Scene, load
+from viewer.evaluation import procedural
+from viewer.training import truth as truths
 from viewer.neural.ranges import PRESETS
 
 FORMAT = 2
@@ -313,63 +314,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _int_list(text: str, flag: str, low: int, high: int) -> list[int]:
-    try:
-        values = [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise SceneError(f"{flag} {text!r}: expected comma-separated integers") from None
-    if not values or any(not low <= v <= high for v in values):
-        raise SceneError(f"{flag} {text!r}: each value must be between {low} and {high}")
-    return values
+if __name__ == "__main__":  # the documented command, `python -m viewer.training.dataset`
+    from viewer.training.dataset_cli import main
 
-
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        if args.dump_obj is not None:
-            for i in _int_list(args.indices, "--indices", 0, 10**6):
-                scene, _ = make_scene(args.split, i, args.seed, args.ranges)
-                write_obj(scene, args.dump_obj / f"{scene.name}.obj")
-                print(args.dump_obj / f"{scene.name}.obj")
-            return 0
-        if args.out is None:
-            parser.error("--out is required (or --dump-obj)")
-        resolutions = sorted(set(_int_list(args.probes, "--probes", 2, 128)), reverse=True)
-        if args.train < 0 or args.val < 0 or args.directions < 16 or args.shard_size < 1:
-            raise SceneError("--train and --val must be at least 0, --directions at least 16, "
-                             "--shard-size at least 1")
-        if (args.workers is not None and args.workers < 1) or args.mitsuba_every < 1 or args.mitsuba_directions < 0:
-            raise SceneError("--workers and --mitsuba-every must be at least 1, --mitsuba-directions at least 0")
-        if args.truth == "mitsuba" or args.mitsuba_directions:
-            from viewer.reference import mitsuba as reference
-
-            reference.variant()  # ReferenceUnavailable says what to install
-        splits = [s.strip() for s in args.splits.split(",") if s.strip()]
-        if not splits or any(s not in SPLITS for s in splits):
-            raise SceneError(f"--splits {args.splits!r}: choose from {', '.join(SPLITS)}")
-        from viewer.training import generate, shards
-
-        settings = shards.Settings(seed=args.seed, ranges=args.ranges, truth=args.truth,
-                                   directions=args.directions, probes=tuple(resolutions), voxels=args.voxels,
-                                   mitsuba_directions=args.mitsuba_directions, mitsuba_every=args.mitsuba_every,
-                                   counts={"paper": len(PAPER_SCENES), "val": args.val, "train": args.train},
-                                   shard_size=args.shard_size)
-        command = " ".join(["python -m viewer.training.dataset", *(argv if argv is not None else sys.argv[1:])])
-        result = generate.run(args.out, settings, splits, workers=args.workers, address=args.address,
-                              verify=args.verify, command=command)
-    except (SceneError, ReferenceUnavailable) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    rate = (f"; {result.rooms_per_hour:.0f} rooms per hour (wall clock, {result.workers} workers)"
-            if result.made else "")
-    print(f"{args.out}: {result.made} rooms made, {result.skipped} already there{rate}", file=sys.stderr)
-    if result.failed:
-        print(f"{len(result.failed)} rooms failed (manifest.json says why): {', '.join(result.failed[:10])}",
-              file=sys.stderr)
-        return 1
-    return 0
-
-
-if __name__ == "__main__":
     sys.exit(main())

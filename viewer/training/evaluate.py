@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from viewer import scene as scenes
-from viewer.bench.accuracy import PUBLIC_BOX, relative_rmse
-from viewer.bench.points import free_space_points
-from viewer.bench.stability.methods import truth_sh
+from viewer.evaluation.error import PUBLIC_BOX, relative_rmse
+from viewer.evaluation.points import free_space_points
+from viewer.evaluation.truth import truth_sh
 
 ROOT = Path(__file__).resolve().parents[2]
 POINTS = 500
@@ -51,7 +51,8 @@ def dark_ranges(preset: str):
 
 def evaluation_scenes(val: int, dark: int, seed: int, preset: str) -> list[tuple[str, scenes.Scene]]:
     """(kind, scene) for every scene of the evaluation, deterministic."""
-    from viewer.training import dataset, procedural
+    from viewer.evaluation import procedural
+    from viewer.training import dataset
 
     out = [("public", scenes.load("paper-test"))]
     if PUBLIC_BOX.exists():

@@ -88,7 +88,7 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
                     "layout": "0-8 SH of all incident light, 9-17 SH of the light reflected by surfaces, "
                               "18 validity logit (> 0: outside solid geometry)"},
         "probes": {"resolution": resolution, "runs_at": "any M divisible by 2^levels (trained at resolution)", "box": "scene bounds", "centres": "lo + (i + 0.5) (hi - lo) / M",
-                   "sh_order": "00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22 (DESIGN.md)", "index": "[x, y, z]"},
+                   "sh_order": "00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22 (docs/ARCHITECTURE.md)", "index": "[x, y, z]"},
         "training": training,
         **({"domain": Domain.from_preset(ranges).to_dict()} if ranges else {}),
         "metrics": metrics,

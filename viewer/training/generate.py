@@ -1,11 +1,11 @@
 """Making the dataset on Ray: one task per room, shards, the manifest, resuming.
 
-`python -m viewer.training.dataset` (the command; viewer.training.dataset is the format) calls `run`.
-Every room is a Ray task (`make_room`, one CPU: the solver's compiled loops run single-threaded in it,
-so N workers keep N cores busy without oversubscribing them); the driver writes each finished room to
-`<split>/pending/<room>.npz` at once and packs a shard when all of its rooms are there. `ray.init()`
-starts Ray on this machine with every core (or `workers` of them); with `address` it joins a cluster
-the user runs (the workers there must import the same `viewer` package).
+`python -m viewer.training.dataset` (the command, viewer/training/dataset_cli.py; viewer.training.dataset
+is the format) calls `run`. Every room is a Ray task (`make_room`, one CPU: the solver's compiled loops
+run single-threaded in it, so N workers keep N cores busy without oversubscribing them); the driver
+writes each finished room to `<split>/pending/<room>.npz` at once and packs a shard when all of its rooms
+are there. `ray.init()` starts Ray on this machine with every core (or `workers` of them); with
+`address` it joins a cluster the user runs (the workers there must import the same `viewer` package).
 
 Resuming: a packed shard is kept when its zip index lists exactly the rooms it should hold, its
 shard.json was made with the same settings and its size is the one the manifest recorded (`verify`

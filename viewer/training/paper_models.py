@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
-from viewer.training.paper_inputs import PAPER_PROBES, VOXEL_FEATURES
+from viewer.neural.paper_inputs import PAPER_PROBES, VOXEL_FEATURES
 
 FAMILIES = ("mlp", "resnet10", "rnn", "cnn", "cnn-mlp")
 

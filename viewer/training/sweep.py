@@ -29,8 +29,8 @@ import numpy as np
 from viewer.neural import encoding
 from viewer.reference import mitsuba as reference
 from viewer import scene as scenes
-from viewer.bench.accuracy import PUBLIC_BOX, relative_rmse
-from viewer.bench.points import free_space_points
+from viewer.evaluation.error import PUBLIC_BOX, relative_rmse
+from viewer.evaluation.points import free_space_points
 from viewer.neural.field import NeuralField
 from viewer.rays.voxels import voxelize
 
@@ -236,7 +236,7 @@ def _load_line() -> str:
 
 
 def write_sweep_table(results: list[dict], chosen: dict, args) -> None:
-    from viewer.bench.report import replace_block
+    from viewer.evaluation.report import replace_block
 
     rows = ["| model | probes | parameters | epochs | mean rel. RMSE | worst scene | neural update (ms) |",
             "|---|---|---|---|---|---|---|"]
@@ -258,7 +258,7 @@ def write_sweep_table(results: list[dict], chosen: dict, args) -> None:
 
 
 def write_shipped_tables(final: dict) -> None:
-    from viewer.bench.report import replace_block
+    from viewer.evaluation.report import replace_block
 
     rows = ["| scene | rel. RMSE vs Mitsuba |", "|---|---|"]
     rows += [f"| {name} | {100 * error:.1f}% |" for name, error in final["errors"].items()]
@@ -349,7 +349,7 @@ def install(final: dict) -> dict:
     card["metrics"].update({"relative_rmse_vs_mitsuba": final["errors"], "worst_relative_rmse": final["worst_error"],
                             "mean_relative_rmse": final["mean_error"], "milliseconds_cornell": final["ms"],
                             "evaluation": "500 free-space points per scene, Mitsuba 4096 directions "
-                                          "(viewer.bench.points.free_space_points, seed 1)"})
+                                          "(viewer.evaluation.points.free_space_points, seed 1)"})
     card["selection"] = f"smallest of the sweep within {int(100 * WITHIN)}% of the best mean error (docs/ACCURACY.md)"
     target.with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n")
     print(f"shipped {target} ({final['parameters']} parameters, worst scene {100 * final['worst_error']:.1f}%)",

@@ -28,9 +28,9 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 from viewer.training import paper_models as pm
-from viewer.training.paper_inputs import PAPER_VOXELS, adaptive_pool, voxel_list
+from viewer.neural.paper_inputs import PAPER_VOXELS, adaptive_pool, voxel_list
 from viewer.training.samples import Samples, encoded_split, load_split, room_of, training_split
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -229,11 +229,9 @@ class BatchLive(LiveSource):
         self.error: str | None = None
 
     def restart(self, scene: Scene, settings: GISettings) -> None:
-        from viewer.sources import SolveOptions
-
-        options = SolveOptions(include_emitted=False, model=self.controller.neural_model)
+        model = self.controller.neural_model
         self.error = None
-        self.task = BackgroundTask(self.source.name, lambda: self.source.solve(scene, settings, options)[0])
+        self.task = BackgroundTask(self.source.name, lambda: self.source.indirect(scene, settings, model))
 
     def step(self) -> None:
         if self.task is not None and self.task.done:

@@ -14,8 +14,9 @@ import numpy as np
 
 from viewer.gpu.renderer import Renderer
 from viewer.scene import SUPPORTED_SUFFIXES, Scene, load
+from viewer.scene.camera import home_camera
 from viewer.ui.background import BackgroundTask
-from viewer.ui.camera_controller import OrbitCamera, home_camera
+from viewer.ui.camera_controller import OrbitCamera
 from viewer.ui.gi_sources import GIController
 from viewer.ui.panels import Message
 from viewer.ui.scene_edits import SceneEdits

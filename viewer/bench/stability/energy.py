@@ -15,7 +15,7 @@ import numpy as np
 
 from viewer.physical import gi
 from viewer.reference import mitsuba as reference
-from viewer.bench.points import free_space_points
+from viewer.evaluation.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, radiance, style, try_method
 from viewer.bench.stability.methods import MethodSettings

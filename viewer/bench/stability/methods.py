@@ -19,9 +19,8 @@ from typing import Callable
 import numpy as np
 
 from viewer.physical import gi
-from viewer.reference import mitsuba as reference
-from viewer.reference import cache as reference_cache
-from viewer.bench.points import free_space_points
+from viewer.evaluation.points import free_space_points
+from viewer.evaluation.truth import truth_sh
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 
@@ -89,19 +88,6 @@ def _compute(scene: Scene, settings: MethodSettings) -> ProbeGrid:
 
 AMBIENT_POINTS = 128
 AMBIENT_DIRECTIONS = 512
-
-
-def truth_sh(scene: Scene, points: np.ndarray, directions: int = 1024, include_emitted: bool = True,
-             seed: int = 0) -> np.ndarray:
-    """Mitsuba's incident-radiance SH (P, 9, 3) at points, or its reflected part only (the indirect light,
-    `reference.probe_sh_parts`), both cached on disk."""
-    points = np.asarray(points, np.float64).reshape(-1, 3)
-    if include_emitted:
-        return reference.probe_sh(scene, points, directions=directions, seed=seed)
-    tag = f"stability-reflected|{reference.CACHE_VERSION}|{reference.variant()}"
-    digest = reference_cache.key(tag, scene, [points], dict(directions=int(directions), seed=int(seed)))
-    return reference_cache.load_or_compute(
-        "probe_sh_reflected", digest, lambda: reference.probe_sh_parts(scene, points, directions, seed=seed)[0])
 
 
 def mean_incident_radiance(scene: Scene, include_emitted: bool = True) -> np.ndarray:

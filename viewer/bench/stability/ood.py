@@ -1,6 +1,6 @@
 """Out of distribution: the neural field's error against a scene's distance from its training set.
 
-Rooms are drawn with `viewer.training.procedural.random_scene` and the ranges the shipped model was
+Rooms are drawn with `viewer.evaluation.procedural.random_scene` and the ranges the shipped model was
 trained on (its card's domain, viewer.neural.domain) moved one axis at a time, from inside them to well
 outside (`steps`): room proportions, colours, lights
 (size and placement) and shapes; plus rooms drawn with the training ranges themselves (`in
@@ -21,14 +21,15 @@ from pathlib import Path
 import numpy as np
 
 from viewer.physical import gi
-from viewer.bench.accuracy import relative_rmse
-from viewer.bench.points import free_space_points
+from viewer.evaluation.error import relative_rmse
+from viewer.evaluation.points import free_space_points
 from viewer.bench.stability.common import RunConfig, StudyResult, try_method
 from viewer.bench.stability.distance import ROOT, outside, scene_encoding, training_distances
-from viewer.bench.stability.methods import MethodSettings, truth_sh
+from viewer.bench.stability.methods import MethodSettings
+from viewer.evaluation.truth import truth_sh
 from viewer.neural.domain import Domain
 from viewer.neural.domain import outside as guard
-from viewer.training.procedural import PRESETS, Ranges, random_scene
+from viewer.evaluation.procedural import PRESETS, Ranges, random_scene
 
 def shipped_card():
     """The shipped model's card (viewer.neural.field.ModelCard), or None without a model."""

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer.bench.report import replace_block
+from viewer.evaluation.report import replace_block
 from viewer.bench.stability.common import StudyResult, format_table
 
 ROOT = Path(__file__).resolve().parents[3]

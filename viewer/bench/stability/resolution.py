@@ -18,8 +18,8 @@ from viewer.probes import grid as probe_grid
 from viewer.reference import mitsuba as reference
 from viewer.physical import transport
 from viewer import scene as scene_files
-from viewer.bench.accuracy import relative_rmse
-from viewer.bench.points import free_space_points
+from viewer.evaluation.error import relative_rmse
+from viewer.evaluation.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, try_method
 from viewer.bench.stability.methods import MethodSettings, MethodUnavailable, gl_context

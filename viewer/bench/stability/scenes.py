@@ -1,7 +1,7 @@
 """The scenes of the stability suite, each built in a few lines from axis-aligned quads.
 
 All are closed rooms (so Mitsuba and the solvers agree on what is inside) with Lambertian walls and
-one-sided quad lamps facing down (counter-clockwise seen from below, DESIGN.md).
+one-sided quad lamps facing down (counter-clockwise seen from below, docs/ARCHITECTURE.md).
 """
 
 from __future__ import annotations

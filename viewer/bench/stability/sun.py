@@ -21,11 +21,11 @@ from dataclasses import replace
 import numpy as np
 
 from viewer.physical import gi
-from viewer.bench.accuracy import relative_rmse
-from viewer.bench.points import free_space_points
+from viewer.evaluation.error import relative_rmse
+from viewer.evaluation.points import free_space_points
 from viewer.bench.stability.common import RunConfig, StudyResult
-from viewer.bench.stability.methods import truth_sh
-from viewer.training.procedural import Ranges, random_scene
+from viewer.evaluation.truth import truth_sh
+from viewer.evaluation.procedural import Ranges, random_scene
 
 COLUMNS = [("scene", "room", "{}"), ("window", "window", "{}"), ("voxels", "voxels", "{}"),
            ("sun_power", "sunlight on the voxels / through the window", "{:.2f}"),
@@ -129,7 +129,7 @@ def run(config: RunConfig) -> StudyResult:
                   f"(no sun {row['without_sun']:.3f}), indirect {row['indirect_with_sun']:.3f} "
                   f"(no sun {row['indirect_without_sun']:.3f})", flush=True)
     result.notes.append(
-        f"Rooms of `viewer.training.procedural` with a window (seeds [{SEED}, n]); {POINTS} free-space points, "
+        f"Rooms of `viewer.evaluation.procedural` with a window (seeds [{SEED}, n]); {POINTS} free-space points, "
         f"Mitsuba {DIRECTIONS} directions per point. `compute` gives the same probes as `physical` (1e-6), so it "
         "is not run again. Sunlight on the voxels: the first bounce's sun term, mean of RGB, over the power "
         "that enters through the window.")

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from viewer.physical import gi
-from viewer.bench.points import free_space_points
+from viewer.evaluation.points import free_space_points
 from viewer.bench.stability import scenes
 from viewer.bench.stability.common import RunConfig, StudyResult, axis_irradiance, style, try_method
 from viewer.bench.stability.methods import METHODS, MethodSettings, size_label, truth_sh

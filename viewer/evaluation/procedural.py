@@ -2,13 +2,13 @@
 
 `random_scene(rng, name, ranges)` draws one scene: a box room open at the front (z = +depth, as in
 `cornell`), walls in whites and greys with now and then a saturated colour, up to a few objects on the
-floor or stacked, area lights (viewer.training.lights), and sometimes a window with the sun shining
+floor or stacked, area lights (viewer.evaluation.lights), and sometimes a window with the sun shining
 through it; with the wide ranges also thin partitions and glowing objects. Every number it draws comes
 from a field of `Ranges` (viewer.neural.ranges: `Ranges()` is the first dataset's, `PRESETS["v2"]`
 issue 14's), so an out-of-distribution study can draw scenes outside the training ranges with
 `random_scene(rng, name, Ranges(room_scale=(1.3, 1.6)))`.
 
-Conventions (DESIGN.md): y up; walls face into the room, closed objects outwards; an emitter is a
+Conventions (docs/ARCHITECTURE.md): y up; walls face into the room, closed objects outwards; an emitter is a
 rectangle that emits from its counter-clockwise front face, into the room; every object is its own
 group. The room is centred on the origin with half extents (hx, hy, hz) drawn per axis, so `cornell`
 is the room (1, 1, 1).
@@ -17,15 +17,15 @@ is the room (1, 1, 1).
 from __future__ import annotations
 
 import colorsys
-from dataclasses import dataclass
 
 import numpy as np
 
 from viewer.scene import meshes
 from viewer.scene.meshes import X_AXIS, Y_AXIS, Mesh, rotate, scale, transformed, translate
 from viewer.scene import Camera, DirectionalLight, Scene
-from viewer.training.lights import CORNELL_POWER  # noqa: F401 - re-exported (tests, studies)
-from viewer.training.lights import WALL_GAP, draw_lights, draw_window, glow_objects, rectangle_light
+from viewer.evaluation.frames import Frame, room_frames
+from viewer.evaluation.lights import CORNELL_POWER  # noqa: F401 - re-exported (tests, studies)
+from viewer.evaluation.lights import WALL_GAP, draw_lights, draw_window, glow_objects, rectangle_light
 from viewer.neural.ranges import OBJECT_KINDS, PRESETS, Ranges  # noqa: F401 - re-exported
 
 OBJECT_GAP = 0.03
@@ -33,45 +33,6 @@ OBJECT_GAP = 0.03
 LIGHT_ALBEDO = (0.8, 0.8, 0.8)
 WALL_NAMES = ("floor", "ceiling", "back", "left-wall", "right-wall")
 DEFAULT_CAMERA_FOV = Camera().fov
-
-
-# ---- a wall as a frame: centre, inward normal n, in-plane axes u and v = n x u -------------------------
-
-@dataclass(frozen=True)
-class Frame:
-    centre: np.ndarray
-    normal: np.ndarray
-    """Unit normal into the room: the front of the rectangles built on this frame."""
-    u: np.ndarray
-    half_u: float
-    half_v: float
-
-    @property
-    def v(self) -> np.ndarray:
-        return np.cross(self.normal, self.u)
-
-    def point(self, a: float, b: float, lift: float = 0.0) -> np.ndarray:
-        return self.centre + a * self.u + b * self.v + lift * self.normal
-
-    def rectangle(self, a: float, b: float, half_a: float, half_b: float, lift: float = 0.0) -> Mesh:
-        """The rectangle [a +- half_a] x [b +- half_b] in (u, v), `lift` in front of the wall, front face
-        along the normal (rectangle()'s +z is cross(x, y), mapped to cross(u, v) = n)."""
-        m = np.eye(4)
-        m[:3, 0], m[:3, 1], m[:3, 2] = half_a * self.u, half_b * self.v, self.normal
-        m[:3, 3] = self.point(a, b, lift)
-        return transformed(meshes.rectangle(), m)
-
-
-def room_frames(half: np.ndarray) -> dict[str, Frame]:
-    hx, hy, hz = (float(h) for h in half)
-    x, y, z = np.eye(3)
-    return {
-        "floor": Frame(np.array([0, -hy, 0.0]), y, x, hx, hz),
-        "ceiling": Frame(np.array([0, hy, 0.0]), -y, x, hx, hz),
-        "back": Frame(np.array([0, 0, -hz]), z, x, hx, hy),
-        "left-wall": Frame(np.array([-hx, 0, 0.0]), x, z, hz, hy),
-        "right-wall": Frame(np.array([hx, 0, 0.0]), -x, z, hz, hy),
-    }
 
 
 def wall_with_hole(frame: Frame, hole: tuple[float, float, float, float] | None) -> Mesh:

@@ -1,6 +1,6 @@
 """Which training targets to make: Mitsuba at few directions per probe, or the physical solver.
 
-    python -m viewer.bench.targets --rooms 20 --probes 24,16 --low 16,64 --truth-directions 1024 \
+    python -m viewer.training.targets --rooms 20 --probes 24,16 --low 16,64 --truth-directions 1024 \
         --out docs/data/targets.json
 
 On freshly drawn validation rooms (`dataset.make_scene("val", i, seed, ranges)`), each candidate's probe
@@ -130,7 +130,7 @@ def table(rows: list[dict], resolution: str, rooms: int, truth_directions: int) 
 def main(argv=None) -> int:
     from viewer.cli_parsing import add_out, tool_parser
 
-    p = tool_parser(__doc__, prog="python -m viewer.bench.targets")
+    p = tool_parser(__doc__, prog="python -m viewer.training.targets")
     p.add_argument("--rooms", type=int, default=20, help="validation rooms measured (default 20)")
     p.add_argument("--seed", type=int, default=14, help="dataset seed the rooms are drawn with (default 14)")
     p.add_argument("--ranges", default="v2", help="procedural ranges preset (default v2)")
@@ -157,7 +157,7 @@ def main(argv=None) -> int:
             f"{100 * rooms[-1][str(m)]['physical']['indirect']:.1f}%" for m in resolutions), file=sys.stderr, flush=True)
     tables = {str(m): summary(rooms, str(m), low, args.truth_directions) for m in resolutions}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"command": " ".join(["python -m viewer.bench.targets", *(argv or sys.argv[1:])]),
+    args.out.write_text(json.dumps({"command": " ".join(["python -m viewer.training.targets", *(argv or sys.argv[1:])]),
                                     "rooms": rooms, "summary": tables}, indent=1) + "\n")
     for m in resolutions:
         print(table(tables[str(m)], str(m), args.rooms, args.truth_directions) + "\n")

@@ -1,8 +1,8 @@
-"""The lights of a procedural room (viewer.training.procedural): rectangular area lights on the ceiling,
+"""The lights of a procedural room (viewer.evaluation.procedural): rectangular area lights on the ceiling,
 the walls or the floor, objects that glow, and a window with the sun shining through it.
 
 Power is counted in units of `CORNELL_POWER` (Mitsuba's Cornell box light) and colour by temperature
-(`blackbody_rgb`), now and then tinted. The rooms' walls are handed in as frames (`procedural.Frame`:
+(`blackbody_rgb`), now and then tinted. The rooms' walls are handed in as frames (`frames.Frame`:
 centre, inward normal, in-plane axes and half extents), so this module needs nothing else of the room.
 """
 
@@ -17,7 +17,7 @@ from viewer.scene import DirectionalLight
 from viewer.neural.ranges import Ranges
 
 if TYPE_CHECKING:
-    from viewer.training.procedural import Frame
+    from viewer.evaluation.frames import Frame
 
 CORNELL_POWER = float(np.pi * (0.46 * 0.38) * np.mean((18.387, 13.9873, 6.75357)))
 """Emitted power (W) of Mitsuba's `cornell_box()` light: pi x area x mean radiance, about 7.2 W."""

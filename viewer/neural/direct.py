@@ -1,0 +1,186 @@
+"""The direct light at the probe lattice: emitting patches, their traced shadows, the sun.
+
+The `direct_*` features of the network's input (viewer/neural/encoding.py), and the gather the one-bounce
+feature (viewer/neural/bounce.py) reuses with the lit surfaces as emitters.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from viewer.probes import sh
+from viewer.rays import dda
+from viewer.rays.voxels import VoxelGrid
+
+NEAR_FIELD = 1.0 / np.pi
+"""r^2 + A/pi: the near-field clamp of the transport kernel, so a probe next to a lamp stays finite."""
+VISIBILITY_CELLS = 2
+"""Edge, in lattice cells, of the clusters of emitting patches that share one visibility ray per probe."""
+SHADOW_OFFSET = 1.0
+"""A cluster's visibility ray ends this many voxels (of the occluders' grid) in front of its patches'
+mean position. Not less: a voxel averages every surface of one facing in its cell, so a lamp lying on
+the floor has its position between the lamp's top and the floor, and a ray to it would end inside the
+lamp."""
+
+
+def splat(points: np.ndarray, lo: np.ndarray, spacing: np.ndarray, m: int):
+    """[(flat cell index (P,), weight (P,))] for the 8 cell centres around each point (weights sum to
+    1; clamped at the lattice's faces, so a wall on the scene's bounds stays in the boundary layer)."""
+    u = np.clip((points - lo) / spacing - 0.5, 0.0, m - 1)
+    i0 = np.minimum(np.floor(u).astype(np.int64), max(m - 2, 0))
+    f = u - i0
+    out = []
+    for corner in range(8):
+        bits = [(corner >> a) & 1 for a in range(3)]
+        index = [i0[:, a] + bits[a] for a in range(3)]
+        weight = np.prod([f[:, a] if bits[a] else 1.0 - f[:, a] for a in range(3)], axis=0)
+        out.append((np.minimum((index[0] * m + index[1]) * m + index[2], m ** 3 - 1), weight))
+    return out
+
+
+def facings(normal: np.ndarray) -> np.ndarray:
+    """(K,) int 0-5: the signed axis each normal (K, 3) is closest to (2 a + 1 for +a, 2 a for -a). Patches
+    merge surfaces of one facing only: the two sides of a thin wall in one cell have opposite normals,
+    and merged, their mean normal is zero and the patch shines nowhere."""
+    axis = np.argmax(np.abs(normal), axis=1)
+    return axis * 2 + (np.take_along_axis(normal, axis[:, None], 1)[:, 0] > 0)
+
+
+def emitting_patches(cell: np.ndarray, voxels: VoxelGrid):
+    """The emitting voxels merged per lattice cell and facing: (positions (E, 3), normals (E, 3), areas
+    (E,), radiance (E, 3)). Seen from the probes (a lattice cell or more away), the pieces of a lamp in
+    one cell all arrive from about the same direction, so one patch per cell keeps the feature cheap."""
+    lit = np.flatnonzero(np.any(voxels.emission > 0, axis=1))
+    if len(lit) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
+    facing = facings(voxels.normal[lit])
+    key, group = np.unique(cell[lit] * 8 + facing, return_inverse=True)
+    count = len(key)
+    a = voxels.area[lit]
+    area = np.bincount(group, a, minlength=count)
+
+    def mean(values):
+        return np.stack([np.bincount(group, a * values[:, k], minlength=count) for k in range(3)], 1) / area[:, None]
+
+    normal = mean(voxels.normal[lit])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    return mean(voxels.position[lit]), normal, area, mean(voxels.emission[lit])
+
+
+def patch_visibility(blockers: dda.Cells, points: np.ndarray, position: np.ndarray, normal: np.ndarray,
+                     lo: np.ndarray, spacing: np.ndarray) -> np.ndarray:
+    """(P, E) float32, 1 where probe p sees emitting patch e (at `position` facing `normal`), else 0: one
+    ray per probe and cluster of patches (`shadow_targets`)."""
+    if len(position) == 0:
+        return np.ones((len(points), 0), np.float32)
+    target, cluster = shadow_targets(blockers, position, normal, lo, spacing)
+    return dda.pairs_clear(blockers, points, target)[:, cluster]
+
+
+def shadow_targets(blockers: dda.Cells, position: np.ndarray, normal: np.ndarray, lo: np.ndarray,
+                   spacing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the visibility rays of emitting patches end: (C, 3) one point per cluster, and (E,) each
+    patch's cluster. Patches are clustered VISIBILITY_CELLS lattice cells a side per facing; a cluster's
+    ray ends at the mean of its patches' positions, lifted SHADOW_OFFSET voxels along their normal. So
+    a patch's visibility depends on every patch of its cluster, whichever emitter they belong to."""
+    if len(position) == 0:
+        return np.zeros((0, 3)), np.zeros(0, np.int64)
+    facing = facings(normal)
+    block = np.floor((position - lo) / (spacing * VISIBILITY_CELLS)).astype(np.int64)
+    _, cluster = np.unique(np.column_stack([block, facing]), axis=0, return_inverse=True)
+    cluster = cluster.ravel()
+    count = cluster.max() + 1
+    centre = np.stack([np.bincount(cluster, position[:, a], minlength=count) for a in range(3)], 1)
+    centre /= np.bincount(cluster, minlength=count)[:, None]
+    lift = np.stack([np.bincount(cluster, normal[:, a], minlength=count) for a in range(3)], 1)
+    lift /= np.maximum(np.linalg.norm(lift, axis=1, keepdims=True), 1e-12)
+    return centre + SHADOW_OFFSET * blockers.h * lift, cluster
+
+
+def emitter_sh(lights, points: np.ndarray, visible: np.ndarray | None = None) -> np.ndarray:
+    """(P, 9, 3) SH of the light arriving straight from the emitting patches: each patch is a solid
+    angle cos_e A / (r^2 + A/pi), seen from the probe if its front faces it, times `visible` (P, E)
+    (`patch_visibility`; None: nothing in the way)."""
+    rows = None if visible is None else np.asarray(visible).T
+    return emitter_sh_rows(lights, points, rows).transpose(2, 1, 0).astype(np.float64)
+
+
+def emitter_sh_rows(lights, points: np.ndarray, visible: np.ndarray | None = None) -> np.ndarray:
+    """`emitter_sh` as (C, 9, P) float32 for a radiance of C channels (lights[3] is (E, C)), with the
+    visibility as (E, P) rows: the layout the compiled loop works in (`viewer.neural.encoder` keeps one
+    channel per emitter, a radiance of 1 times its weights)."""
+    source, normal, area, radiance = lights
+    radiance = np.asarray(radiance)   # (E, C)
+    out = np.zeros((radiance.shape[1], sh.SH_COUNT, len(points)), np.float32)
+    if len(area) == 0:
+        return out
+    f32 = [np.ascontiguousarray(a, np.float32) for a in (np.asarray(points).T, source, normal, area, radiance)]
+    seen = np.ones((len(area), 1), np.float32) if visible is None else np.ascontiguousarray(visible, np.float32)
+    _emitter_sh(*f32, seen, visible is not None, np.float32(NEAR_FIELD), out)
+    return out
+
+
+SH_BLOCK = 256
+"""Probes per block of `_emitter_sh`: the patch loop runs over a block that stays in L1, and the probe
+loop inside it vectorizes."""
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
+def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_field, out):
+    """The terms of `emitter_sh`: points (3, P), radiance (E, C), visible (E, P) when `shadowed`, out
+    (C, 9, P)."""
+    count = points.shape[1]
+    w = np.empty(SH_BLOCK, np.float32)
+    b = np.empty((9, SH_BLOCK), np.float32)
+    one, tiny, zero = np.float32(1.0), np.float32(1e-12), np.float32(0.0)
+    for start in range(0, count, SH_BLOCK):
+        n = min(SH_BLOCK, count - start)
+        px, py, pz = points[0, start:start + n], points[1, start:start + n], points[2, start:start + n]
+        for e in range(source.shape[0]):
+            sx, sy, sz = source[e, 0], source[e, 1], source[e, 2]
+            mx, my, mz = normal[e, 0], normal[e, 1], normal[e, 2]
+            flux, clamp = area[e], area[e] * near_field
+            for i in range(n):
+                x, y, z = sx - px[i], sy - py[i], sz - pz[i]
+                r2 = x * x + y * y + z * z
+                inv = one / np.sqrt(max(r2, tiny))
+                x, y, z = x * inv, y * inv, z * inv
+                weight = max(-(x * mx + y * my + z * mz), zero) * flux / (r2 + clamp)
+                if shadowed:
+                    weight *= visible[e, start + i]
+                w[i] = weight
+                b[0, i] = np.float32(0.282095)
+                b[1, i] = np.float32(0.488603) * y
+                b[2, i] = np.float32(0.488603) * z
+                b[3, i] = np.float32(0.488603) * x
+                b[4, i] = np.float32(1.092548) * x * y
+                b[5, i] = np.float32(1.092548) * y * z
+                b[6, i] = np.float32(0.315392) * (np.float32(3.0) * z * z - one)
+                b[7, i] = np.float32(1.092548) * x * z
+                b[8, i] = np.float32(0.546274) * (x * x - y * y)
+            for c in range(radiance.shape[1]):
+                rc = radiance[e, c]
+                if rc == 0:
+                    continue
+                for k in range(9):
+                    row, basis = out[c, k, start:start + n], b[k]   # contiguous views: the loop vectorizes
+                    for i in range(n):
+                        row[i] += rc * w[i] * basis[i]
+
+
+def sun_sh(sun, blockers: dda.Cells | None, points: np.ndarray) -> np.ndarray:
+    """(P, 9, 3) the sun's delta at the probes where a ray towards it leaves the scene unblocked."""
+    out = np.zeros((len(points), sh.SH_COUNT, 3))
+    if sun is None or not np.any(np.asarray(sun.irradiance) > 0):
+        return out
+    direction = np.asarray(sun.direction, np.float64)
+    visible = sun_visibility(blockers, points, direction)
+    return visible[:, None, None] * sh.project_delta(direction, sun.irradiance)[None]
+
+
+def sun_visibility(blockers: dda.Cells | None, points: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """(P,) float 1 where a ray from the probe towards the sun (`direction` points to it) escapes."""
+    if blockers is None:
+        return np.ones(len(points))
+    return dda.escapes(blockers, points, direction).astype(np.float64)
