@@ -47,7 +47,7 @@ def test_domain_from_the_ranges():
 
 def test_the_shipped_card_carries_its_domain_and_a_card_without_one_falls_back_to_v1(tmp_path):
     card = neural.ModelCard.read(ROOT / "models" / "probenet.onnx")
-    assert card.domain == V2  # trained on the v2 rooms (issue 14)
+    assert card.domain == V2  # trained on the v2 rooms
     assert card.data["sha256"] == neural.file_sha256(card.path)
     old = dict(card.data)
     del old["domain"]

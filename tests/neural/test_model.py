@@ -55,7 +55,7 @@ def test_meets_its_card_on_the_paper_test_scene(field):
     truth = reference.probe_sh(scene, points, directions=4096)
     error = relative_rmse(field.solve(scene).interpolate(points), truth)
     assert error <= claimed * 1.02 + 1e-3
-    assert error < 0.20  # the bound for every scene
+    assert error < 0.20  # the bound every scene is held to
 
 
 def test_sample_method_neural(tmp_path):

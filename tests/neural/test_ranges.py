@@ -1,4 +1,4 @@
-"""The wide ranges of issue 14 (`ranges.PRESETS["v2"]`): every room is a closed box open at the front,
+"""The wide ranges (`ranges.PRESETS["v2"]`): every room is a closed box open at the front,
 its lights (on any surface, objects included) shine into it with the power drawn, and it is the same
 room for the same seed."""
 

@@ -5,7 +5,7 @@
 floor or stacked, area lights (viewer.evaluation.lights), and sometimes a window with the sun shining
 through it; with the wide ranges also thin partitions and glowing objects. Every number it draws comes
 from a field of `Ranges` (viewer.neural.ranges: `Ranges()` is the first dataset's, `PRESETS["v2"]`
-issue 14's), so an out-of-distribution study can draw scenes outside the training ranges with
+the v2 ranges), so an out-of-distribution study can draw scenes outside the training ranges with
 `random_scene(rng, name, Ranges(room_scale=(1.3, 1.6)))`.
 
 Conventions (docs/ARCHITECTURE.md): y up; walls face into the room, closed objects outwards; an emitter is a

@@ -2,7 +2,7 @@
 
 `Ranges()` is the first dataset's ("v1", what models/probenet.onnx was trained on and what the
 out-of-distribution study of viewer.bench.stability measures distances from); `PRESETS["v2"]` is the
-wide one of issue 14: any albedo from near black to near white, one to three lights of any size, colour
+wide one (v2): any albedo from near black to near white, one to three lights of any size, colour
 and intensity on any surface (objects included), sun through windows more often, thin partitions,
 more objects and elongated rooms. A dataset records the preset's name and every field it drew from.
 """
@@ -127,7 +127,7 @@ V2 = Ranges(
     sun_zenith_degrees=(0.0, 60.0),
     partitions=(0, 2),
 )
-"""Issue 14's ranges: albedo 0.01-0.95 per surface; 1-3 lights, each on the ceiling, a wall, the floor
+"""The v2 ranges: albedo 0.01-0.95 per surface; 1-3 lights, each on the ceiling, a wall, the floor
 or an object, 0.03-0.6 half extent, 2000-10000 K (three in ten tinted), 0.1-10x the Cornell light's power
 in all, one light up to twenty times another; a window with the sun in about one room in three; up to two
 thin partitions and six objects; each half extent 0.6-1.8 (rooms up to three times longer than high)."""

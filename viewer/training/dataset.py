@@ -279,7 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--val", type=int, default=300, help="procedural validation rooms (default 300)")
     p.add_argument("--seed", type=int, default=14, help="room i of a split is default_rng([seed, split, i])")
     p.add_argument("--ranges", choices=sorted(PRESETS), default="v2",
-                   help="procedural ranges (viewer.neural.ranges; default v2, issue 14's wide ones)")
+                   help="procedural ranges (viewer.neural.ranges; default v2, the wide ones)")
     p.add_argument("--probes", default="24,16", help="probe resolutions M, comma separated (default 24,16)")
     p.add_argument("--truth", choices=truths.TRUTHS, default="physical",
                    help="ground truth: physical (viewer.physical.gi's solver, ~1-3 s a room; the default, "

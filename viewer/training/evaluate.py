@@ -1,4 +1,4 @@
-"""Issue 14's acceptance numbers for a neural model: its error against Mitsuba on the scenes it never saw.
+"""The acceptance numbers of a neural model: its error against Mitsuba on the scenes it never saw.
 
     python -m viewer.training.evaluate [--model models/probenet.onnx] [--val 20] [--dark 4] [--physical]
                                        [--perfect] [--noise] [--out docs/data/neural_accuracy.json]
@@ -38,7 +38,7 @@ DIRECTIONS = 4096
 """Mitsuba's directions per point. At 4096 the truth's own noise on the indirect light is 2.5-15% a room
 (median 7% on the 20 validation rooms, `--noise`); at 1024, which the first evaluations used, twice that."""
 LIMITS = {"all": 0.08, "indirect": 0.20, "dark_ratio": 2.0}
-"""The issue's bars: all the light and the indirect part, per scene; the dark rooms' indirect light
+"""The bars a model is held to: all the light and the indirect part, per scene; the dark rooms' indirect light
 within 2x of the truth."""
 
 

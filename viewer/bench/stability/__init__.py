@@ -1,4 +1,4 @@
-"""The stability suite (issue 5): where each method must hold, and where it is expected to fail, by how much.
+"""The stability suite: where each method must hold, and where it is expected to fail, by how much.
 
     python -m viewer.bench.stability [--quick] [--only NAME ...]
 
