@@ -25,6 +25,7 @@ import moderngl_window as mglw
 
 from viewer.cli_parsing import gi_settings, parse_size, tool_parser
 from viewer.errors import exit_status
+from viewer.progress import announce_compiles
 from viewer.ui.options import add_arguments, options_from
 
 
@@ -34,6 +35,7 @@ def log(message: str) -> None:
 
 
 def run(args) -> int:
+    announce_compiles()
     options = options_from(args)
     parse_size(options.size)
     gi_settings(options)   # bad GI flags are bad input before a window opens
@@ -41,7 +43,7 @@ def run(args) -> int:
         log(f"no display found (DISPLAY and WAYLAND_DISPLAY are unset); rendering {options.scene} headless")
         return render_headless(options)
     from viewer.bake import grid as baked_files
-    from viewer.scene import load
+    from viewer.scene import load, unlit_warning
 
     baked = None   # a baked grid (`gi-viewer FILE.npz`): its scene, lit by its probes
     if baked_files.is_baked_file(options.scene):
@@ -55,6 +57,8 @@ def run(args) -> int:
     except Exception as exc:  # no X server behind DISPLAY, no GL 4.3, glfw missing ...
         log(f"cannot open a window ({type(exc).__name__}: {exc}); rendering {options.scene} headless")
         return render_headless(options)
+    if unlit_warning(scene):   # the window shows it too, over the view
+        log(unlit_warning(scene))
     ViewerApp.argv = options
     app = ViewerApp(ctx=window.ctx, wnd=window, timer=mglw.timers.clock.Timer(), scene=scene, baked=baked)
     window._config = weakref.ref(app)  # as moderngl-window's create_window_config_instance does
@@ -139,7 +143,7 @@ class ViewerApp(mglw.WindowConfig):
         from viewer.gpu.context import describe
         from viewer.gpu.programs import SHADERS
         from viewer.gpu.renderer import RenderSettings, Renderer
-        from viewer.scene import load
+        from viewer.scene import load, unlit_warning
         from viewer.ui.controls import Controls
         from viewer.ui.frame_graph import FrameTimes
         from viewer.ui.gi_sources import GIController

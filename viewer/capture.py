@@ -21,6 +21,7 @@ from viewer.cli_parsing import CAPTURE_SIZES, dataclass_from_args, gi_settings, 
 from viewer.errors import InputError
 from viewer.gpu.capture_request import MAX_SIZE, CaptureError, CaptureRequest
 from viewer.gpu.render_settings import RenderSettings
+from viewer.progress import step
 
 if TYPE_CHECKING:  # types only: GL is imported when a capture runs
     import moderngl
@@ -91,6 +92,7 @@ def baked_probe_source(request: CaptureRequest):
     def probe_source(scene, gi, ctx):
         print(f"capture: the probes baked in {path} stand in for --gi {gi}", file=sys.stderr)
         return grid.indirect
+    probe_source.label = "baked"
     return request, probe_source
 
 
@@ -123,7 +125,7 @@ def render(request: CaptureRequest, probe_source: ProbeSource | None = None) -> 
     from viewer.gpu.offscreen import capture
     from viewer.gpu.renderer import VIEWS
     from viewer.gpu.shadows import MAX_LIGHT_SAMPLES
-    from viewer.scene import Camera, load
+    from viewer.scene import Camera, load, note, unlit_warning
 
     out = request.out
     if not out:
@@ -162,19 +164,32 @@ def render(request: CaptureRequest, probe_source: ProbeSource | None = None) -> 
     if not Path(out).resolve().parent.is_dir():
         raise CaptureError(f"--out {out}: the folder {Path(out).parent} does not exist")
 
+    unlit = unlit_warning(scene)
+    if unlit:   # every light the solve and the final gather could find is black: neither runs
+        note(unlit)
     start = time.perf_counter()
     ctx = create_context()
     try:
         probes = None
-        if sources.SOURCES[gi].solve is not None:   # off solves nothing: direct light only
-            probes = (probe_source or solver_probes(request))(scene, gi, ctx)
+        if sources.SOURCES[gi].solve is not None and not unlit:   # off solves nothing: direct light only
+            if probe_source is None:
+                with step(f"capture: solving the indirect light ({sources.SOURCES[gi].label})"):
+                    probes = solver_probes(request)(scene, gi, ctx)
+            else:
+                probes = probe_source(scene, gi, ctx)
         solved = time.perf_counter()
         voxels, radiance = _debug_voxels(scene, view, settings, request.gi_settings.voxels)
-        capture(scene, probes, out, size=size, view=view, camera=camera, settings=settings, voxels=voxels,
-                voxel_radiance=radiance, samples=int(request.msaa), ctx=ctx)
+        gathers = probes is not None and view in ("final", "indirect") and settings.final_gather
+        with step(f"capture: rendering {size[0]}x{size[1]}"
+                  + (" (the lightmap's final gather traces its rays)" if gathers else "")):
+            capture(scene, probes, out, size=size, view=view, camera=camera, settings=settings, voxels=voxels,
+                    voxel_radiance=radiance, samples=int(request.msaa), ctx=ctx)
     finally:
         ctx.release()
-    print(f"capture: {out} ({size[0]}x{size[1]}, view {view}, gi {gi}); probes {solved - start:.2f} s, "
+    shown = (getattr(probe_source, "label", None) if probes is not None else None) or gi
+    if unlit and sources.SOURCES[gi].solve is not None:
+        shown += ", not solved: nothing emits"
+    print(f"capture: {out} ({size[0]}x{size[1]}, view {view}, gi {shown}); probes {solved - start:.2f} s, "
           f"render {time.perf_counter() - solved:.2f} s", file=sys.stderr)
     return 0
 

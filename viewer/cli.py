@@ -19,6 +19,7 @@ from viewer.cli_parsing import add_dataclass_flags, add_gi_flags, gi_settings
 from viewer.errors import ArgumentParser, InputError, exit_status
 from viewer.gpu.render_settings import RenderSettings
 from viewer.physical.gi import Timings
+from viewer.progress import announce_compiles, step
 from viewer.ui.options import add_arguments as view_arguments  # no GL or imgui import
 
 
@@ -89,6 +90,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run_command(args) -> int:
+    announce_compiles()   # the first run compiles the ray kernels: say so rather than sit silent
     return {"view": run_view, "sample": run_sample, "capture": run_capture,
             "bench": run_bench, "bake": run_bake}[args.command](args)
 
@@ -120,7 +122,11 @@ def _load_scene(args):
     from viewer import scene as scenes
 
     sun = scenes.parse_sun(args.sun) if getattr(args, "sun", None) else None
-    return scenes.load(args.scene, sun=sun)
+    scene = scenes.load(args.scene, sun=sun)
+    unlit = scenes.unlit_warning(scene)
+    if unlit:
+        scenes.note(unlit)
+    return scene
 
 
 def run_sample(args) -> int:
@@ -134,7 +140,8 @@ def run_sample(args) -> int:
     timings = Timings({"load": time.perf_counter() - start})
     options = sources.SolveOptions(include_emitted=True, model=getattr(args, "model", None), timings=timings)
     try:
-        grid, timings = sources.lookup(args.method).solve(scene, settings, options)
+        with step(f"sample: solving ({sources.lookup(args.method).label})"):
+            grid, timings = sources.lookup(args.method).solve(scene, settings, options)
     except sources.SourceError as exc:
         raise InputError(f"--method {args.method}: {exc}") from None
     clock = time.perf_counter()
@@ -172,7 +179,8 @@ def run_bake(args) -> int:
     start = time.perf_counter()
     scene = _load_scene(args)
     timings = Timings({"load": time.perf_counter() - start})
-    grid = baked.bake(scene, args.scene, settings, timings)
+    with step("bake: solving the probe grid (the CPU solver)"):
+        grid = baked.bake(scene, args.scene, settings, timings)
     texels = baked.texture_volumes(grid.indirect) if args.dds else None
     if texels is not None and args.dds_precision == "16":
         if np.abs(texels).max() > float(np.finfo(np.float16).max):

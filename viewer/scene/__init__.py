@@ -11,7 +11,9 @@
 """
 
 from viewer.scene.loading import (ASSETS, SUPPORTED_SUFFIXES, Camera, DirectionalLight, Scene, SceneError,
-                                  builtin_names, load, parse_sun, read_sidecar, scene_file)
+                                  builtin_names, load, note, parse_sun, read_sidecar, scene_file,
+                                  unlit_warning)
 
 __all__ = ["Camera", "DirectionalLight", "Scene", "SceneError", "ASSETS", "SUPPORTED_SUFFIXES",
-           "builtin_names", "load", "read_sidecar", "parse_sun", "scene_file"]
+           "builtin_names", "load", "read_sidecar", "parse_sun", "scene_file",
+           "unlit_warning", "note"]

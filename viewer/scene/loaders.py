@@ -4,8 +4,10 @@ the reader by suffix).
 - glTF/GLB: trimesh reads the geometry and the node graph; materials and lights come from the glTF JSON
   itself, because trimesh 5.2 rounds baseColorFactor to 8 bits and reads neither
   KHR_materials_emissive_strength nor KHR_lights_punctual. Albedo = baseColorFactor x mean linear colour
-  of the base-colour texture; emission = emissiveFactor x KHR_materials_emissive_strength; a directional
-  light becomes the sun (its `intensity` x `color` read as irradiance in W/m^2).
+  of the base-colour texture x COLOR_0 (linear, as glTF's colours are; averaged per face); emission =
+  emissiveFactor x KHR_materials_emissive_strength (a file whose emitters all stay at or under 1 without it
+  gets a hint: such a lamp barely lights a room); a directional light becomes the sun (its `intensity` x
+  `color` read as irradiance in W/m^2).
 - PLY (trimesh): vertex colours averaged per face, or face colours (sRGB, 8 bit), as the albedo; no
   emission.
 Every parse failure becomes a one-line `SceneError`.
@@ -20,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer.scene.types import DirectionalLight, Scene, SceneError
+from viewer.scene.types import DirectionalLight, Scene, SceneError, note
 
 DEFAULT_ALBEDO = (0.7, 0.7, 0.7)
 MATERIAL_TAG = "gi-viewer-material-"
@@ -38,7 +40,17 @@ def read(path: Path) -> Scene:
              for name, vertices, faces, visual in _meshes(path, loaded)]
     if not parts:
         raise SceneError(f"{path}: no triangles found")
-    return Scene.concatenate(path.stem, parts, sun=_gltf_sun(path, gltf))
+    scene = Scene.concatenate(path.stem, parts, sun=_gltf_sun(path, gltf))
+    if gltf and 0.0 < float(scene.emission.max(initial=0.0)) <= 1.0 and not _uses_emissive_strength(gltf):
+        note(f"{path}: its emitters' emissiveFactor is at most 1, which lights a room only dimly; glTF "
+             f"raises it with KHR_materials_emissive_strength, e.g. \"extensions\": "
+             f"{{\"KHR_materials_emissive_strength\": {{\"emissiveStrength\": 20}}}} on the lamp's material")
+    return scene
+
+
+def _uses_emissive_strength(gltf: dict) -> bool:
+    return any(isinstance(m, dict) and "KHR_materials_emissive_strength" in (m.get("extensions") or {})
+               for m in gltf.get("materials") or [])
 
 
 def _one_line(exc: Exception) -> str:
@@ -158,7 +170,27 @@ def _gltf_material(path: Path, name: str, faces, visual, gltf: dict):
             raise SceneError(f"{path}: unreadable base-colour texture in glTF material {index} "
                              f"({_one_line(exc)})") from None
         albedo = albedo * _srgb_to_linear(pixels).mean(axis=0)
+    colours = _vertex_colours(path, getattr(visual, "vertex_attributes", None) or {}, faces)
+    if colours is not None:   # glTF multiplies the base colour by COLOR_0 (linear): per face, the mean
+        albedo = albedo[None, :] * colours[faces].mean(axis=1)
     return albedo, emission, str(spec.get("name") or f"material-{index}")
+
+
+def _vertex_colours(path: Path, attributes, faces) -> np.ndarray | None:
+    """A primitive's COLOR_0 beside its material (trimesh keeps it as the `color` vertex attribute) as
+    linear RGB in 0..1 per vertex, or None. Normalized integers are scaled to 0..1 (glTF 2.0, 3.7.2.1)."""
+    colours = attributes.get("color") if hasattr(attributes, "get") else None
+    if colours is None:
+        return None
+    colours = np.asarray(colours)
+    if colours.ndim != 2 or colours.shape[1] not in (3, 4) or len(colours) <= int(np.max(faces, initial=-1)):
+        raise SceneError(f"{path}: COLOR_0 is not one RGB or RGBA colour per vertex")
+    rgb = colours[:, :3].astype(np.float64)
+    if np.issubdtype(colours.dtype, np.integer):
+        rgb /= float(np.iinfo(colours.dtype).max)
+    if not np.all(np.isfinite(rgb)):
+        raise SceneError(f"{path}: COLOR_0 holds NaN or infinite colours")
+    return np.clip(rgb, 0.0, None)
 
 
 def _rgb(values) -> np.ndarray:

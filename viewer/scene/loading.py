@@ -19,10 +19,10 @@ import numpy as np
 from viewer.scene import loaders
 from viewer.scene import obj
 from viewer.resources import SCENES
-from viewer.scene.types import Camera, DirectionalLight, Scene, SceneError
+from viewer.scene.types import Camera, DirectionalLight, Scene, SceneError, note
 
 __all__ = ["Camera", "DirectionalLight", "Scene", "SceneError", "ASSETS", "SUPPORTED_SUFFIXES",
-           "builtin_names", "load", "read_sidecar", "parse_sun"]
+           "builtin_names", "load", "read_sidecar", "parse_sun", "unlit_warning", "note"]
 
 ASSETS = SCENES
 """The folder of the built-in scenes (viewer.resources: assets/scenes/ of a checkout, or in the wheel)."""
@@ -67,6 +67,8 @@ def load(source: str | Path, sun: DirectionalLight | None = None) -> Scene:
         raise SceneError(f"{path}: cannot read ({exc.strerror or exc})") from None
 
     scene = _separate_groups(_read(path))
+    for message in sidecar_notes(path):
+        note(message)
     side = read_sidecar(path)
     if side.get("sun") is not None:
         scene = scene.with_sun(side["sun"])
@@ -94,18 +96,68 @@ def _separate_groups(scene: Scene) -> Scene:
     return replace(scene, vertices=scene.vertices[keys % n], faces=inverse.reshape(scene.faces.shape))
 
 
+SIDECAR_KEYS = ("sun", "camera")
+SHARED_SIDECAR = "scene.json"
+"""The sidecar a folder with a single scene file may give it under this name."""
+
+
+def sidecar_path(path: Path) -> Path | None:
+    """The sidecar JSON of scene file `path`: `<name>.json` (`room.obj` -> `room.json`), else
+    `<name>.<suffix>.json` (`room.obj.json`), else `scene.json` when `path` is the only scene file in its
+    folder; None when there is none."""
+    for candidate in (path.with_suffix(".json"), path.with_name(path.name + ".json")):
+        if candidate.is_file() and candidate != path:
+            return candidate
+    shared = path.with_name(SHARED_SIDECAR)
+    if shared.is_file() and _scene_files(path.parent) == [path.name]:
+        return shared
+    return None
+
+
+def _scene_files(folder: Path) -> list[str]:
+    try:
+        return sorted(p.name for p in folder.iterdir() if p.suffix.lower() in SUPPORTED_SUFFIXES and p.is_file())
+    except OSError:
+        return []
+
+
+def sidecar_notes(path: Path) -> list[str]:
+    """Why a sidecar beside scene file `path` is not read, or what of it is not used, one line each: a
+    `scene.json` in a folder of several scene files, keys other than "sun" and "camera"."""
+    found = sidecar_path(path)
+    shared = path.with_name(SHARED_SIDECAR)
+    if found is None and shared.is_file():
+        count = len(_scene_files(path.parent))
+        return [f"{shared} is not read for {path.name}: its folder holds {count} scene files, and scene.json "
+                f"serves a folder of one; name it {path.with_suffix('.json').name} to give {path.name} its sun "
+                f"and camera"]
+    if found is None:
+        return []
+    try:
+        data = json.loads(found.read_text())
+    except (OSError, ValueError):
+        return []   # read_sidecar says so, as an error
+    if not isinstance(data, dict):
+        return []
+    unused = [key for key in data if key not in SIDECAR_KEYS]
+    if not unused:
+        return []
+    return [f"{found}: {', '.join(repr(k) for k in unused)} not used (a sidecar gives "
+            f"{' and '.join(repr(k) for k in SIDECAR_KEYS)})"]
+
+
 def read_sidecar(path: Path) -> dict:
-    """`scene.obj` -> `scene.json` (or `scene.obj.json`), all keys optional:
+    """The sidecar of scene file `path` (`sidecar_path`: `room.json`, `room.obj.json`, or `scene.json`
+    beside a single scene file), all keys optional:
 
         {"sun": {"direction": [x, y, z], "irradiance": [r, g, b]},
          "camera": {"origin": [...], "target": [...], "up": [...], "fov": 39.3}}
 
-    `direction` points from the scene towards the sun.
+    `direction` points from the scene towards the sun; the camera's `fov` is vertical, in degrees, and
+    the keys it leaves out take the defaults of viewer.scene.Camera.
     """
-    for candidate in (path.with_suffix(".json"), path.with_name(path.name + ".json")):
-        if candidate.exists() and candidate != path:
-            break
-    else:
+    candidate = sidecar_path(path)
+    if candidate is None:
         return {}
     try:
         data = json.loads(candidate.read_text())
@@ -121,6 +173,16 @@ def read_sidecar(path: Path) -> dict:
         raise SceneError(f"{candidate}: {exc}") from None
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise SceneError(f"{candidate}: malformed sidecar ({exc})") from None
+
+
+def unlit_warning(scene: Scene) -> str | None:
+    """One line for a scene that nothing lights (no emitting material and no sun), naming the fixes; None
+    for a lit scene. Its pictures are black but for the albedo and normals views."""
+    if scene.has_emitters:
+        return None
+    return (f"{scene.name} has no emitter and no sun, so its light is black: give a material an emission "
+            f"(Ke in an OBJ's .mtl, emissiveFactor in glTF) or add a sun (\"sun\" in a sidecar {scene.name}.json, "
+            f"or --sun dx,dy,dz,r,g,b on capture, sample and bake)")
 
 
 def parse_sun(text: str) -> DirectionalLight:

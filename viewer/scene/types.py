@@ -13,6 +13,7 @@ viewer.scene picks the format of a file and loads built-in scenes by name; this 
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -27,6 +28,12 @@ FLAT = 1e-6
 
 class SceneError(ValueError):
     """A scene file (or scene description) that cannot be used; the message is one readable line."""
+
+
+def note(message: str) -> None:
+    """One line for the user on stderr (`viewer: ...`) about a scene that loads but may not be what they
+    meant (nothing lights it, a sidecar left unread, a lamp too dim)."""
+    print(f"viewer: {message}", file=sys.stderr, flush=True)
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ import numpy as np
 from imgui_bundle import imgui
 
 from viewer import sources
+from viewer.scene import unlit_warning
 from viewer.gpu.renderer import TONEMAPS, VIEWS, RenderSettings
 from viewer.ui.background import BackgroundTask
 from viewer.ui.frame_graph import FrameTimes, draw_frame_graph
@@ -297,6 +298,26 @@ def messages_window(messages: list[Message], shader_error: str | None, info_seco
     imgui.end()
 
 
+def unlit_overlay(text: str | None, show_panel: bool) -> None:
+    """A scene that nothing lights: the reason and the fix in the middle of the view, where the eye is
+    (the view itself is black)."""
+    if not text:
+        return
+    width, height = imgui.get_io().display_size
+    view_width = width - (PANEL_WIDTH if show_panel else 0)
+    imgui.set_next_window_pos(imgui.ImVec2(view_width / 2, height / 2), imgui.Cond_.always, imgui.ImVec2(0.5, 0.5))
+    imgui.set_next_window_size(imgui.ImVec2(min(520.0, max(view_width - 32.0, 200.0)), 0), imgui.Cond_.always)
+    flags = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.no_saved_settings
+             | imgui.WindowFlags_.no_inputs | imgui.WindowFlags_.no_focus_on_appearing | imgui.WindowFlags_.no_nav)
+    imgui.set_next_window_bg_alpha(0.85)
+    imgui.begin("No light", None, flags)
+    imgui.text_colored(WARNING_COLOUR, "Nothing lights this scene: no emitter and no sun.")
+    imgui.push_text_wrap_pos(0.0)
+    imgui.text(text)
+    imgui.pop_text_wrap_pos()
+    imgui.end()
+
+
 def loading_overlay(task: BackgroundTask | None) -> None:
     """A spinner-like indicator in the middle of the window while a dropped file loads."""
     if task is None or task.done:
@@ -311,6 +332,16 @@ def loading_overlay(task: BackgroundTask | None) -> None:
     # An indeterminate bar: a block sweeping across (the loader has no percentage to report).
     imgui.progress_bar(-1.0 * time.perf_counter(), imgui.ImVec2(260, 0), "")
     imgui.end()
+
+
+_UNLIT: list = [None, None]
+"""The last scene asked about and its `unlit_warning` (a frame asks again for the same scene)."""
+
+
+def _unlit(scene) -> str | None:
+    if _UNLIT[0] is not scene:
+        _UNLIT[:] = [scene, unlit_warning(scene)]
+    return _UNLIT[1]
 
 
 def draw_windows(session, view: ViewOptions, settings: RenderSettings, viewport, times: FrameTimes,
@@ -332,6 +363,7 @@ def draw_windows(session, view: ViewOptions, settings: RenderSettings, viewport,
         "View": (lambda: view_section(view, settings, viewport), True),
     })
     frame_time_overlay(times, session.gi.status()[0], view.show_frame_times)
+    unlit_overlay(_unlit(session.edits.base), view.show_panel)
     help_window(view)
     messages_window(session.messages, shader_error)
     loading_overlay(session.loading)

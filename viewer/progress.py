@@ -1,0 +1,96 @@
+"""Lines that tell the user what a long step is doing, on stderr: before a step that takes seconds (a GI
+solve, the lightmap's final gather, a bake), and once when the compiled ray kernels are being built for
+this machine (the first run only: numba caches them, next to the package or in the user's cache folder).
+
+    from viewer.progress import say, step
+    say("tracing ...")
+    with step("capture: solving the GI (compute)"):
+        ...
+
+The lines go to a terminal: where stderr is a file or a pipe (a script, a test) they are left out, so that
+what a command prints there stays its result. `GI_VIEWER_PROGRESS=1` prints them anywhere, `=0` nowhere.
+Cheap to import: numba is imported only by `announce_compiles`.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from contextlib import contextmanager
+
+PREFIX = "viewer: "
+SLOW_SECONDS = 2.0
+"""A step that took longer than this says how long it took when it ends."""
+
+
+def enabled() -> bool:
+    """Whether progress lines are printed: GI_VIEWER_PROGRESS=1 or 0 when set, else whether stderr is a
+    terminal."""
+    chosen = os.environ.get("GI_VIEWER_PROGRESS", "").strip()
+    if chosen in ("0", "1"):
+        return chosen == "1"
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def say(message: str) -> None:
+    """One progress line on stderr, flushed at once (the user reads it while the step runs), where
+    `enabled`."""
+    if not enabled():
+        return
+    print(f"{PREFIX}{message}", file=sys.stderr, flush=True)
+
+
+@contextmanager
+def step(message: str):
+    """Say `message` and " ..." before the work; after it, when it took over SLOW_SECONDS, say how long."""
+    say(f"{message} ...")
+    start = time.perf_counter()
+    yield
+    seconds = time.perf_counter() - start
+    if seconds > SLOW_SECONDS:
+        say(f"{message}: done in {seconds:.1f} s")
+
+
+_announced: set[str] = set()
+_listening = False
+
+
+def compile_message(module: str) -> str | None:
+    """The line for the first compilation of a kernel of `module` in this process (None: already said,
+    or not one of ours)."""
+    if not module.startswith("viewer.") or module in _announced:
+        return None
+    first = not _announced
+    _announced.add(module)
+    if first:
+        return (f"compiling the ray kernels for this machine ({module}); the first run only, later runs "
+                f"load them from numba's cache")
+    return f"compiling the ray kernels of {module} (first run only)"
+
+
+def announce_compiles() -> None:
+    """From now on, say a line when numba compiles (rather than loads from its cache) a kernel of a module
+    of the viewer for the first time in this process: the first run of a command can otherwise sit silent
+    for a minute."""
+    global _listening
+    if _listening:
+        return
+    from numba.core import event
+
+    class Announce(event.Listener):
+        def on_start(self, ev):
+            dispatcher = (ev.data or {}).get("dispatcher")
+            module = getattr(getattr(dispatcher, "py_func", None), "__module__", None) or ""
+            message = compile_message(module)
+            if message:
+                say(message)
+
+        def on_end(self, ev):
+            pass
+
+    event.register("numba:compile", Announce())
+    _listening = True
