@@ -28,7 +28,7 @@ from PIL import Image
 from conftest import missing
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGE_INPUTS = ("pyproject.toml", "README.md", "viewer", "shaders", "models", "assets")
+PACKAGE_INPUTS = ("pyproject.toml", "README.md", "LICENSE", "viewer", "shaders", "models", "assets")
 """What building the wheel reads; copied, so that the repository's own build/ folder is neither used
 (it may hold stale copies of deleted files) nor written."""
 MOST_BYTES = 2_000_000
@@ -89,6 +89,22 @@ def test_the_wheel_carries_every_shader_model_and_builtin_scene_and_no_more(whee
     assert "viewer/_data/models/probenet.onnx" in names and "viewer/_data/scenes/cornell.obj" in names
     assert not [n for n in names if n.startswith(("docs/", "tests/", "runs/", "data/")) or n.endswith(".png")]
     assert wheel.stat().st_size < MOST_BYTES
+
+
+def test_the_wheel_carries_the_license(wheel):
+    names = zipfile.ZipFile(wheel).namelist()
+    licenses = [n for n in names if n.endswith("/LICENSE") and ".dist-info/" in n]
+    assert licenses, names
+    text = zipfile.ZipFile(wheel).read(licenses[0]).decode()
+    assert "MIT License" in text and "gi-viewer contributors" in text
+
+
+def test_the_installed_program_calls_itself_gi_viewer_in_its_help(installed):
+    result = installed["run"](installed["gi-viewer"], "capture", "--help")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("usage: gi-viewer capture") and "python -m viewer" not in result.stdout
+    words = " ".join(result.stdout.split())
+    assert "cornell" in words and "(default: compute)" in words, words
 
 
 def test_the_installed_program_is_the_wheel_not_the_checkout(installed):

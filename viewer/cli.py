@@ -15,7 +15,8 @@ import numpy as np
 from viewer import sources
 from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
 from viewer import capture as captures  # no GL import until a capture runs
-from viewer.cli_parsing import add_dataclass_flags, add_gi_flags, gi_settings
+from viewer.cli_parsing import (NEGATIVE_VALUE_FLAGS, add_dataclass_flags, add_gi_flags, gi_settings,
+                                joined_negative_values)
 from viewer.errors import ArgumentParser, InputError, exit_status
 from viewer.gpu.render_settings import RenderSettings
 from viewer.physical.gi import Timings
@@ -35,30 +36,49 @@ def _gi_arguments(p: argparse.ArgumentParser):
     p.add_argument("--model", help="the neural source's .onnx file (default: models/probenet.onnx)")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = ArgumentParser(prog="python -m viewer", description="Real-time diffuse global illumination viewer.")
-    sub = parser.add_subparsers(dest="command", parser_class=ArgumentParser)
+def program_name(argv0: str | None = None) -> str:
+    """What the user typed to run the command line: `gi-viewer` for the installed program, else
+    `python -m viewer`."""
+    name = Path(sys.argv[0] if argv0 is None else argv0).name
+    return "gi-viewer" if name.startswith("gi-viewer") else "python -m viewer"
 
-    view = sub.add_parser("view", help="the interactive viewer (default)")
-    view.add_argument("scene", nargs="?", default="cornell",
-                      help="a built-in scene name, a scene file or a baked grid .npz (default: %(default)s)")
+
+def scene_help(grids: bool = False) -> str:
+    """SCENE's help: what it may be, and the built-in scenes by name."""
+    from viewer.scene import SUPPORTED_SUFFIXES, builtin_names
+
+    files = f"a scene file ({' '.join(SUPPORTED_SUFFIXES)})" + (" or a baked grid .npz" if grids else "")
+    return f"a built-in scene ({', '.join(builtin_names())}) or {files}"
+
+
+def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
+    parser = ArgumentParser(prog=prog or program_name(),
+                            description="Real-time diffuse global illumination viewer. Without a command it "
+                                        "opens the viewer on SCENE (the Cornell box by default).")
+    sub = parser.add_subparsers(dest="command", parser_class=ArgumentParser, metavar="COMMAND")
+
+    view = sub.add_parser("view", help="the interactive viewer (the default command)")
+    view.add_argument("scene", nargs="?", default="cornell", metavar="SCENE", help=scene_help(grids=True))
     view_arguments(view)
 
     sample = sub.add_parser("sample", help="incident-radiance SH at points, as the renderer sees it")
-    sample.add_argument("scene", help="a built-in scene name or a scene file (.obj .glb .gltf .ply)")
+    sample.add_argument("scene", metavar="SCENE", help=scene_help())
     sample.add_argument("--points", required=True, help="(P, 3) float32 world points, .npy")
-    sample.add_argument("--method", choices=sources.sample_choices(), default=sources.SOLVER.name)
+    sample.add_argument("--method", choices=sources.sample_choices(), default=sources.SOLVER.name,
+                        help="the GI source that solves")
     sample.add_argument("--out", required=True, help="(P, 9, 3) float32 SH output, .npy")
     _gi_arguments(sample)
 
-    capture = sub.add_parser("capture", help="render a PNG headless (EGL)")
-    capture.add_argument("scene", nargs="?", default="cornell",
-                         help="a built-in scene name, a scene file or a baked grid .npz (default: %(default)s)")
+    capture = sub.add_parser("capture", help="render a picture headless (EGL): .png, .jpg or .npy")
+    capture.add_argument("scene", nargs="?", default="cornell", metavar="SCENE", help=scene_help(grids=True))
     capture.add_argument("--out", required=True, metavar="FILE",
-                         help="the picture to write: .png or .jpg, or .npy for the linear HDR radiance")
-    capture.add_argument("--size", default="1280x720", help="WxH")
-    capture.add_argument("--gi", choices=sources.chosen_by_name(), default=sources.SOLVER.name)
-    capture.add_argument("--view", choices=VIEWS, default="final")
+                         help="the picture to write, by its suffix: .png, .jpg (or .jpeg), or .npy for the "
+                              "linear HDR radiance (H, W, 3) float32")
+    capture.add_argument("--size", default="1280x720", metavar="WxH", help="the picture's size")
+    capture.add_argument("--gi", choices=sources.chosen_by_name(), default=sources.DEFAULT,
+                         help="where the indirect light comes from, as in the window (compute: the "
+                              "compute-shader solver)")
+    capture.add_argument("--view", choices=VIEWS, default="final", help="what the picture shows")
     capture.add_argument("--msaa", type=int, default=4, metavar="N", help="multisample count (default: %(default)s)")
     capture.add_argument("--camera", metavar="ox,oy,oz,tx,ty,tz",
                          help="the camera's position and the point it looks at (default: the view the viewer "
@@ -70,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     _gi_arguments(capture)
 
     bake = sub.add_parser("bake", help="solve once and write the converged probe grid for other tools")
-    bake.add_argument("scene", help="a built-in scene name or a scene file (.obj .glb .gltf .ply)")
+    bake.add_argument("scene", metavar="SCENE", help=scene_help())
     bake.add_argument("--out", required=True, help="the probe grid, .npz (keys: docs/BAKED.md)")
     bake.add_argument("--dds", help="also write the indirect light as a DDS volume texture (docs/BAKED.md)")
     bake.add_argument("--dds-precision", dest="dds_precision", choices=("32", "16"), default="32",
@@ -86,6 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] not in ("view", "sample", "capture", "bake", "bench", "-h", "--help"):
         argv = ["view", *argv]
+    argv = joined_negative_values(argv, NEGATIVE_VALUE_FLAGS)   # --camera -0.7,0.3,... is a value
     return exit_status(lambda: run_command(build_parser().parse_args(argv)))
 
 

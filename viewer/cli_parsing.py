@@ -62,6 +62,37 @@ def parse_camera(text: str) -> tuple[tuple[float, float, float], tuple[float, fl
     return origin, target
 
 
+NEGATIVE_VALUE_FLAGS = ("--camera", "--sun")
+"""Flags whose value is a list of numbers that may start with a minus sign (`--camera -0.7,0.3,...`)."""
+
+
+def joined_negative_values(argv: list[str], flags=NEGATIVE_VALUE_FLAGS) -> list[str]:
+    """argv with `FLAG -0.7,0.3,...` written `FLAG=-0.7,0.3,...` for each of `flags`, so that argparse takes
+    a value that starts with a minus sign for the flag's value, not for another flag."""
+    out, i = [], 0
+    while i < len(argv):
+        arg = argv[i]
+        following = argv[i + 1] if i + 1 < len(argv) else None
+        if arg in flags and following is not None and _number_list(following):
+            out.append(f"{arg}={following}")
+            i += 2
+            continue
+        out.append(arg)
+        i += 1
+    return out
+
+
+def _number_list(text: str) -> bool:
+    """Whether text starts with '-' and reads as comma-separated numbers (`-0.7,0.3,0.9`, `-1`)."""
+    if not text.startswith("-"):
+        return False
+    try:
+        [float(v) for v in text.split(",")]
+    except ValueError:
+        return False
+    return True
+
+
 # ---- flags from settings dataclasses ----------------------------------------------------------------------
 
 @lru_cache(maxsize=None)

@@ -29,8 +29,26 @@ BAD_INPUT = (InputError, SceneError, BakedError)
 """The errors that mean "the user's input is wrong", not "the program is"."""
 
 
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """Help that ends each flag's text with its default, where it has one worth saying (not None, not a
+    switch's False) and the text does not say it already."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        if (not text or "%(default)" in text or default in (None, False, argparse.SUPPRESS)
+                or action.option_strings == [] and action.nargs not in ("?", "*")):
+            return text
+        return text + " (default: %(default)s)"
+
+
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse whose errors are `InputError` (one line, exit status 2) instead of usage and SystemExit."""
+    """argparse whose errors are `InputError` (one line, exit status 2) instead of usage and SystemExit;
+    its help shows the flags' defaults (DefaultsHelpFormatter)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", DefaultsHelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         raise InputError(f"{self.prog}: {message}")

@@ -94,3 +94,8 @@ def announce_compiles() -> None:
 
     event.register("numba:compile", Announce())
     _listening = True
+
+
+def plural(count: int, word: str) -> str:
+    """`1 bounce`, `3 bounces`."""
+    return f"{count} {word}" + ("" if count == 1 else "s")

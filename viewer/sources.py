@@ -241,7 +241,7 @@ NO_BAKED_GRID = "No baked grid: open one with `gi-viewer FILE.npz` (write it wit
 
 OFF = register(Source("off", "Off (direct only)", live=_live("OffLive")))
 COMPUTE = register(Source(
-    "compute", "Compute (GPU)", Needs(gl=True), _solve_compute, _live("ComputeLive"), _compute_unavailable,
+    "compute", "Compute solver", Needs(gl=True), _solve_compute, _live("ComputeLive"), _compute_unavailable,
     traces_on_every_core=True, steps_on_render_thread=True))
 SOLVER = register(Source(
     "solver", "CPU solver (numpy)", Needs(), _solve_cpu, _live("SolverLive"), traces_on_every_core=True,

@@ -290,8 +290,8 @@ def warning(reasons: list[str]) -> str | None:
     if not reasons:
         return None
     return ("This scene lies outside what the neural model was trained on (" + "; ".join(reasons)
-            + "): its light is a guess here. The physical solver (compute or CPU source, `--method solver`) "
-              "computes it.")
+            + "): its light is a guess here. The physical solver computes it: the compute or the CPU source "
+              "(`--gi compute` in the window and in capture, `--method solver` in sample).")
 
 
 def print_warning(scene: Scene, domain: Domain) -> None:

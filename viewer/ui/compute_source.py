@@ -10,6 +10,7 @@ import time
 from viewer.physical.gi import GISettings
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
+from viewer.progress import plural
 from viewer.ui.background import BackgroundTask
 
 
@@ -102,4 +103,4 @@ class ComputeSource:
         if self.solver is None:
             return "Compute solver: idle."
         solver = self.solver
-        return f"Compute solver: {solver.phase}, {solver.bounces} bounces, {self.steps} steps."
+        return f"Compute solver: {solver.phase}, {plural(solver.bounces, 'bounce')}, {self.steps} steps."

@@ -20,6 +20,7 @@ import time
 from viewer.physical.gi import GISettings, PhysicalGI, Timings
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
+from viewer.progress import plural
 from viewer.ui.background import BackgroundTask
 
 SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "software")
@@ -185,7 +186,7 @@ class RelightSource:
         ms = self.milliseconds
         traced = ", ".join(f"{name} {ms[name]:.0f} ms" for name in ("voxelize", "geometry") if name in ms)
         state = "converging" if self.busy else "converged"
-        line = f"Compute solver: {state}; relight ({where}) {ms.get('relight', 0):.0f} ms, {self.sweeps} bounces"
+        line = f"Compute solver: {state}; relight ({where}) {ms.get('relight', 0):.0f} ms, {plural(self.sweeps, 'bounce')}"
         if self.edit_to_probes is not None:
             line += f"; edit to GI {1000 * self.edit_to_probes:.0f} ms"
         return line + (f"; traced: {traced}" if traced else "") + "."
