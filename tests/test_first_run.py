@@ -135,13 +135,13 @@ def test_progress_lines_go_to_a_terminal_or_where_asked(monkeypatch, capsys):
     assert capsys.readouterr().err == ""
 
 
-def test_the_first_compilation_of_a_module_is_said_once():
+def test_each_kernel_compiled_is_said_once_the_first_saying_why():
     progress._announced.clear()
-    first = progress.compile_message("viewer.rays.dda")
-    assert first and "first run only" in first
-    assert progress.compile_message("viewer.rays.dda") is None
-    assert "viewer.gpu.final_gather" in progress.compile_message("viewer.gpu.final_gather")
-    assert progress.compile_message("numpy.linalg") is None
+    first = progress.compile_message("viewer.rays.dda", "trace")
+    assert first and "first run only" in first and "viewer.rays.dda.trace" in first
+    assert progress.compile_message("viewer.rays.dda", "trace") is None
+    assert progress.compile_message("viewer.gpu.final_gather", "_sum") == "compiling viewer.gpu.final_gather._sum"
+    assert progress.compile_message("numpy.linalg", "solve") is None
 
 
 def test_capture_says_what_it_is_doing_when_asked(tmp_path):

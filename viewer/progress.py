@@ -59,17 +59,18 @@ _announced: set[str] = set()
 _listening = False
 
 
-def compile_message(module: str) -> str | None:
+def compile_message(module: str, kernel: str = "") -> str | None:
     """The line for the first compilation of a kernel of `module` in this process (None: already said,
-    or not one of ours)."""
-    if not module.startswith("viewer.") or module in _announced:
+    or not one of ours): the first says what is happening, the next ones name their kernel, so that a
+    minute of compiling is never a minute of silence."""
+    name = f"{module}.{kernel}" if kernel else module
+    if not module.startswith("viewer.") or name in _announced:
         return None
     first = not _announced
-    _announced.add(module)
+    _announced.add(name)
     if first:
-        return (f"compiling the ray kernels for this machine ({module}); the first run only, later runs "
-                f"load them from numba's cache")
-    return f"compiling the ray kernels of {module} (first run only)"
+        return (f"compiling the ray kernels for this machine, the first run only (numba caches them): {name}")
+    return f"compiling {name}"
 
 
 def announce_compiles() -> None:
@@ -84,8 +85,9 @@ def announce_compiles() -> None:
     class Announce(event.Listener):
         def on_start(self, ev):
             dispatcher = (ev.data or {}).get("dispatcher")
-            module = getattr(getattr(dispatcher, "py_func", None), "__module__", None) or ""
-            message = compile_message(module)
+            function = getattr(dispatcher, "py_func", None)
+            message = compile_message(getattr(function, "__module__", None) or "",
+                                      getattr(function, "__name__", ""))
             if message:
                 say(message)
 

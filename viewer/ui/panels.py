@@ -28,24 +28,23 @@ BAKING_NOTE = "Lightmap: tracing the final gather for the new geometry..."
 meanwhile shows the probes per fragment)."""
 KERNELS = ("physical", "paper")
 LIGHT_SAMPLES = (4, 8, 16, 32, 64)
-HELP = """\
-Mouse
-  left drag            orbit around the target
-  shift + left drag    pan (also middle drag)
-  wheel                zoom
-  right drag           look around (fly mode)
-  right held + W A S D fly forward / left / back / right
-               Q E     down / up (shift: faster)
-Keys
-  Z     reset the camera
-  S     save a screenshot of the view (PNG in the current folder)
-  shift + S   ... of the whole window, panels included
-  R     reload shaders (errors are shown, the old ones keep running)
-  F1    this help
-  Tab   hide / show the panel
-  Esc   quit
-Files
-  drop an .obj .glb .gltf or .ply file on the window to open it"""
+HELP = (
+    ("Mouse", (("left drag", "orbit around the target"),
+               ("shift + left drag", "pan (also middle drag)"),
+               ("wheel", "zoom"),
+               ("right drag", "look around (fly mode)"),
+               ("right held + W A S D", "fly forward / left / back / right"),
+               ("right held + Q E", "down / up (shift: faster)"))),
+    ("Keys", (("Z", "reset the camera"),
+              ("S", "save a screenshot of the view (PNG in the current folder)"),
+              ("shift + S", "... of the whole window, panels included"),
+              ("R", "reload shaders (errors are shown, the old ones keep running)"),
+              ("F1", "this help"),
+              ("Tab", "hide / show the panel"),
+              ("Esc", "quit"))),
+    ("Files", (("drop a file", "open an .obj .glb .gltf or .ply file"),)),
+)
+"""The F1 help: sections of (input, what it does), drawn as a two-column table."""
 
 
 @dataclass
@@ -136,11 +135,15 @@ def gi_section(gi: GIController, baking: bool = False) -> None:
     if changed:
         gi.set_settings(probes=probes)
     line, progress, error = gi.status()
+    imgui.push_text_wrap_pos(0.0)   # status lines wrap at the panel's edge, never cut
     imgui.text(line)
+    imgui.pop_text_wrap_pos()
     if progress is not None and gi.busy:
         imgui.progress_bar(progress, imgui.ImVec2(-1, 0))
     if baking:
+        imgui.push_text_wrap_pos(0.0)
         imgui.text_colored(NOTE_COLOUR, BAKING_NOTE)
+        imgui.pop_text_wrap_pos()
     if error:
         imgui.push_text_wrap_pos(0.0)
         imgui.text_colored(ERROR_COLOUR, error)
@@ -250,7 +253,9 @@ def frame_time_overlay(times: FrameTimes, gi_line: str, shown: bool) -> None:
              | imgui.WindowFlags_.no_focus_on_appearing | imgui.WindowFlags_.no_nav | imgui.WindowFlags_.no_move)
     imgui.begin("Frame time", None, flags)
     draw_frame_graph(times, height=60.0)
+    imgui.push_text_wrap_pos(0.0)   # the window keeps its width; a long line wraps below
     imgui.text_colored(NOTE_COLOUR, gi_line)
+    imgui.pop_text_wrap_pos()
     imgui.end()
 
 
@@ -263,7 +268,18 @@ def help_window(options: ViewOptions) -> None:
     imgui.set_next_window_bg_alpha(0.9)
     flags = imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
     _, still_open = imgui.begin("Help (F1)", True, flags)
-    imgui.text(HELP)
+    if imgui.begin_table("help", 2, imgui.TableFlags_.sizing_fixed_fit | imgui.TableFlags_.row_bg):
+        for section, rows in HELP:
+            imgui.table_next_row()
+            imgui.table_next_column()
+            imgui.text_colored(WARNING_COLOUR, section)
+            for key, action in rows:
+                imgui.table_next_row()
+                imgui.table_next_column()
+                imgui.text(key)
+                imgui.table_next_column()
+                imgui.text(action)
+        imgui.end_table()
     imgui.end()
     options.show_help = bool(still_open)
 
