@@ -16,10 +16,13 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 import time
 from contextlib import contextmanager
 
 PREFIX = "viewer: "
+HEARTBEAT = 8.0
+"""While one kernel compiles, a line every this many seconds."""
 SLOW_SECONDS = 2.0
 """A step that took longer than this says how long it took when it ends."""
 
@@ -82,19 +85,35 @@ def announce_compiles() -> None:
         return
     from numba.core import event
 
+    compiling: list[tuple[str, float]] = []   # the kernels being compiled, innermost last, and since when
+    said = [time.perf_counter()]
+
+    def heartbeat():   # one kernel can take most of a minute: say it is still going every HEARTBEAT seconds
+        while True:
+            time.sleep(1.0)
+            if compiling and time.perf_counter() - said[0] >= HEARTBEAT:
+                name, start = compiling[-1]
+                say(f"still compiling {name} ({time.perf_counter() - start:.0f} s)")
+                said[0] = time.perf_counter()
+
     class Announce(event.Listener):
         def on_start(self, ev):
             dispatcher = (ev.data or {}).get("dispatcher")
             function = getattr(dispatcher, "py_func", None)
-            message = compile_message(getattr(function, "__module__", None) or "",
-                                      getattr(function, "__name__", ""))
+            module = getattr(function, "__module__", None) or ""
+            compiling.append((f"{module}.{getattr(function, '__name__', '')}", time.perf_counter()))
+            message = compile_message(module, getattr(function, "__name__", ""))
             if message:
                 say(message)
+                said[0] = time.perf_counter()
 
         def on_end(self, ev):
-            pass
+            if compiling:
+                compiling.pop()
 
     event.register("numba:compile", Announce())
+    if enabled():
+        threading.Thread(target=heartbeat, name="compile-heartbeat", daemon=True).start()
     _listening = True
 
 
