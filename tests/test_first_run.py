@@ -153,3 +153,28 @@ def test_capture_says_what_it_is_doing_when_asked(tmp_path):
 
 def test_plural():
     assert progress.plural(1, "bounce") == "1 bounce" and progress.plural(3, "bounce") == "3 bounces"
+
+
+# ---- small things ------------------------------------------------------------------------------------------
+
+def test_a_captured_baked_grid_says_baked(tmp_path):
+    grid, out = tmp_path / "grid.npz", tmp_path / "baked.png"
+    small = ["--voxels", "8", "--probes", "4", "--directions", "32"]
+    assert run("bake", "cornell", "--out", grid, *small).returncode == 0
+    result = run("capture", grid, "--size", "32x24", "--out", out)
+    assert result.returncode == 0, result.stderr
+    assert "gi baked)" in result.stderr.strip().splitlines()[-1], result.stderr
+
+
+def test_the_neural_warning_names_each_commands_flag():
+    from viewer.neural.domain import warning
+
+    line = warning(["a reason"])
+    assert "--gi compute" in line and "--method solver" in line and "\n" not in line
+
+
+def test_the_pictures_the_readme_writes_are_ignored_and_the_license_is_mit():
+    ignored = subprocess.run(["git", "check-ignore", "-q", "cornell.png"], cwd=ROOT)
+    assert ignored.returncode == 0
+    assert "MIT License" in (ROOT / "LICENSE").read_text()
+    assert 'license-files = ["LICENSE"]' in (ROOT / "pyproject.toml").read_text()
