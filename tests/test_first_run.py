@@ -178,3 +178,12 @@ def test_the_pictures_the_readme_writes_are_ignored_and_the_license_is_mit():
     assert ignored.returncode == 0
     assert "MIT License" in (ROOT / "LICENSE").read_text()
     assert 'license-files = ["LICENSE"]' in (ROOT / "pyproject.toml").read_text()
+
+
+def test_a_view_copied_from_the_window_is_read_back_by_capture():
+    from viewer.cli_parsing import camera_flags, parse_camera
+
+    line = camera_flags((-0.7, 0.3, 3.5), (0.0, -0.1, 0.0), 42.5)
+    assert line == "--camera -0.7,0.3,3.5,0,-0.1,0 --fov 42.5"
+    args = cli.build_parser().parse_args(joined_negative_values(["capture", "--out", "x.png", *line.split()]))
+    assert parse_camera(args.camera) == ((-0.7, 0.3, 3.5), (0.0, -0.1, 0.0)) and args.fov == 42.5

@@ -108,8 +108,7 @@ class ViewerApp(mglw.WindowConfig):
     window_size = (1280, 720)
     aspect_ratio = None
     """Free aspect: the view fills the window whatever its shape."""
-    resizable = True
-    vsync = True
+    resizable, vsync = True, True
     samples = 0
     clear_color = None
     """The viewport covers the whole window every frame: no clear needed."""
@@ -170,6 +169,7 @@ class ViewerApp(mglw.WindowConfig):
             keys.F1: lambda mods: setattr(self.view, "show_help", not self.view.show_help),
             keys.TAB: lambda mods: setattr(self.view, "show_panel", not self.view.show_panel),
             keys.Z: lambda mods: self.session.camera.reset(),
+            keys.C: lambda mods: self.session.copy_view(),
         }, linger=self.interaction_linger)
         settings = RenderSettings(light_samples=self.light_samples, interleave=self.interleave)
         self.renderer = Renderer(self.ctx, settings, options.shader_dir or SHADERS)

@@ -62,6 +62,13 @@ def parse_camera(text: str) -> tuple[tuple[float, float, float], tuple[float, fl
     return origin, target
 
 
+def camera_flags(origin, target, fov: float) -> str:
+    """A view as capture's flags, `--camera ox,oy,oz,tx,ty,tz --fov F` (what `parse_camera` reads back): the
+    window's C key gives it, so that a view found in the window can be captured."""
+    numbers = ",".join(f"{float(v):.6g}" for v in (*origin, *target))
+    return f"--camera {numbers} --fov {float(fov):.6g}"
+
+
 NEGATIVE_VALUE_FLAGS = ("--camera", "--sun")
 """Flags whose value is a list of numbers that may start with a minus sign (`--camera -0.7,0.3,...`)."""
 

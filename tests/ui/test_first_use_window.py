@@ -24,3 +24,28 @@ def test_an_unlit_scene_is_said_where_the_eye_is(display, tmp_path):
     assert np.asarray(Image.open(view).convert("RGB")).max() <= 8            # the view is black
     middle = picture[320:400, 300:620]                                       # the view's centre, left of the panel
     assert middle.max() >= 150, "no message over the middle of the view"
+
+
+def test_the_c_key_gives_the_view_as_captures_flags(display, x11, tmp_path):
+    import re
+    import subprocess
+    import sys
+
+    from viewer.bench.x11 import REPO
+
+    viewer = Viewer(display, ["cornell", "--gi", "off", "--quit-after", "120"], tmp_path)
+    try:
+        window = viewer.ready()
+        x0, y0 = x11.origin(window)
+        x11.move(x0 + 300, y0 + 300)
+        x11.drag((x0 + 300, y0 + 300), (x0 + 420, y0 + 300))        # orbit: x of the eye turns negative
+        count = len(viewer.lines)
+        x11.key("c")
+        line = viewer.wait_for(r"view: (--camera \S+ --fov \S+)$", start=count).group(1)
+    finally:
+        viewer.kill()
+    assert re.match(r"--camera -", line), line
+    out = tmp_path / "kept.png"
+    result = subprocess.run([sys.executable, "-m", "viewer", "capture", "cornell", "--gi", "off", "--size", "32x24",
+                             "--out", str(out), *line.split()], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0 and out.is_file(), result.stderr

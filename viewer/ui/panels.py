@@ -36,6 +36,7 @@ HELP = (
                ("right held + W A S D", "fly forward / left / back / right"),
                ("right held + Q E", "down / up (shift: faster)"))),
     ("Keys", (("Z", "reset the camera"),
+              ("C", "copy the view as capture's --camera and --fov (also printed)"),
               ("S", "save a screenshot of the view (PNG in the current folder)"),
               ("shift + S", "... of the whole window, panels included"),
               ("R", "reload shaders (errors are shown, the old ones keep running)"),

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer.cli_parsing import camera_flags
 from viewer.gpu.renderer import Renderer
 from viewer.scene import SUPPORTED_SUFFIXES, Scene, load
 from viewer.scene.camera import home_camera
@@ -113,6 +114,18 @@ class Session:
         self._show_domain_warning()
         if view == "voxels":
             self._update_voxels()
+
+    def copy_view(self) -> str:
+        """The view as capture's flags (`--camera ... --fov ...`): on stderr, on the clipboard and said in the
+        window (the C key)."""
+        from imgui_bundle import imgui
+
+        camera = self.camera.camera()
+        line = camera_flags(camera.origin, camera.target, camera.fov)
+        imgui.set_clipboard_text(line)
+        self.messages.append(Message(f"The view, copied (capture takes it): {line}"))
+        self.log(f"view: {line}")
+        return line
 
     def _show_domain_warning(self) -> None:
         """A message while the neural source shows a scene outside its training domain (replaced when
