@@ -187,3 +187,18 @@ def test_a_view_copied_from_the_window_is_read_back_by_capture():
     assert line == "--camera -0.7,0.3,3.5,0,-0.1,0 --fov 42.5"
     args = cli.build_parser().parse_args(joined_negative_values(["capture", "--out", "x.png", *line.split()]))
     assert parse_camera(args.camera) == ((-0.7, 0.3, 3.5), (0.0, -0.1, 0.0)) and args.fov == 42.5
+
+
+def test_a_turntable_is_an_animated_gif_turning_about_the_scene(tmp_path):
+    from PIL import Image
+
+    out = tmp_path / "turn.gif"
+    result = run("capture", "cornell", "--gi", "off", "--size", "48x32", "--turntable", "8", "--out", out)
+    assert result.returncode == 0, result.stderr
+    gif = Image.open(out)
+    assert gif.is_animated and gif.n_frames >= 4 and gif.size == (48, 32)
+    first = np.asarray(gif.convert("RGB")).copy()
+    gif.seek(1)
+    assert np.abs(np.asarray(gif.convert("RGB")).astype(int) - first).max() > 30   # the view turned
+    bad = run("capture", "cornell", "--turntable", "8", "--out", tmp_path / "turn.png")
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "gif" in bad.stderr

@@ -62,7 +62,7 @@ def capture_request(args, **changes) -> CaptureRequest:
                           gi=value("gi", CaptureRequest.gi), view=value("view", CaptureRequest.view),
                           camera=camera, fov=value("fov"), render=render,
                           msaa=int(value("msaa", CaptureRequest.msaa)), sun=sun, gi_settings=gi_settings(args),
-                          model=value("model"))
+                          model=value("model"), turntable=int(value("turntable", 0)))
 
 
 def run_capture(request: CaptureRequest) -> int:
@@ -159,7 +159,9 @@ def render(request: CaptureRequest, probe_source: ProbeSource | None = None) -> 
     if not 0 <= settings.light_samples <= MAX_LIGHT_SAMPLES:
         raise CaptureError(f"--light-samples {settings.light_samples}: expected 0..{MAX_LIGHT_SAMPLES}")
     suffix = Path(out).suffix.lower()
-    if suffix not in (".png", ".jpg", ".jpeg", ".npy"):
+    if request.turntable and (suffix != ".gif" or not 2 <= request.turntable <= 720):
+        raise CaptureError(f"--turntable {request.turntable}: expected 2..720 frames written to a .gif --out")
+    if suffix not in (".png", ".jpg", ".jpeg", ".npy") and not request.turntable:
         raise CaptureError(f"--out {out}: expected a .png (or .jpg, or .npy for linear HDR radiance)")
     if not Path(out).resolve().parent.is_dir():
         raise CaptureError(f"--out {out}: the folder {Path(out).parent} does not exist")
@@ -182,8 +184,11 @@ def render(request: CaptureRequest, probe_source: ProbeSource | None = None) -> 
         gathers = probes is not None and view in ("final", "indirect") and settings.final_gather
         with step(f"capture: rendering {size[0]}x{size[1]}"
                   + (" (the lightmap's final gather traces its rays)" if gathers else "")):
-            capture(scene, probes, out, size=size, view=view, camera=camera, settings=settings, voxels=voxels,
-                    voxel_radiance=radiance, samples=int(request.msaa), ctx=ctx)
+            if request.turntable:
+                turntable(scene, probes, out, size, view, camera, settings, voxels, radiance, request, ctx)
+            else:
+                capture(scene, probes, out, size=size, view=view, camera=camera, settings=settings,
+                        voxels=voxels, voxel_radiance=radiance, samples=int(request.msaa), ctx=ctx)
     finally:
         ctx.release()
     shown = (getattr(probe_source, "label", None) if probes is not None else None) or gi
@@ -192,6 +197,40 @@ def render(request: CaptureRequest, probe_source: ProbeSource | None = None) -> 
     print(f"capture: {out} ({size[0]}x{size[1]}, view {view}, gi {shown}); probes {solved - start:.2f} s, "
           f"render {time.perf_counter() - solved:.2f} s", file=sys.stderr)
     return 0
+
+
+def turntable(scene, probes, out, size, view, camera, settings, voxels, radiance, request, ctx) -> None:
+    """`capture --turntable N`: N frames of the camera turned about the vertical axis through the scene's
+    centre (its height and distance kept), as a looping animated GIF of 25 frames a second. The scene,
+    its probes and its lightmap are set up once; each frame is one more draw."""
+    import math
+
+    import numpy as np
+    from PIL import Image
+
+    from viewer.gpu.offscreen import OffscreenRenderer
+    from viewer.scene import Camera
+
+    lo, hi = scene.bounds
+    centre = 0.5 * (np.asarray(lo) + np.asarray(hi))
+    offset = np.asarray(camera.origin, np.float64) - centre
+    target = np.asarray(camera.target, np.float64) - centre
+    offscreen = OffscreenRenderer(size, settings, int(request.msaa), ctx)
+    frames = []
+    try:
+        offscreen.renderer.set_scene(scene)
+        offscreen.renderer.set_probes(probes)
+        if view == "voxels":
+            offscreen.renderer.set_voxels(voxels, radiance)
+        for index in range(request.turntable):
+            angle = 2.0 * math.pi * index / request.turntable
+            c, s = math.cos(angle), math.sin(angle)
+            turn = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+            frame = Camera(tuple(centre + turn @ offset), tuple(centre + turn @ target), camera.up, camera.fov)
+            frames.append(Image.fromarray(offscreen.render(frame, view)))
+    finally:
+        offscreen.release()
+    frames[0].save(out, save_all=True, append_images=frames[1:], duration=40, loop=0)
 
 
 def _debug_voxels(scene, view: str, settings: RenderSettings, resolution: int):

@@ -73,13 +73,15 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     capture.add_argument("scene", nargs="?", default="cornell", metavar="SCENE", help=scene_help(grids=True))
     capture.add_argument("--out", required=True, metavar="FILE",
                          help="the picture to write, by its suffix: .png, .jpg (or .jpeg), or .npy for the "
-                              "linear HDR radiance (H, W, 3) float32")
+                              "linear HDR radiance (H, W, 3) float32; .gif with --turntable")
     capture.add_argument("--size", default="1280x720", metavar="WxH", help="the picture's size")
     capture.add_argument("--gi", choices=sources.chosen_by_name(), default=sources.DEFAULT,
                          help="where the indirect light comes from, as in the window (compute: the "
                               "compute-shader solver)")
     capture.add_argument("--view", choices=VIEWS, default="final", help="what the picture shows")
     capture.add_argument("--msaa", type=int, default=4, metavar="N", help="multisample count (default: %(default)s)")
+    capture.add_argument("--turntable", type=int, default=0, metavar="N",
+                         help="N frames of a turn around the scene's centre, as an animated .gif --out")
     capture.add_argument("--camera", metavar="ox,oy,oz,tx,ty,tz",
                          help="the camera's position and the point it looks at (default: the view the viewer "
                               "opens the scene with)")

@@ -49,3 +49,5 @@ class CaptureRequest:
     """The solvers' settings (`--gi solver` and `compute`); its voxels are also the `voxels` view's."""
     model: str | None = None
     """The neural source's .onnx file (None: the shipped model)."""
+    turntable: int = 0
+    """Frames of a turn around the scene's centre, written as an animated .gif (0: one picture)."""
