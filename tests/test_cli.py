@@ -34,6 +34,16 @@ def test_sample_writes_sh_at_points_and_reports_seconds(tmp_path, points):
     assert "total" in result.stderr and "s" in result.stderr
 
 
+def test_sample_writes_exactly_the_out_path_it_is_given(tmp_path, points):
+    """`--out sh.txt` is sh.txt (numpy alone would write sh.txt.npy), and nothing else is left beside it."""
+    out = tmp_path / "sh.txt"
+    result = run("sample", "cornell", "--points", points, "--method", "solver", "--out", out,
+                 "--voxels", "8", "--probes", "4", "--directions", "64")
+    assert result.returncode == 0, result.stderr
+    assert np.load(out).shape == (3, 9, 3)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["points.npy", "sh.txt"]
+
+
 def test_a_scene_without_emitters_gives_a_black_finite_field(tmp_path, points):
     scene = tmp_path / "dark.obj"
     scene.write_text("v -1 -1 -1\nv 1 -1 -1\nv 1 -1 1\nv -1 -1 1\nv 0 1 0\nf 1 3 2\nf 1 4 3\nf 1 2 5\n")

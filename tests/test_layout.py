@@ -22,7 +22,7 @@ MAX_LINES = 400
 
 RANKS = {
     # the package itself (viewer/__init__.py) and where the data files are
-    "viewer": 0, "resources": 0,
+    "viewer": 0, "resources": 0, "output": 0,   # output: files written whole, where the user said
     "scene": 1,                       # the Scene type and everything that makes one
     "rays": 2,                        # voxels and the compiled ray kernels
     "probes": 3,                      # the ProbeGrid type, SH, the surface weights

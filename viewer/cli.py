@@ -20,6 +20,7 @@ from viewer.errors import ArgumentParser, InputError, exit_status
 from viewer.gpu.render_settings import RenderSettings
 from viewer.physical.gi import Timings
 from viewer.ui.options import add_arguments as view_arguments  # no GL or imgui import
+from viewer.output import replacing
 
 
 VIEWS = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
@@ -140,7 +141,8 @@ def run_sample(args) -> int:
     clock = time.perf_counter()
     sh = grid.interpolate(points).astype(np.float32)
     timings.stages["interpolate"] = time.perf_counter() - clock
-    np.save(out, sh)
+    with replacing(out) as fh:   # exactly --out (np.save would add .npy to another suffix), whole or not at all
+        np.save(fh, sh)
     print(f"sample {args.method}: {len(points)} points; {timings}", file=sys.stderr)
     return 0
 
