@@ -633,3 +633,12 @@ def test_a_scene_file_past_the_size_limit_is_refused_before_it_is_read(tmp_path)
         fh.truncate(MAX_FILE_BYTES + 1)
     with pytest.raises(SceneError, match="MiB"):
         load(huge)
+
+
+def test_light_past_float32s_range_is_refused(tmp_path):
+    """Ke 1e39 and a sun of 1e39 are finite in float64 but put NaN into the float32 probes and picture."""
+    (tmp_path / "hot.mtl").write_text("newmtl lamp\nKe 1e39 1e39 1e39\n")
+    with pytest.raises(SceneError, match="emitted radiance beyond"):
+        load(write_obj(tmp_path / "hot.obj", f"mtllib hot.mtl\n{QUAD_USING_LAMP}"))
+    with pytest.raises(SceneError, match="irradiance beyond"):
+        DirectionalLight((0.0, 1.0, 0.0), (1e39, 1e39, 1e39))
