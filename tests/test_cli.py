@@ -131,6 +131,7 @@ BAD_POINTS = {
     "strings": np.array([["a", "b", "c"]]),
     "not npy": b"this is not an npy file",
     "pickled objects": np.array([[object(), 1, 2]], dtype=object),
+    "an npz archive": "npz",
 }
 
 
@@ -140,6 +141,9 @@ def test_bad_points_exit_2_with_one_line(tmp_path, case):
     value = BAD_POINTS[case]
     if isinstance(value, bytes):
         path.write_bytes(value)
+    elif isinstance(value, str):   # an .npz archive renamed .npy
+        with open(path, "wb") as fh:
+            np.savez(fh, points=np.zeros((3, 3), np.float32))
     elif value is not None:
         np.save(path, value, allow_pickle=True)
     result = run("sample", "cornell", "--points", path, "--out", tmp_path / "sh.npy", "--voxels", "8")
@@ -170,7 +174,7 @@ def test_capture_views_match_the_renderer():
 
 @pytest.mark.parametrize("args", [["--size", "0x10"], ["--size", "big"], ["--camera", "1,2"], ["--fov", "500"],
                                   ["--view", "xray"], ["--exposure", "nan"], ["--exposure", "inf"],
-                                  ["--camera=nan,0,3,0,0,0"], ["--camera=0,0,1,0,0,1"]])
+                                  ["--camera=nan,0,3,0,0,0"], ["--camera=0,0,1,0,0,1"], ["--camera=1e30,0,0,0,0,0"]])
 def test_bad_capture_options_exit_2_with_one_line(tmp_path, args):
     result = run("capture", "cornell", "--out", tmp_path / "x.png", "--gi", "off", *args)
     assert result.returncode == 2, (args, result.stderr)

@@ -107,6 +107,9 @@ def load_points(path: str) -> np.ndarray:
         points = np.load(file, allow_pickle=False)
     except Exception as exc:
         raise InputError(f"{path}: not a readable .npy array ({type(exc).__name__})") from None
+    if not isinstance(points, np.ndarray):   # an .npz archive, whatever its name
+        points.close()
+        raise InputError(f"{path}: an .npz archive, not an .npy array of points")
     if points.ndim != 2 or points.shape[1] != 3 or len(points) == 0:
         raise InputError(f"{path}: points must be a non-empty (P, 3) array, got shape {points.shape}")
     if not np.issubdtype(points.dtype, np.number) or np.issubdtype(points.dtype, np.complexfloating):
