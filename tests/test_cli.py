@@ -267,3 +267,11 @@ def test_the_viewer_and_the_benchmark_do_not_import_each_others_command_line():
     for module, other_side in [*((m, bench_side) for m in viewer_side), *((m, viewer_side) for m in bench_side)]:
         crossing = {m for m in modules[module] if m.startswith(other_side)}
         assert not crossing, f"{module} imports {crossing}"
+
+
+def test_an_error_naming_a_file_is_one_printable_line(tmp_path):
+    """A file name holding a newline and a terminal escape cannot print a forged `error:` line."""
+    name = tmp_path / "room\nerror: forged\x1b[31m.obj"
+    result = run("capture", name, "--out", tmp_path / "x.png")
+    assert result.returncode == 2
+    assert len(result.stderr.splitlines()) == 1 and "\x1b" not in result.stderr, result.stderr
