@@ -34,6 +34,16 @@ def test_sample_writes_sh_at_points_and_reports_seconds(tmp_path, points):
     assert "total" in result.stderr and "s" in result.stderr
 
 
+def test_sample_writes_exactly_the_out_path_it_is_given(tmp_path, points):
+    """`--out sh.txt` is sh.txt (numpy alone would write sh.txt.npy), and nothing else is left beside it."""
+    out = tmp_path / "sh.txt"
+    result = run("sample", "cornell", "--points", points, "--method", "solver", "--out", out,
+                 "--voxels", "8", "--probes", "4", "--directions", "64")
+    assert result.returncode == 0, result.stderr
+    assert np.load(out).shape == (3, 9, 3)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["points.npy", "sh.txt"]
+
+
 def test_a_scene_without_emitters_gives_a_black_finite_field(tmp_path, points):
     scene = tmp_path / "dark.obj"
     scene.write_text("v -1 -1 -1\nv 1 -1 -1\nv 1 -1 1\nv -1 -1 1\nv 0 1 0\nf 1 3 2\nf 1 4 3\nf 1 2 5\n")
@@ -121,6 +131,7 @@ BAD_POINTS = {
     "strings": np.array([["a", "b", "c"]]),
     "not npy": b"this is not an npy file",
     "pickled objects": np.array([[object(), 1, 2]], dtype=object),
+    "an npz archive": "npz",
 }
 
 
@@ -130,6 +141,9 @@ def test_bad_points_exit_2_with_one_line(tmp_path, case):
     value = BAD_POINTS[case]
     if isinstance(value, bytes):
         path.write_bytes(value)
+    elif isinstance(value, str):   # an .npz archive renamed .npy
+        with open(path, "wb") as fh:
+            np.savez(fh, points=np.zeros((3, 3), np.float32))
     elif value is not None:
         np.save(path, value, allow_pickle=True)
     result = run("sample", "cornell", "--points", path, "--out", tmp_path / "sh.npy", "--voxels", "8")
@@ -159,7 +173,8 @@ def test_capture_views_match_the_renderer():
 
 
 @pytest.mark.parametrize("args", [["--size", "0x10"], ["--size", "big"], ["--camera", "1,2"], ["--fov", "500"],
-                                  ["--view", "xray"]])
+                                  ["--view", "xray"], ["--exposure", "nan"], ["--exposure", "inf"],
+                                  ["--camera=nan,0,3,0,0,0"], ["--camera=0,0,1,0,0,1"], ["--camera=1e30,0,0,0,0,0"]])
 def test_bad_capture_options_exit_2_with_one_line(tmp_path, args):
     result = run("capture", "cornell", "--out", tmp_path / "x.png", "--gi", "off", *args)
     assert result.returncode == 2, (args, result.stderr)
@@ -252,3 +267,11 @@ def test_the_viewer_and_the_benchmark_do_not_import_each_others_command_line():
     for module, other_side in [*((m, bench_side) for m in viewer_side), *((m, viewer_side) for m in bench_side)]:
         crossing = {m for m in modules[module] if m.startswith(other_side)}
         assert not crossing, f"{module} imports {crossing}"
+
+
+def test_an_error_naming_a_file_is_one_printable_line(tmp_path):
+    """A file name holding a newline and a terminal escape cannot print a forged `error:` line."""
+    name = tmp_path / "room\nerror: forged\x1b[31m.obj"
+    result = run("capture", name, "--out", tmp_path / "x.png")
+    assert result.returncode == 2
+    assert len(result.stderr.splitlines()) == 1 and "\x1b" not in result.stderr, result.stderr

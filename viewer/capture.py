@@ -209,6 +209,7 @@ def turntable(scene, probes, out, size, view, camera, settings, voxels, radiance
     from PIL import Image
 
     from viewer.gpu.offscreen import OffscreenRenderer
+    from viewer.output import replacing
     from viewer.scene import Camera
 
     lo, hi = scene.bounds
@@ -230,7 +231,8 @@ def turntable(scene, probes, out, size, view, camera, settings, voxels, radiance
             frames.append(Image.fromarray(offscreen.render(frame, view)))
     finally:
         offscreen.release()
-    frames[0].save(out, save_all=True, append_images=frames[1:], duration=40, loop=0)
+    with replacing(out) as file:   # whole or not at all, as every picture
+        frames[0].save(file, format="GIF", save_all=True, append_images=frames[1:], duration=40, loop=0)
 
 
 def _debug_voxels(scene, view: str, settings: RenderSettings, resolution: int):

@@ -22,6 +22,7 @@ from viewer.gpu.render_settings import RenderSettings
 from viewer.physical.gi import Timings
 from viewer.progress import announce_compiles, step
 from viewer.ui.options import add_arguments as view_arguments  # no GL or imgui import
+from viewer.output import replacing
 
 
 VIEWS = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
@@ -131,6 +132,9 @@ def load_points(path: str) -> np.ndarray:
         points = np.load(file, allow_pickle=False)
     except Exception as exc:
         raise InputError(f"{path}: not a readable .npy array ({type(exc).__name__})") from None
+    if not isinstance(points, np.ndarray):   # an .npz archive, whatever its name
+        points.close()
+        raise InputError(f"{path}: an .npz archive, not an .npy array of points")
     if points.ndim != 2 or points.shape[1] != 3 or len(points) == 0:
         raise InputError(f"{path}: points must be a non-empty (P, 3) array, got shape {points.shape}")
     if not np.issubdtype(points.dtype, np.number) or np.issubdtype(points.dtype, np.complexfloating):
@@ -170,7 +174,8 @@ def run_sample(args) -> int:
     clock = time.perf_counter()
     sh = grid.interpolate(points).astype(np.float32)
     timings.stages["interpolate"] = time.perf_counter() - clock
-    np.save(out, sh)
+    with replacing(out) as fh:   # exactly --out (np.save would add .npy to another suffix), whole or not at all
+        np.save(fh, sh)
     print(f"sample {args.method}: {len(points)} points; {timings}", file=sys.stderr)
     return 0
 

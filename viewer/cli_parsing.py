@@ -27,6 +27,9 @@ if TYPE_CHECKING:
 
 # ---- values ---------------------------------------------------------------------------------------------
 
+MAX_CAMERA_COORDINATE = 1e15
+"""The largest camera coordinate (viewer.scene.types.MAX_COORDINATE for vertices): the view matrices are
+float32."""
 WINDOW_SIZES = (64, 16384)
 """The sides a window may have (`python -m viewer --size WxH`)."""
 CAPTURE_SIZES = (1, 8192)
@@ -56,6 +59,8 @@ def parse_camera(text: str) -> tuple[tuple[float, float, float], tuple[float, fl
         values = []
     if len(values) != 6 or not all(math.isfinite(v) for v in values):
         raise InputError(f"--camera {text!r}: expected six numbers ox,oy,oz,tx,ty,tz")
+    if max(abs(v) for v in values) > MAX_CAMERA_COORDINATE:
+        raise InputError(f"--camera {text!r}: coordinates beyond +-{MAX_CAMERA_COORDINATE:.0e}, as for a scene's vertices")
     origin, target = tuple(values[:3]), tuple(values[3:])
     if math.dist(origin, target) < 1e-9:
         raise InputError(f"--camera {text!r}: the origin and the target are the same point")

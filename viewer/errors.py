@@ -54,6 +54,13 @@ class ArgumentParser(argparse.ArgumentParser):
         raise InputError(f"{self.prog}: {message}")
 
 
+def one_line(text: str) -> str:
+    """`text` as one printable line: newlines, terminal escapes and other control characters (which a file
+    name or a string read from a file may hold) are shown escaped, so a message cannot print a forged
+    second line or restyle the terminal."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
 def exit_status(command: Callable[[], int], internal_errors: bool = True) -> int:
     """Run command and return its exit status: bad input (BAD_INPUT) is one line on stderr and 2.
 
@@ -62,7 +69,7 @@ def exit_status(command: Callable[[], int], internal_errors: bool = True) -> int
     try:
         return command()
     except BAD_INPUT as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         if not internal_errors:
@@ -71,6 +78,6 @@ def exit_status(command: Callable[[], int], internal_errors: bool = True) -> int
     except Exception as exc:  # an internal error: one line, and the traceback only when asked for
         if not internal_errors or os.environ.get("VIEWER_DEBUG"):
             raise
-        print(f"internal error: {type(exc).__name__}: {exc} (set VIEWER_DEBUG=1 for a traceback)",
+        print(f"internal error: {type(exc).__name__}: {one_line(str(exc))} (set VIEWER_DEBUG=1 for a traceback)",
               file=sys.stderr)
         return 1

@@ -587,3 +587,58 @@ def test_scene_modules_import_downwards_only():
         assert "types" in viewer_imports(module)
         assert viewer_imports(module).isdisjoint((formats - {module}) | {"loading"}), module
     assert formats | {"types"} <= viewer_imports("loading")
+
+
+# ---- what a scene may open ----------------------------------------------------------------------------------
+
+LAMP_MTL = "newmtl lamp\nKd 0 0 0\nKe 10 10 10\n"
+QUAD_USING_LAMP = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl lamp\nf 1 2 3 4\n"
+
+
+@pytest.mark.parametrize("name", ["../outside.mtl", "{outside}"])
+def test_material_libraries_outside_the_scenes_folder_are_skipped_with_a_line(tmp_path, capsys, name):
+    """`mtllib ../outside.mtl` (or an absolute path elsewhere) is not read: its lamp does not light the
+    scene, and stderr says what was skipped."""
+    (tmp_path / "outside.mtl").write_text(LAMP_MTL)
+    folder = tmp_path / "room"
+    folder.mkdir()
+    name = name.format(outside=tmp_path / "outside.mtl")
+    room = load(write_obj(folder / "room.obj", f"mtllib {name}\n{QUAD_USING_LAMP}"))
+    assert not room.emission.any()
+    assert "skipped" in capsys.readouterr().err
+
+
+def test_material_libraries_inside_the_scenes_folder_are_read(tmp_path):
+    (tmp_path / "materials").mkdir()
+    (tmp_path / "materials" / "lamp.mtl").write_text(LAMP_MTL)
+    room = load(write_obj(tmp_path / "room.obj", f"mtllib materials/lamp.mtl\n{QUAD_USING_LAMP}"))
+    assert room.emission.max() == 10.0
+
+
+def test_a_pipe_named_as_the_scene_is_refused_without_opening_it(tmp_path):
+    """Opening a FIFO would block until something writes to it: it is refused from its stat alone."""
+    import os
+
+    pipe = tmp_path / "scene.obj"
+    os.mkfifo(pipe)
+    with pytest.raises(SceneError, match="not a regular file"):
+        load(pipe)
+
+
+def test_a_scene_file_past_the_size_limit_is_refused_before_it_is_read(tmp_path):
+    from viewer.scene.files import MAX_FILE_BYTES
+
+    huge = tmp_path / "huge.obj"
+    with open(huge, "wb") as fh:   # sparse: no disk used
+        fh.truncate(MAX_FILE_BYTES + 1)
+    with pytest.raises(SceneError, match="MiB"):
+        load(huge)
+
+
+def test_light_past_float32s_range_is_refused(tmp_path):
+    """Ke 1e39 and a sun of 1e39 are finite in float64 but put NaN into the float32 probes and picture."""
+    (tmp_path / "hot.mtl").write_text("newmtl lamp\nKe 1e39 1e39 1e39\n")
+    with pytest.raises(SceneError, match="emitted radiance beyond"):
+        load(write_obj(tmp_path / "hot.obj", f"mtllib hot.mtl\n{QUAD_USING_LAMP}"))
+    with pytest.raises(SceneError, match="irradiance beyond"):
+        DirectionalLight((0.0, 1.0, 0.0), (1e39, 1e39, 1e39))

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer.output import replacing
+
 MAGIC = b"DDS "
 DXGI_FORMATS = {np.dtype("<f4"): 2, np.dtype("<f2"): 10}
 """numpy dtype -> DXGI format of four channels: R32G32B32A32_FLOAT (2), R16G16B16A16_FLOAT (10)."""
@@ -58,7 +60,7 @@ def write_volume(path: str | Path, texels: np.ndarray) -> None:
     header = struct.pack("<7I44x", 124, FLAGS, height, width, pitch, depth, 1) + pixel_format
     header += struct.pack("<4I4x", CAPS, CAPS2_VOLUME, 0, 0)
     dx10 = struct.pack("<5I", DXGI_FORMATS[dtype], TEXTURE3D, 0, 1, 0)
-    with open(path, "wb") as out:
+    with replacing(path) as out:
         out.write(MAGIC + header + dx10)
         out.write(texels.astype(dtype, copy=False).tobytes())
 

@@ -36,6 +36,7 @@ import numpy as np
 
 from viewer.probes.grid import ProbeGrid
 from viewer.scene.types import DirectionalLight
+from viewer.output import replacing
 
 FORMAT = "gi-viewer probe grid"
 VERSION = 1
@@ -82,7 +83,7 @@ def write_npz(baked: BakedGrid, path: str | Path) -> None:
     except PackageNotFoundError:  # running from a checkout that was never installed
         generator = "gi-viewer (source checkout)"
     grid, sun = baked.radiance, baked.sun
-    with open(path, "wb") as out:  # a file object: np.savez would append .npz to another suffix
+    with replacing(path) as out:  # a file object: np.savez would append .npz to another suffix
         np.savez_compressed(
             out, format=np.str_(FORMAT), version=np.int64(VERSION), lo=grid.lo, hi=grid.hi,
             resolution=np.int64(grid.resolution), sh_order=np.int64(2), sh_basis=np.str_(SH_BASIS),

@@ -22,6 +22,7 @@ from viewer.gpu.renderer import VIEWS, RenderSettings, Renderer
 from viewer.gpu.targets import DisplayTarget, HdrTarget
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Camera, Scene
+from viewer.output import replacing
 
 __all__ = ["CaptureError", "MAX_SIZE", "OffscreenRenderer", "capture", "save"]
 
@@ -129,8 +130,10 @@ def save(image: np.ndarray, path: str | Path) -> None:
     path = Path(path)
     if not path.resolve().parent.is_dir():
         raise CaptureError(f"{path}: the folder {path.parent} does not exist")
-    if path.suffix.lower() == ".npy":
-        np.save(path, image)
-    else:
-        from PIL import Image
-        Image.fromarray(image).save(path)
+    with replacing(path) as out:
+        if path.suffix.lower() == ".npy":
+            np.save(out, image)
+        else:
+            from PIL import Image
+
+            Image.fromarray(image).save(out, format=Image.registered_extensions().get(path.suffix.lower(), "PNG"))

@@ -11,6 +11,9 @@ from dataclasses import dataclass
 VIEWS = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
 TONEMAPS = {"none": 0, "reinhard": 1, "aces": 2}
 VOXEL_COLORS = ("albedo", "radiance")
+MAX_EXPOSURE = 64.0
+"""Stops either way: 2^64 scales any radiance float32 holds to white or black already; NaN and infinity
+would give a black picture."""
 
 
 @dataclass
@@ -71,6 +74,8 @@ class RenderSettings:
     (a full grid of strata: 32, 72, 128, ...); 0: the probes' light alone."""
 
     def __post_init__(self):
+        if not (isinstance(self.exposure, (int, float)) and abs(self.exposure) <= MAX_EXPOSURE):
+            raise ValueError(f"exposure must be a number of stops within +-{MAX_EXPOSURE:g}, not {self.exposure!r}")
         if self.tonemap not in TONEMAPS:
             raise ValueError(f"tonemap must be one of {', '.join(TONEMAPS)}, not {self.tonemap!r}")
         if not 0.0 <= self.probe_plane_falloff <= 20.0:

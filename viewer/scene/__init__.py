@@ -6,6 +6,7 @@
     loaders.py   glTF, GLB, PLY (through trimesh) -> Scene
     meshes.py    built-in meshes (boxes, spheres, ...) for procedural scenes
     camera.py    the camera a scene opens with (its file's own, or one framing it)
+    files.py     what a scene may open: regular files of bounded size, companions from its own folder
 
 `from viewer.scene import Scene, load` is the face every later stage uses.
 """

@@ -18,6 +18,7 @@ import numpy as np
 
 from viewer.scene import loaders
 from viewer.scene import obj
+from viewer.scene.files import check_readable
 from viewer.resources import SCENES
 from viewer.scene.types import Camera, DirectionalLight, Scene, SceneError, note
 
@@ -60,6 +61,7 @@ def load(source: str | Path, sun: DirectionalLight | None = None) -> Scene:
     if suffix not in SUPPORTED_SUFFIXES:
         raise SceneError(f"{path}: unsupported format {suffix or '(none)'!r}; "
                          f"use one of {', '.join(SUPPORTED_SUFFIXES)}")
+    check_readable(path)   # before opening it: a pipe would block, a huge file would be read whole
     try:
         with open(path, "rb") as fh:
             fh.read(1)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer.scene.files import check_readable, companion
 from viewer.scene.types import Scene, SceneError
 
 DEFAULT_ALBEDO = (0.7, 0.7, 0.7)
@@ -58,12 +59,13 @@ def read(path: Path) -> Scene:
                 face_material.append(current)
         elif key == "usemtl":
             current = _material_index(material_names, " ".join(words[1:]) or "default")
-        elif key == "mtllib":
+        elif key == "mtllib":   # one name with spaces, or several names; only inside the scene's folder
             rest = raw.split("#", 1)[0].strip()[len("mtllib"):].strip()
             libraries = [rest] if _is_file(path.parent / rest) else rest.split()
-            for name in libraries:
-                if _is_file(path.parent / name):
-                    materials.update(read_mtl(path.parent / name))
+            for library in filter(None, (companion(path, name) for name in libraries)):
+                if _is_file(library):
+                    check_readable(library, "material library")
+                    materials.update(read_mtl(library))
     if not faces:
         raise SceneError(f"{path}: no faces found")
     albedo = np.array([materials.get(n, {}).get("Kd", DEFAULT_ALBEDO) for n in material_names], np.float64)

@@ -22,6 +22,10 @@ import numpy as np
 MAX_COORDINATE = 1e15
 """Largest vertex coordinate: the renderer and the compute solver work in float32 (up to 3.4e38), and
 triangle areas, squares of coordinates, summed over a voxel, must stay finite there."""
+MAX_RADIANCE = 1e30
+"""Largest emitted radiance (and sun irradiance): the bounces, the probes' SH and the renderer work in
+float32 (up to 3.4e38) and multiply it by areas, solid angles and the bounce series' sum; a value finite
+in float64 but past this would come out as NaN or infinity in the probes and the picture."""
 FLAT = 1e-6
 """A bounding box thinner than this fraction of its largest extent along an axis is flat along it."""
 
@@ -52,6 +56,8 @@ class DirectionalLight:
             raise SceneError("directional light: direction must be a finite non-zero vector")
         if not np.all(np.isfinite(e)) or np.any(e < 0):
             raise SceneError("directional light: irradiance must be finite and non-negative")
+        if np.any(e > MAX_RADIANCE):
+            raise SceneError(f"directional light: irradiance beyond {MAX_RADIANCE:.0e} (the GI works in float32)")
         object.__setattr__(self, "direction", d / np.linalg.norm(d))
         object.__setattr__(self, "irradiance", e)
 
@@ -110,6 +116,8 @@ class Scene:
             raise SceneError(f"{self.name}: material colours contain NaN or infinity")
         if np.any(emission < 0):
             raise SceneError(f"{self.name}: negative emission")
+        if np.any(emission > MAX_RADIANCE):
+            raise SceneError(f"{self.name}: emitted radiance beyond {MAX_RADIANCE:.0e} (the GI works in float32)")
         # Albedo 1 never converges (eq. 30 is a geometric series in albedo): keep it just below.
         albedo = np.clip(albedo, 0.0, 0.999)
         group = np.broadcast_to(np.asarray(self.face_group, np.int64), (len(f),)).copy()
