@@ -61,7 +61,8 @@ def capture_request(args, **changes) -> CaptureRequest:
     return CaptureRequest(out=value("out"), scene=str(value("scene", CaptureRequest.scene)), size=size,
                           gi=value("gi", CaptureRequest.gi), view=value("view", CaptureRequest.view),
                           camera=camera, fov=value("fov"), render=render,
-                          msaa=int(value("msaa", CaptureRequest.msaa)), sun=sun, gi_settings=gi_settings(args),
+                          msaa=int(value("msaa", CaptureRequest.msaa)), sun=sun,
+                          gi_settings=gi_settings(args, size, int(value("msaa", CaptureRequest.msaa))),
                           model=value("model"), turntable=int(value("turntable", 0)))
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from viewer.errors import ArgumentParser, InputError
+from viewer.physical.work import MAX_PROBES, WorkError, check_work
 
 if TYPE_CHECKING:
     from viewer.physical.gi import GISettings
@@ -159,7 +160,7 @@ GI_FLAG_NAMES = {"normal_mode": "--normals"}
 GI_CHOICES = {"kernel": ("physical", "paper"), "normal_mode": ("area", "paper")}
 GI_METAVARS = {"voxels": "N", "probes": "M", "bounces": "B", "directions": "D", "gather_rays": "R",
                "dering": "S", "invalid_backface_fraction": "F"}
-GI_LIMITS = {"voxels": (4, 256), "probes": (2, 128), "bounces": (0, 100000), "directions": (16, 65536),
+GI_LIMITS = {"voxels": (4, 256), "probes": (2, MAX_PROBES), "bounces": (0, 100000), "directions": (16, 65536),
              "gather_rays": (1, 65536), "dering": (0.0, 1.0), "invalid_backface_fraction": (0.0, 1.0)}
 """The values a GI flag accepts, both ends included."""
 
@@ -172,9 +173,10 @@ def add_gi_flags(parser: argparse.ArgumentParser) -> None:
     add_dataclass_flags(parser, GISettings, names=GI_FLAG_NAMES, choices=GI_CHOICES, metavars=GI_METAVARS)
 
 
-def gi_settings(args) -> GISettings:
-    """The GISettings of the GI flags on args (defaults for the missing ones); a value out of range is
-    bad input (InputError)."""
+def gi_settings(args, size: tuple[int, int] | None = None, msaa: int = 1) -> GISettings:
+    """The GISettings of the GI flags on args (defaults for the missing ones); a value out of range, or
+    flags whose product (with a picture's `size` and `msaa`) asks for more memory than a request may use
+    (viewer.physical.work), is bad input (InputError)."""
     from viewer.physical.gi import GISettings
 
     settings = dataclass_from_args(GISettings, args)
@@ -185,6 +187,10 @@ def gi_settings(args) -> GISettings:
             if isinstance(low, float):
                 raise InputError(f"{flag} {value}: must be between {low:g} and {high:g}")
             raise InputError(f"{flag} {value}: must be between {low} and {high}")
+    try:
+        check_work(settings, size, msaa)
+    except WorkError as exc:
+        raise InputError(str(exc)) from None
     return settings
 
 

@@ -6,4 +6,5 @@
     retrace.py     after a moved lamp or object: trace again only the rays the move can change
     relight.py     the bounces and the probe projection as sparse products (every edit)
     transport.py   the reference numpy solver and the paper's kernel (eq. 23-30)
+    work.py        the memory a request's settings ask for, checked before a solve starts
 """
