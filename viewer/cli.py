@@ -204,6 +204,10 @@ def run_bake(args) -> int:
             raise InputError(f"{name}: expected a {suffix} file")
         if not Path(name).resolve().parent.is_dir():
             raise InputError(f"{name}: folder {Path(name).parent} does not exist")
+    scene_path = Path(args.scene)
+    if scene_path.suffix and not scene_path.resolve().is_relative_to(Path(args.out).resolve().parent):
+        print(f"bake: note: {args.scene} lies outside the folder of {args.out}; opening the grid will need "
+              f"its scene beside it or below it", file=sys.stderr)
     start = time.perf_counter()
     scene = _load_scene(args)
     timings = Timings({"load": time.perf_counter() - start})

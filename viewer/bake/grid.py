@@ -34,8 +34,10 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer.physical.work import MAX_PROBES
 from viewer.probes.grid import ProbeGrid
-from viewer.scene.types import DirectionalLight
+from viewer.scene.files import check_readable
+from viewer.scene.types import MAX_COORDINATE, DirectionalLight, SceneError
 from viewer.output import replacing
 
 FORMAT = "gi-viewer probe grid"
@@ -93,27 +95,69 @@ def write_npz(baked: BakedGrid, path: str | Path) -> None:
             settings=np.str_(json.dumps(baked.settings)), generator=np.str_(generator))
 
 
+MAX_TEXT_BYTES = 1 << 20
+"""The largest text or small entry of a grid (its settings, scene name, box ...): 1 MiB."""
+
+
+def member_limit(key: str) -> int:
+    """The most bytes the entry `key` of a grid may hold once decompressed: the probes of a grid of
+    MAX_PROBES per axis, as float64 at most; its validity; 1 MiB for the rest."""
+    if key in ("radiance", "indirect"):
+        return MAX_PROBES ** 3 * 27 * 8 + 4096
+    if key == "valid":
+        return MAX_PROBES ** 3 + 4096
+    return MAX_TEXT_BYTES
+
+
 def read_npz(path: str | Path) -> BakedGrid:
-    """A baked grid, checked key by key; anything else is a BakedError naming the file."""
+    """A baked grid, checked key by key; anything else is a BakedError naming the file.
+
+    The size every entry declares (in the zip's directory and in its array header) is checked against
+    `member_limit` before it is decompressed: a small file that unpacks to gigabytes is refused unread."""
     path = Path(path)
-    if not path.is_file():
-        raise BakedError(f"{path}: no such file")
     try:
-        with np.load(path, allow_pickle=False) as data:
-            missing = [k for k in KEYS if k not in data.files]
+        check_readable(path, "baked probe grid")
+    except SceneError as exc:
+        raise BakedError(str(exc) if Path(path).exists() else f"{path}: no such file") from None
+    try:
+        with zipfile.ZipFile(path) as archive:
+            members = {info.filename.removesuffix(".npy"): info for info in archive.infolist()}
+            missing = [k for k in KEYS if k not in members]
             if missing:
                 raise BakedError(f"{path}: not a baked probe grid (no {', '.join(missing[:3])})")
-            values = {k: data[k] for k in KEYS}
+            values = {k: _member(path, archive, members[k], member_limit(k)) for k in KEYS}
     except BakedError:
         raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError, NotImplementedError, MemoryError,
+            RuntimeError) as exc:
         raise BakedError(f"{path}: not a readable .npz file ({type(exc).__name__})") from None
     try:
-        return _checked(path, values)
+        with np.errstate(all="ignore"):   # overflow in a hostile box is refused below, not printed
+            return _checked(path, values)
     except BakedError:
         raise
-    except (TypeError, ValueError) as exc:  # a key of the wrong kind (an array where a number belongs)
+    except (TypeError, ValueError, RecursionError) as exc:  # a key of the wrong kind (an array where a number belongs)
         raise BakedError(f"{path}: malformed baked probe grid ({type(exc).__name__}: {exc})"[:300]) from None
+
+
+def _member(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo, limit: int) -> np.ndarray:
+    """One .npy entry of the archive, its declared sizes checked before its data is read."""
+    key = info.filename.removesuffix(".npy")
+    if info.file_size > limit:
+        raise BakedError(f"{path}: entry {key!r} unpacks to {info.file_size / 2**20:.0f} MiB, more than the "
+                         f"{limit / 2**20:.0f} MiB a baked grid's {key!r} may hold")
+    with archive.open(info) as fh:
+        version = np.lib.format.read_magic(fh)
+        shape, _, dtype = (np.lib.format.read_array_header_1_0(fh) if version == (1, 0)
+                           else np.lib.format.read_array_header_2_0(fh))
+        if dtype.hasobject:
+            raise BakedError(f"{path}: entry {key!r} holds Python objects, which a baked grid never does")
+        count = int(np.prod(shape, dtype=object))
+        if count * dtype.itemsize > limit:
+            raise BakedError(f"{path}: entry {key!r} declares {count * dtype.itemsize / 2**20:.0f} MiB, more "
+                             f"than the {limit / 2**20:.0f} MiB a baked grid's {key!r} may hold")
+    with archive.open(info) as fh:
+        return np.lib.format.read_array(fh, allow_pickle=False)
 
 
 def is_baked_file(source) -> bool:
@@ -133,8 +177,8 @@ def _checked(path: Path, v: dict) -> BakedGrid:
         fail(f"version {int(v['version'])} is newer than this gi-viewer reads ({VERSION})")
     m = int(v["resolution"]) if v["resolution"].shape == () and np.issubdtype(v["resolution"].dtype,
                                                                                 np.integer) else -1
-    if not 1 <= m <= 1024:
-        fail("resolution must be an integer 1..1024")
+    if not 1 <= m <= MAX_PROBES:
+        fail(f"resolution must be an integer 1..{MAX_PROBES}")
     for key in ("radiance", "indirect"):
         if v[key].shape != (m, m, m, 9, 3) or not np.issubdtype(v[key].dtype, np.floating):
             fail(f"{key} must be ({m}, {m}, {m}, 9, 3) floats, got {v[key].shape} {v[key].dtype}")
@@ -145,6 +189,8 @@ def _checked(path: Path, v: dict) -> BakedGrid:
     lo, hi = v["lo"], v["hi"]
     if lo.shape != (3,) or hi.shape != (3,) or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         fail("lo and hi must be three finite numbers each")
+    if max(np.abs(lo).max(), np.abs(hi).max()) > MAX_COORDINATE:
+        fail(f"the probe box reaches beyond +-{MAX_COORDINATE:.0e}, as a scene's vertices may not")
     if not np.all(hi > lo):
         fail("the probe box is empty (hi must exceed lo on every axis)")
     if int(v["sh_order"]) != 2:
@@ -159,7 +205,7 @@ def _checked(path: Path, v: dict) -> BakedGrid:
             fail(str(exc))
     try:
         settings = json.loads(str(v["settings"]))
-    except ValueError:
+    except (ValueError, RecursionError):   # not JSON, or nested past what the parser follows
         settings = None
     if not isinstance(settings, dict):
         fail("settings are not a JSON object")
@@ -171,14 +217,33 @@ def _checked(path: Path, v: dict) -> BakedGrid:
 
 
 def scene_source(baked: BakedGrid, path: str | Path) -> str:
-    """Where to load the baked scene from: the stored name or path, else a file of the same name next to
-    the baked file (the pair moved together)."""
+    """Where to load the baked scene from: a built-in name, or a file inside the baked file's own folder
+    (the stored path, a relative one taken from that folder), else a file of the same name beside the
+    baked file (the pair moved together). A grid never opens a scene outside its folder: a file that names
+    one is refused, as is a scene file that is not a regular file (a pipe would block)."""
+    from viewer.scene import builtin_names
+
     stored = Path(baked.scene)
-    if not stored.suffix or stored.exists():
-        return baked.scene
-    beside = Path(path).resolve().parent / stored.name
-    if beside.is_file():
-        return str(beside)
+    if not stored.suffix:
+        if baked.scene in builtin_names():
+            return baked.scene
+        raise BakedError(f"{path}: its scene {baked.scene!r} is not a built-in scene")
+    folder = Path(path).resolve().parent
+    try:
+        named = (folder / stored).resolve()
+    except (OSError, ValueError, RuntimeError):
+        named = None
+    inside = named is not None and named.is_relative_to(folder)
+    for candidate in ([named] if inside else []) + [folder / stored.name]:
+        if candidate.exists():
+            try:
+                check_readable(candidate)
+            except SceneError as exc:
+                raise BakedError(f"{path}: its scene {exc}") from None
+            return str(candidate)
+    if not inside and named is not None and named.exists():
+        raise BakedError(f"{path}: its scene {baked.scene} lies outside the baked file's folder {folder} (a grid "
+                         f"opens only a scene beside it or below it: move the grid next to its scene)")
     raise BakedError(f"{path}: its scene {baked.scene} is gone (and no {stored.name} beside the baked file)")
 
 
