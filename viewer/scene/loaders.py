@@ -18,10 +18,12 @@ from __future__ import annotations
 import io
 import json
 import struct
+import sys
 from pathlib import Path
 
 import numpy as np
 
+from viewer.scene.files import check_readable
 from viewer.scene.types import DirectionalLight, Scene, SceneError, note
 
 DEFAULT_ALBEDO = (0.7, 0.7, 0.7)
@@ -62,14 +64,51 @@ def _trimesh_scene(path: Path, data: bytes):
     import trimesh
 
     suffix = path.suffix.lower()[1:]
+    resolver = FolderResolver(path)
     try:
         # trimesh casts whatever numbers the file holds (a NaN colour to uint8, say) and numpy warns on
         # the user's terminal; what comes back is checked here and by Scene instead.
         with np.errstate(all="ignore"):
-            return trimesh.load_scene(io.BytesIO(data), file_type=suffix, process=False,
-                                      resolver=trimesh.resolvers.FilePathResolver(str(path)))
+            loaded = trimesh.load_scene(io.BytesIO(data), file_type=suffix, process=False, resolver=resolver)
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error on bad files
+        if resolver.refused:   # a buffer the file may not read: say which
+            raise SceneError(resolver.refused[0]) from None
         raise SceneError(f"{path}: cannot parse {suffix.upper()} file ({_one_line(exc)})") from None
+    if resolver.refused:   # an image trimesh went on without
+        print(f"{resolver.refused[0]}; skipped", file=sys.stderr)
+    return loaded
+
+
+class FolderResolver:
+    """What a glTF file may read besides itself (trimesh's resolver): regular files of a bounded size inside
+    the file's own folder, by the exact name the file gives. Anything else is refused unopened and noted in
+    `refused` (one line each): a buffer's refusal is the load's error, an image's is printed and skipped."""
+
+    def __init__(self, path: Path):
+        self.path, self.folder, self.refused = path, path.parent.resolve(), []
+
+    def get(self, name: str) -> bytes:
+        try:
+            target = (self.folder / str(name).strip()).resolve()
+        except (OSError, ValueError, RuntimeError):
+            target = None
+        if target is None or not target.is_relative_to(self.folder):
+            self.refused.append(f"{self.path}: {str(name)[:120]!r} lies outside the scene's folder {self.folder}")
+            raise SceneError(self.refused[-1])
+        try:
+            check_readable(target, "glTF buffer or image")
+        except SceneError as exc:
+            self.refused.append(str(exc))
+            raise
+        return target.read_bytes()
+
+    __getitem__ = get
+
+    def namespaced(self, namespace: str) -> "FolderResolver":
+        return self
+
+    def keys(self):
+        return iter(())
 
 
 def _meshes(path: Path, loaded):

@@ -28,6 +28,8 @@ __all__ = ["Camera", "DirectionalLight", "Scene", "SceneError", "ASSETS", "SUPPO
 ASSETS = SCENES
 """The folder of the built-in scenes (viewer.resources: assets/scenes/ of a checkout, or in the wheel)."""
 SUPPORTED_SUFFIXES = (".obj", ".glb", ".gltf", ".ply")
+SIDECAR_BYTES = 1 << 20
+"""The largest sidecar JSON read (1 MiB): it holds a sun and a camera."""
 
 
 def builtin_names() -> list[str]:
@@ -161,6 +163,7 @@ def read_sidecar(path: Path) -> dict:
     candidate = sidecar_path(path)
     if candidate is None:
         return {}
+    check_readable(candidate, "sidecar JSON", limit=SIDECAR_BYTES)   # a pipe would block the load
     try:
         data = json.loads(candidate.read_text())
         out = {}
@@ -173,8 +176,8 @@ def read_sidecar(path: Path) -> dict:
         return out
     except SceneError as exc:  # e.g. a zero sun direction: say which file
         raise SceneError(f"{candidate}: {exc}") from None
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise SceneError(f"{candidate}: malformed sidecar ({exc})") from None
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:
+        raise SceneError(f"{candidate}: malformed sidecar ({type(exc).__name__}: {str(exc)[:160]})") from None
 
 
 def unlit_warning(scene: Scene) -> str | None:

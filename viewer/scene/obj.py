@@ -101,18 +101,19 @@ def _material_index(names: list[str], name: str) -> int:
     return names.index(name)
 
 
-def _floats(words, path, number) -> list[float]:
+def _floats(words, path, number, what: str = "coordinate") -> list[float]:
+    """The numbers of an OBJ or MTL line; `what` they are (a coordinate, a colour) names a bad one."""
     try:
         values = [float(w) for w in words]
     except ValueError:
         raise SceneError(f"{path}:{number}: {' '.join(words)!r} is not a number") from None
     if not all(np.isfinite(values)):
-        raise SceneError(f"{path}:{number}: NaN or infinite coordinate")
+        raise SceneError(f"{path}:{number}: NaN or infinite {what}")
     return values
 
 
 def _rgb(words, path, number) -> np.ndarray:
-    values = _floats(words[:3], path, number)
+    values = _floats(words[:3], path, number, "colour")
     if len(values) == 1:
         values = values * 3
     if len(values) != 3:

@@ -1,0 +1,108 @@
+"""A scene reads only its own folder, and only regular files: a glTF's buffers and images outside the
+.gltf's folder are refused (a buffer: the load's one-line error) or skipped with one line (an image); a
+buffer or a sidecar JSON that is a pipe is refused without being opened (it would block the load forever).
+And an MTL colour that is not finite says "colour"."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from viewer.scene import SceneError, load
+
+ROOT = Path(__file__).resolve().parents[2]
+POSITIONS = np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0]], np.float32)
+INDICES = np.array([0, 1, 2], np.uint32)
+BLOB = POSITIONS.tobytes() + INDICES.tobytes()
+
+
+def gltf(buffer_uri: str, image_uri: str | None = None) -> str:
+    document = {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1]}}],
+        "buffers": [{"uri": buffer_uri, "byteLength": len(BLOB)}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 12}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 0, 1]},
+                      {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"}]}
+    if image_uri is not None:
+        document["images"] = [{"uri": image_uri}]
+        document["textures"] = [{"source": 0}]
+        document["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+    return json.dumps(document)
+
+
+@pytest.fixture
+def folders(tmp_path):
+    inner = tmp_path / "scene"
+    inner.mkdir()
+    (tmp_path / "outside.bin").write_bytes(BLOB)
+    (inner / "mesh.bin").write_bytes(BLOB)
+    return tmp_path, inner
+
+
+def test_a_buffer_in_the_gltf_s_folder_loads(folders):
+    _, inner = folders
+    (inner / "ok.gltf").write_text(gltf("mesh.bin"))
+    assert len(load(inner / "ok.gltf").faces) == 1
+
+
+@pytest.mark.parametrize("uri", ["../outside.bin", "{root}/outside.bin", "sub/../../outside.bin"])
+def test_a_buffer_outside_the_gltf_s_folder_is_refused_in_one_line(folders, uri):
+    root, inner = folders
+    uri = uri.format(root=root)
+    (inner / "out.gltf").write_text(gltf(uri))
+    with pytest.raises(SceneError) as refused:
+        load(inner / "out.gltf")
+    message = str(refused.value)
+    assert "outside the scene's folder" in message and "\n" not in message, message
+
+
+def test_an_image_outside_the_gltf_s_folder_is_skipped_with_one_line(folders, capsys):
+    root, inner = folders
+    (root / "secret.png").write_bytes(b"\x89PNG not really")
+    (inner / "img.gltf").write_text(gltf("mesh.bin", "../secret.png"))
+    assert len(load(inner / "img.gltf").faces) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "'../secret.png'" in err[0] and "skipped" in err[0], err
+
+
+def test_a_buffer_that_is_a_pipe_is_refused_without_opening_it(folders):
+    _, inner = folders
+    os.mkfifo(inner / "pipe.bin")
+    (inner / "pipe.gltf").write_text(gltf("pipe.bin"))
+    command = (f"from viewer.scene import load, SceneError\ntry: load({str(inner / 'pipe.gltf')!r})\n"
+               "except SceneError as e: print(e)")
+    # the timeout guards against the hang this test is about; what it asserts is the message
+    result = subprocess.run([sys.executable, "-c", command], capture_output=True, text=True, timeout=120,
+                            env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert "not a regular file" in result.stdout and result.stdout.count("\n") == 1, (result.stdout, result.stderr)
+
+
+def test_a_sidecar_that_is_a_pipe_is_refused_without_opening_it(tmp_path):
+    (tmp_path / "room.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    os.mkfifo(tmp_path / "room.json")
+    with pytest.raises(SceneError, match="not a regular file"):
+        load(tmp_path / "room.obj")
+
+
+def test_a_sidecar_nested_past_the_json_parser_is_one_line(tmp_path):
+    (tmp_path / "room.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "room.json").write_text("[" * 100000 + "]" * 100000)
+    with pytest.raises(SceneError, match="malformed sidecar") as refused:
+        load(tmp_path / "room.obj")
+    assert "\n" not in str(refused.value) and len(str(refused.value)) < 400
+
+
+def test_an_mtl_colour_that_is_not_finite_says_colour(tmp_path):
+    (tmp_path / "room.mtl").write_text("newmtl lamp\nKd 0.5 nan 0.5\n")
+    (tmp_path / "room.obj").write_text("mtllib room.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl lamp\nf 1 2 3\n")
+    with pytest.raises(SceneError, match="NaN or infinite colour"):
+        load(tmp_path / "room.obj")
+    (tmp_path / "room.obj").write_text("v 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(SceneError, match="NaN or infinite coordinate"):
+        load(tmp_path / "room.obj")
