@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import sys
 
+from viewer.errors import one_line
 from viewer.reference.mitsuba import ReferenceUnavailable
 from viewer.scene import SceneError
 from viewer.training import generate, shards
@@ -58,7 +59,11 @@ def main(argv: list[str] | None = None) -> int:
         result = generate.run(args.out, settings, splits, workers=args.workers, address=args.address,
                               verify=args.verify, command=command)
     except (SceneError, ReferenceUnavailable) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
+        return 2
+    except OSError as exc:   # --out names a file, a folder it may not write, a full disk
+        where = exc.filename if exc.filename is not None else args.out
+        print(f"error: {one_line(str(where))}: {one_line(exc.strerror or type(exc).__name__)}", file=sys.stderr)
         return 2
     rate = (f"; {result.rooms_per_hour:.0f} rooms per hour (wall clock, {result.workers} workers)"
             if result.made else "")

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer.scene import SceneError
 from viewer.training import dataset, truth as truths
 from viewer.training.shards import Manifest, Settings, Shard, pack, plan, room_ok, shard_ok, write_pending
 
@@ -116,6 +117,30 @@ class Progress:
             self.stream.write("\n")
 
 
+CONNECT_SECONDS = 10.0
+"""How long `--address` may take to answer before the dataset command gives up on it."""
+
+
+def check_address(address: str, timeout: float = CONNECT_SECONDS) -> None:
+    """SceneError in one line unless something listens at a `host:port` (or `ray://host:port`) address
+    within `timeout` seconds: Ray itself retries a dead address for many minutes. `auto` and other forms
+    are left to Ray."""
+    import socket
+
+    text = address.removeprefix("ray://")
+    host, colon, port = text.rpartition(":")
+    if not colon or not host:
+        return
+    if not port.isdigit() or not 0 < int(port) < 65536:
+        raise SceneError(f"--address {address!r}: expected host:port, e.g. 192.168.1.2:6379")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as exc:   # refused, unreachable, unknown host or timed out
+        reason = (f"no answer within {timeout:g} s" if isinstance(exc, TimeoutError)
+                  else exc.strerror or type(exc).__name__)
+        raise SceneError(f"--address {address}: no Ray cluster answers there ({reason})") from None
+
+
 def start_ray(workers: int | None, address: str | None) -> tuple[bool, int]:
     """Ray on this machine (every core, or `workers`) or the cluster at `address`, quiet (no dashboard,
     workers' output not forwarded). Returns (whether this call started it, CPUs to keep busy)."""
@@ -127,7 +152,12 @@ def start_ray(workers: int | None, address: str | None) -> tuple[bool, int]:
     if started:
         quiet = dict(include_dashboard=False, log_to_driver=False, logging_level=logging.ERROR)
         if address:
-            ray.init(address=address, **quiet)
+            check_address(address)
+            try:
+                ray.init(address=address, **quiet)
+            except (ConnectionError, RuntimeError, ValueError, TimeoutError) as exc:
+                raise SceneError(f"--address {address}: cannot join that Ray cluster "
+                                 f"({type(exc).__name__}: {str(exc).strip()[:160]})") from None
         else:
             ray.init(num_cpus=workers or os.cpu_count() or 1, **quiet)
     cpus = int(ray.cluster_resources().get("CPU", 1))

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from viewer.scene import SceneError
+from viewer.scene.files import check_readable
 from viewer.training import dataset
 from viewer.neural.ranges import PRESETS
 
@@ -167,12 +168,41 @@ def write_pending(folder: Path, room: str, payload: bytes) -> None:
 
 # ---- the manifest ---------------------------------------------------------------------------------------
 
+MANIFEST_BYTES = 64 << 20
+"""The largest manifest.json read (64 MiB: a few hundred bytes a shard)."""
+MANIFEST_PARTS = {"settings": dict, "splits": dict, "failed": dict, "commands": list, "timing": dict}
+"""The manifest's entries a resumed run reads, and what each must be."""
+
+
+def read_manifest(path: Path) -> dict:
+    """An existing manifest.json as the dict it must be; a directory, a pipe, bad JSON, a list or an entry
+    of the wrong kind is a SceneError in one line (the dataset command: exit status 2)."""
+    check_readable(path, "manifest", limit=MANIFEST_BYTES)
+    try:
+        data = json.loads(path.read_text())
+    except (ValueError, RecursionError) as exc:   # bad JSON, bytes that are not UTF-8, nested too deep
+        raise SceneError(f"{path}: not a readable manifest ({type(exc).__name__}); use another --out, or "
+                         "remove it to start again") from None
+    if not isinstance(data, dict):
+        raise SceneError(f"{path}: a manifest is a JSON object, this is a {type(data).__name__}")
+    for key, kind in MANIFEST_PARTS.items():
+        if key in data and not isinstance(data[key], kind):
+            raise SceneError(f"{path}: its {key!r} is a {type(data[key]).__name__}, not a {kind.__name__}")
+    timing = data.get("timing", {})
+    if not all(isinstance(timing.get(k, 0), (int, float)) for k in ("rooms_made", "worker_seconds", "wall_seconds")):
+        raise SceneError(f"{path}: its 'timing' holds something other than numbers")
+    for split in data.get("splits", {}).values():
+        if not isinstance(split, dict) or not isinstance(split.get("shards", {}), dict):
+            raise SceneError(f"{path}: its 'splits' are not objects of shards")
+    return data
+
+
 class Manifest:
     """manifest.json: what the dataset is and how far it got, rewritten as shards land."""
 
     def __init__(self, out: Path, settings: Settings, command: str):
         self.path = out / "manifest.json"
-        old = json.loads(self.path.read_text()) if self.path.exists() else None
+        old = read_manifest(self.path) if self.path.exists() or self.path.is_symlink() else None
         if old is not None and old.get("settings") != settings.fingerprint():
             theirs = old.get("settings") or {k: old.get(k) for k in FINGERPRINT}
             differ = ", ".join(f"{k} {theirs.get(k)} != {v}" for k, v in settings.fingerprint().items()
@@ -186,7 +216,7 @@ class Manifest:
                      "versions": versions(settings.truth == "mitsuba" or settings.mitsuba_directions > 0),
                      "splits": old.get("splits", {}), "failed": old.get("failed", {}),
                      "started": old.get("started") or _now()}
-        self.before = old.get("timing", {"rooms_made": 0, "worker_seconds": 0.0, "wall_seconds": 0.0})
+        self.before = {"rooms_made": 0, "worker_seconds": 0.0, "wall_seconds": 0.0, **old.get("timing", {})}
         """The timing of earlier runs; `save` adds this run's."""
 
     def shards(self, split: str) -> dict:
