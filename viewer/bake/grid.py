@@ -28,7 +28,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import struct
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -128,8 +130,8 @@ def read_npz(path: str | Path) -> BakedGrid:
             values = {k: _member(path, archive, members[k], member_limit(k)) for k in KEYS}
     except BakedError:
         raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError, NotImplementedError, MemoryError,
-            RuntimeError) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, struct.error, KeyError,
+            NotImplementedError, MemoryError, RuntimeError) as exc:   # damaged bytes, whichever layer notices
         raise BakedError(f"{path}: not a readable .npz file ({type(exc).__name__})") from None
     try:
         with np.errstate(all="ignore"):   # overflow in a hostile box is refused below, not printed

@@ -176,7 +176,7 @@ def read_sidecar(path: Path) -> dict:
         return out
     except SceneError as exc:  # e.g. a zero sun direction: say which file
         raise SceneError(f"{candidate}: {exc}") from None
-    except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError, OverflowError) as exc:
         raise SceneError(f"{candidate}: malformed sidecar ({type(exc).__name__}: {str(exc)[:160]})") from None
 
 
