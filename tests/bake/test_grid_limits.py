@@ -129,3 +129,11 @@ def test_a_grid_or_its_scene_that_is_a_pipe_is_refused_without_opening_it(tmp_pa
     refused(path, "not a regular file")
     os.mkfifo(tmp_path / "pipe.npz")
     refused(tmp_path / "pipe.npz", "not a regular file")
+
+
+def test_a_grid_is_held_to_the_memory_limit_of_every_request(tmp_path, monkeypatch):
+    path = written(tmp_path / "g.npz")
+    monkeypatch.setenv("GI_VIEWER_MAX_GIB", "1e-6")   # about 1 KiB: less than two 2^3 grids of probes
+    refused(path, "resolution 2: its probes would take")
+    monkeypatch.setenv("GI_VIEWER_MAX_GIB", "1")
+    assert baked.read_npz(path).radiance.resolution == 2

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer.physical.work import MAX_PROBES
+from viewer.physical.work import MAX_PROBES, WorkError, check_probe_grid
 from viewer.probes.grid import ProbeGrid
 from viewer.scene.files import check_readable
 from viewer.scene.types import MAX_COORDINATE, DirectionalLight, SceneError
@@ -181,6 +181,10 @@ def _checked(path: Path, v: dict) -> BakedGrid:
                                                                                 np.integer) else -1
     if not 1 <= m <= MAX_PROBES:
         fail(f"resolution must be an integer 1..{MAX_PROBES}")
+    try:
+        check_probe_grid(m)   # the memory its probes take, against the limit every request has
+    except WorkError as exc:
+        fail(str(exc))
     for key in ("radiance", "indirect"):
         if v[key].shape != (m, m, m, 9, 3) or not np.issubdtype(v[key].dtype, np.floating):
             fail(f"{key} must be ({m}, {m}, {m}, 9, 3) floats, got {v[key].shape} {v[key].dtype}")
