@@ -98,3 +98,17 @@ def test_the_command_line_refuses_too_much_work_at_once_in_one_line(tmp_path):
         lines = result.stderr.splitlines()
         assert len(lines) == 1 and lines[0].startswith("error:") and "GiB" in lines[0], (args, result.stderr)
     assert not list(tmp_path.iterdir())
+
+
+def test_the_window_keeps_its_settings_when_a_panel_edit_would_take_too_much(monkeypatch):
+    from viewer.ui.gi_sources import GIController
+
+    monkeypatch.delenv(work.LIMIT_VARIABLE, raising=False)
+    start = GISettings(probes=2, directions=65536)   # 8 probes x 65536 directions: 8 MiB of rays
+    gi = GIController(ctx=None, source="off", settings=start)
+    gi.set_settings(probes=32)                       # 32^3 x 65536: 32 GiB
+    assert gi.settings == start and "--probes 32 --directions 65536" in gi.refused
+    gi.set_settings(kernel="paper", voxels=64)       # the all-pairs kernel on 64^3 voxels
+    assert gi.settings == start and "--kernel paper" in gi.refused
+    gi.set_settings(probes=4)
+    assert gi.settings.probes == 4 and gi.refused is None

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from viewer import sources
 from viewer.physical.gi import GISettings
+from viewer.physical.work import WorkError, check_work
 from viewer.probes.grid import ProbeGrid
 from viewer.resources import MODELS  # noqa: F401 - where the neural source's shipped model is looked for
 from viewer.scene import Scene
@@ -57,6 +58,7 @@ class GIController:
         self._live: dict[str, LiveSource] = {}   # name -> adapter, made when the source is first shown
         self.fallback: str | None = None   # why a source that could not start was left for the default
         self._fallback_from: str | None = None
+        self.refused: str | None = None   # why the last settings change was not made (too much work)
         self._outgoing: list[ProbeGrid | None] = []   # grids for the render loop to show, oldest first
         self.ready_seconds: float | None = None        # how long the last finished solve took
 
@@ -123,7 +125,15 @@ class GIController:
         self._restart()
 
     def set_settings(self, **changes) -> None:
+        """Solve with `changes` to the settings; a change that would take more memory than a request may use
+        (viewer.physical.work) is not made, and `refused` says why (the panel shows it)."""
         settings = replace(self.settings, **changes)
+        try:
+            check_work(settings)
+        except WorkError as exc:
+            self.refused = f"{exc}: kept the previous settings"
+            return
+        self.refused = None
         if settings != self.settings:
             self.settings = settings
             self._restart()

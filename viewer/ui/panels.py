@@ -135,6 +135,8 @@ def gi_section(gi: GIController, baking: bool = False) -> None:
     changed, probes = imgui.slider_int("probes per axis", s.probes, 2, 32)
     if changed:
         gi.set_settings(probes=probes)
+    if gi.refused:   # a change that would take more memory than a request may use
+        imgui.text_wrapped(gi.refused)
     line, progress, error = gi.status()
     imgui.push_text_wrap_pos(0.0)   # status lines wrap at the panel's edge, never cut
     imgui.text(line)
