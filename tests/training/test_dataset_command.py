@@ -76,3 +76,29 @@ def test_the_command_with_a_dead_address_exits_2_in_one_line(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("error: --address 127.0.0.1:1"), result.stderr
     manifest = tmp_path / "data" / "manifest.json"
     assert not manifest.exists() or isinstance(json.loads(manifest.read_text()), dict)
+
+
+def test_an_address_that_answers_but_is_not_ray_is_one_line_after_a_few_tries(monkeypatch):
+    """Something listens (here a bare socket) but no Ray GCS answers: Ray is asked to try a few times, not
+    its default 20 of about 40 s each, and its ConnectionError becomes one line. ray.init is replaced here:
+    the real one measured 128 s for 3 tries."""
+    import socket
+
+    import ray
+
+    tried = {}
+
+    def init(**kwargs):
+        tried["tries"] = os.environ.get("RAY_gcs_server_port_wait_time_s")
+        raise ConnectionError(f"Failed to connect to Ray cluster at {kwargs['address']}")
+
+    monkeypatch.delenv("RAY_gcs_server_port_wait_time_s", raising=False)
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "init", init)
+    with socket.socket() as listening:
+        listening.bind(("127.0.0.1", 0))
+        listening.listen(1)
+        address = f"127.0.0.1:{listening.getsockname()[1]}"
+        with pytest.raises(SceneError, match=f"--address {address}: cannot join that Ray cluster") as refused:
+            generate.start_ray(None, address)
+    assert tried["tries"] == str(generate.JOIN_TRIES) and "\n" not in str(refused.value)

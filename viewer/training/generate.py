@@ -119,6 +119,10 @@ class Progress:
 
 CONNECT_SECONDS = 10.0
 """How long `--address` may take to answer before the dataset command gives up on it."""
+JOIN_TRIES = 3
+"""How often Ray tries to reach the cluster's GCS at an address that answers: measured against a port that
+accepts connections and says nothing, 3 tries gave up with a ConnectionError after 128 s (Ray's default
+of 20 waits over 10 minutes)."""
 
 
 def check_address(address: str, timeout: float = CONNECT_SECONDS) -> None:
@@ -153,6 +157,9 @@ def start_ray(workers: int | None, address: str | None) -> tuple[bool, int]:
         quiet = dict(include_dashboard=False, log_to_driver=False, logging_level=logging.ERROR)
         if address:
             check_address(address)
+            # something answers, but it may not be Ray: a few tries of Ray's own connection timeout (about
+            # 40 s each) instead of its default 20, unless the user set how long to wait
+            os.environ.setdefault("RAY_gcs_server_port_wait_time_s", str(JOIN_TRIES))
             try:
                 ray.init(address=address, **quiet)
             except (ConnectionError, RuntimeError, ValueError, TimeoutError) as exc:
