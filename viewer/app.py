@@ -37,8 +37,7 @@ def log(message: str) -> None:
 def run(args) -> int:
     announce_compiles()
     options = options_from(args)
-    # bad GI flags, or flags and a size that ask for more memory than a request may use, are bad input
-    # before a window opens
+    # bad GI flags, or flags and a size asking for more memory than a request may use: bad input, no window
     gi_settings(options, size=parse_size(options.size))
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         log(f"no display found (DISPLAY and WAYLAND_DISPLAY are unset); rendering {options.scene} headless")

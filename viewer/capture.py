@@ -62,7 +62,8 @@ def capture_request(args, **changes) -> CaptureRequest:
                           gi=value("gi", CaptureRequest.gi), view=value("view", CaptureRequest.view),
                           camera=camera, fov=value("fov"), render=render,
                           msaa=int(value("msaa", CaptureRequest.msaa)), sun=sun,
-                          gi_settings=gi_settings(args, size, int(value("msaa", CaptureRequest.msaa))),
+                          gi_settings=gi_settings(args, size, int(value("msaa", CaptureRequest.msaa)),
+                                                  max(1, int(value("turntable", 1)))),
                           model=value("model"), turntable=int(value("turntable", 0)))
 
 

@@ -173,9 +173,9 @@ def add_gi_flags(parser: argparse.ArgumentParser) -> None:
     add_dataclass_flags(parser, GISettings, names=GI_FLAG_NAMES, choices=GI_CHOICES, metavars=GI_METAVARS)
 
 
-def gi_settings(args, size: tuple[int, int] | None = None, msaa: int = 1) -> GISettings:
+def gi_settings(args, size: tuple[int, int] | None = None, msaa: int = 1, frames: int = 1) -> GISettings:
     """The GISettings of the GI flags on args (defaults for the missing ones); a value out of range, or
-    flags whose product (with a picture's `size` and `msaa`) asks for more memory than a request may use
+    flags whose product (with a picture's `size`, `msaa` and animation `frames`) asks for more memory than a request may use
     (viewer.physical.work), is bad input (InputError)."""
     from viewer.physical.gi import GISettings
 
@@ -188,7 +188,7 @@ def gi_settings(args, size: tuple[int, int] | None = None, msaa: int = 1) -> GIS
                 raise InputError(f"{flag} {value}: must be between {low:g} and {high:g}")
             raise InputError(f"{flag} {value}: must be between {low} and {high}")
     try:
-        check_work(settings, size, msaa)
+        check_work(settings, size, msaa, frames)
     except WorkError as exc:
         raise InputError(str(exc)) from None
     return settings

@@ -112,3 +112,13 @@ def test_the_window_keeps_its_settings_when_a_panel_edit_would_take_too_much(mon
     assert gi.settings == start and "--kernel paper" in gi.refused
     gi.set_settings(probes=4)
     assert gi.settings.probes == 4 and gi.refused is None
+
+
+def test_a_turntable_keeps_every_frame_and_is_counted_so(monkeypatch):
+    monkeypatch.delenv(work.LIMIT_VARIABLE, raising=False)
+    work.check_work(GISettings(), (1280, 720), 4, frames=120)
+    with pytest.raises(work.WorkError, match="--size 8192x8192 --turntable 720: the frames"):
+        work.check_work(GISettings(), (8192, 8192), 4, frames=720)
+    args = cli.build_parser().parse_args(["capture", "--out", "t.gif", "--size", "4096x4096", "--turntable", "720"])
+    with pytest.raises(InputError, match="--turntable 720"):
+        capture_request(args)

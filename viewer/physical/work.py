@@ -45,6 +45,8 @@ GATHER_RAY_BYTES = 16
 PIXEL_BYTES = 16
 """A picture's own targets per pixel: the resolved frame, the picture read back, the PNG's bytes (measured
 3 bytes over the per-sample share)."""
+FRAME_BYTES = 3
+"""A turntable's frame per pixel: RGB, every frame kept until the GIF is written."""
 SAMPLE_BYTES = 12
 """Per multisample of every pixel: colour and depth (measured 9.6 bytes)."""
 
@@ -74,9 +76,10 @@ def memory_limit() -> int:
     return int(gib * (1 << 30))
 
 
-def stages(settings, size: tuple[int, int] | None = None, msaa: int = 1) -> list[Stage]:
+def stages(settings, size: tuple[int, int] | None = None, msaa: int = 1, frames: int = 1) -> list[Stage]:
     """The largest arrays each stage of a request makes: the solve's (settings: a GISettings) and, with a
-    picture's `size`, the picture's targets."""
+    picture's `size`, the picture's targets (and, for an animation of `frames`, every frame kept until
+    it is written)."""
     n, m = int(settings.voxels), int(settings.probes)
     surface = SURFACE_VOXELS_PER_N2 * n * n
     out = [Stage("the voxels", f"--voxels {n}", VOXEL_BYTES_PER_N2 * n * n),
@@ -91,6 +94,9 @@ def stages(settings, size: tuple[int, int] | None = None, msaa: int = 1) -> list
         pixels = int(size[0]) * int(size[1])
         out.append(Stage("the picture", f"--size {size[0]}x{size[1]} --msaa {msaa}",
                          pixels * (PIXEL_BYTES + SAMPLE_BYTES * max(int(msaa), 1))))
+        if frames > 1:
+            out.append(Stage("the frames", f"--size {size[0]}x{size[1]} --turntable {frames}",
+                             pixels * (PIXEL_BYTES + SAMPLE_BYTES * max(int(msaa), 1)) + FRAME_BYTES * pixels * frames))
     return out
 
 
@@ -98,11 +104,11 @@ def gib(count: int) -> str:
     return f"{count / (1 << 30):.1f} GiB" if count >= 1 << 30 else f"{count / (1 << 20):.0f} MiB"
 
 
-def check_work(settings, size: tuple[int, int] | None = None, msaa: int = 1) -> None:
+def check_work(settings, size: tuple[int, int] | None = None, msaa: int = 1, frames: int = 1) -> None:
     """WorkError, in one line naming the flags, the memory and the limit, when the largest stage of the
     request would take more than `memory_limit()`."""
     limit = memory_limit()
-    largest = max(stages(settings, size, msaa), key=lambda stage: stage.bytes)
+    largest = max(stages(settings, size, msaa, frames), key=lambda stage: stage.bytes)
     if largest.bytes > limit:
         raise WorkError(f"{largest.flags}: {largest.name} would take about {gib(largest.bytes)}, more than "
                         f"the {gib(limit)} a request may use (ask for less, or set {LIMIT_VARIABLE})")

@@ -139,7 +139,7 @@ def sidecar_notes(path: Path) -> list[str]:
         return []
     try:
         data = json.loads(found.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):   # read_sidecar says so, as an error
         return []   # read_sidecar says so, as an error
     if not isinstance(data, dict):
         return []
