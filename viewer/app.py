@@ -142,7 +142,7 @@ class ViewerApp(mglw.WindowConfig):
         from viewer.gpu.context import describe
         from viewer.gpu.programs import SHADERS
         from viewer.gpu.renderer import RenderSettings, Renderer
-        from viewer.scene import load, unlit_warning
+        from viewer.scene import load
         from viewer.ui.controls import Controls
         from viewer.ui.frame_graph import FrameTimes
         from viewer.ui.gi_sources import GIController

@@ -152,7 +152,7 @@ def write_report(path: Path, rows: list[dict], args, host: str) -> None:
     for r in rows:
         name, stem = r["scene"], image_stem(r["scene"], r["source"])
         lines += ["", f"### {name}, {r['source']} GI", "",
-                  f"Ours (left) and Mitsuba (right), both clamped and sRGB-encoded the same way:", "",
+                  "Ours (left) and Mitsuba (right), both clamped and sRGB-encoded the same way:", "",
                   f"![{name}, {r['source']}: ours vs Mitsuba]({relative}/{stem}-vs-mitsuba.png)", "",
                   "Our views with the default tone mapping (ACES): " + ", ".join(VIEWS) + ".", "",
                   " ".join(f"![{name} {r['source']} {v}]({relative}/{stem}-{v}.png)" for v in VIEWS)]
