@@ -642,3 +642,18 @@ def test_light_past_float32s_range_is_refused(tmp_path):
         load(write_obj(tmp_path / "hot.obj", f"mtllib hot.mtl\n{QUAD_USING_LAMP}"))
     with pytest.raises(SceneError, match="irradiance beyond"):
         DirectionalLight((0.0, 1.0, 0.0), (1e39, 1e39, 1e39))
+
+
+@pytest.mark.parametrize("camera, message", [
+    ({"origin": [""]}, "malformed"), ({"origin": "abc"}, "camera origin|malformed"),
+    ({"origin": [0, 0, 1], "target": [0, 0, 1]}, "same point"), ({"up": [0, 0, 0]}, "up is zero"),
+    ({"origin": [0, 0, 1e30]}, "three finite"), ({"fov": 0}, "fov")])
+def test_a_sidecar_camera_that_cannot_make_a_picture_is_refused(tmp_path, camera, message):
+    """A camera with no numbers, a target on its origin or no usable up gave a black picture or a
+    TypeError deep in the renderer; it is one line naming the sidecar."""
+    import json
+
+    room = write_obj(tmp_path / "room.obj", QUAD_USING_LAMP)
+    (tmp_path / "room.json").write_text(json.dumps({"camera": camera}))
+    with pytest.raises(SceneError, match=message):
+        load(room)

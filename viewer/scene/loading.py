@@ -20,7 +20,7 @@ from viewer.scene import loaders
 from viewer.scene import obj
 from viewer.scene.files import check_readable
 from viewer.resources import SCENES
-from viewer.scene.types import Camera, DirectionalLight, Scene, SceneError, note
+from viewer.scene.types import MAX_COORDINATE, Camera, DirectionalLight, Scene, SceneError, note
 
 __all__ = ["Camera", "DirectionalLight", "Scene", "SceneError", "ASSETS", "SUPPORTED_SUFFIXES",
            "builtin_names", "load", "read_sidecar", "parse_sun", "unlit_warning", "note"]
@@ -170,14 +170,33 @@ def read_sidecar(path: Path) -> dict:
         if data.get("sun"):
             out["sun"] = DirectionalLight(data["sun"]["direction"], data["sun"]["irradiance"])
         if data.get("camera"):
-            c = data["camera"]
-            out["camera"] = Camera(tuple(c.get("origin", Camera.origin)), tuple(c.get("target", Camera.target)),
-                                   tuple(c.get("up", Camera.up)), float(c.get("fov", Camera.fov)))
+            out["camera"] = _sidecar_camera(data["camera"])
         return out
     except SceneError as exc:  # e.g. a zero sun direction: say which file
         raise SceneError(f"{candidate}: {exc}") from None
     except (ValueError, KeyError, TypeError, AttributeError, RecursionError, OverflowError) as exc:
         raise SceneError(f"{candidate}: malformed sidecar ({type(exc).__name__}: {str(exc)[:160]})") from None
+
+
+def _sidecar_camera(c: dict) -> Camera:
+    """A sidecar's camera, checked: three finite numbers each for origin, target and up, a target apart
+    from the origin, an up not along the view, a field of view between 0 and 180 degrees."""
+    def point(key):
+        value = np.asarray(c.get(key, getattr(Camera, key)), np.float64)   # ValueError/TypeError: malformed
+        if value.shape != (3,) or not np.all(np.isfinite(value)) or np.abs(value).max() > MAX_COORDINATE:
+            raise SceneError(f"camera {key}: expected three finite numbers")
+        return value
+
+    origin, target, up = point("origin"), point("target"), point("up")
+    fov = float(c.get("fov", Camera.fov))
+    view = target - origin
+    if np.linalg.norm(view) < 1e-12 * max(1.0, np.abs(origin).max()):
+        raise SceneError("camera: the origin and the target are the same point")
+    if np.linalg.norm(np.cross(view / np.linalg.norm(view), up)) < 1e-6 * max(np.linalg.norm(up), 1e-300):
+        raise SceneError("camera: up is zero or along the view")
+    if not 0.0 < fov < 180.0:
+        raise SceneError(f"camera fov {fov}: expected degrees between 0 and 180")
+    return Camera(tuple(map(float, origin)), tuple(map(float, target)), tuple(map(float, up)), fov)
 
 
 def unlit_warning(scene: Scene) -> str | None:
