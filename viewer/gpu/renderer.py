@@ -92,6 +92,9 @@ class Renderer(LightmapUpkeep):
         with GI comes a second later for a settled frame no sooner)."""
         self._baked: BakedDirectLight | None = None
         self._geometry = 0
+        self._scene_size = 1.0
+        """The longest side of the scene's box when its faces were set: lengths (the lightmap's texel) are
+        fractions of it, so that a scene renders alike in any unit."""
         """Counts the scenes whose triangles differ from the one before (a colour edit keeps them)."""
         self._layout_key = None
         """What the lightmap's layout and the indirect light's weights and rays were made for."""
@@ -125,6 +128,8 @@ class Renderer(LightmapUpkeep):
             self._geometry += 1
             if self.scene is None or not np.array_equal(draw_scene.faces, self._draw_scene.faces):
                 self._release_baked()
+                lo, hi = scene.bounds
+                self._scene_size = float(np.max(hi - lo))   # kept while the same faces move
         elif self._baked is not None:
             self._baked.recolour(draw_scene)
             if self._indirect is not None:
