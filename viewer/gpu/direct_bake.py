@@ -23,31 +23,36 @@ from viewer.scene import Scene, SceneError
 
 ATLAS_WIDTH = 2048
 """Texels along a row of the lightmap atlas (tiles are packed in shelves)."""
-MAX_ATLAS_TEXELS = 2048 * 1024
+MAX_ATLAS_TEXELS = 2048 * 2048
 """The most texels of one side's lightmap (the texture holds both sides, twice this). Each costs about
-1.5 kB on the CPU and GPU together (positions, normals, the probe weights, the final gather's rays):
-the Cornell box's 0.39 M take a capture of 0.9 GB resident, so this bound keeps any scene's lightmap
-near 3 GB. A scene that would need more gets coarser texels (`fitted_texel`)."""
+0.8 kB on the CPU and GPU together (positions, normals, probe weights, the final gather's rays): a room
+with 60 plates in it, a 1.96 M texel atlas, peaks at 1.8 GB resident against 0.53 GB for the room
+alone, so this bound keeps a scene's lightmap under about 3.5 GB. A scene that would need more gets
+coarser texels (`fitted_texel`), and one with more faces than fit at one texel each is refused."""
 MIN_TILE = 3
 """Texels along the side of the smallest tile: one texel inside and its border."""
 
 
-def fitted_texel(scene: Scene, texel: float, max_side: int, max_texels: int = MAX_ATLAS_TEXELS) -> float:
+def fitted_texel(scene: Scene, texel: float, max_side: int, max_texels: int | None = None) -> float:
     """`texel`, or the smallest coarser spacing whose atlas fits: at most `max_texels` texels and a texture
     (twice the atlas's width, for the back sides) of at most `max_side` texels along each side (what the GL
-    context allows). Raises SceneError for a scene with too many faces for any spacing: each face needs a
-    tile of at least MIN_TILE^2 texels."""
-    keep = scene.face_areas > 0
-    faces = int(np.count_nonzero(keep))
+    context allows; `max_texels`: MAX_ATLAS_TEXELS). Raises SceneError for a scene with too many faces
+    for any spacing: each face needs a tile of at least MIN_TILE^2 texels."""
+    max_texels = MAX_ATLAS_TEXELS if max_texels is None else max_texels
+    faces = int(np.count_nonzero(scene.face_areas > 0))
     width = min(ATLAS_WIDTH, max_side // 2)
     shelves = max_side // MIN_TILE
-    if faces * MIN_TILE ** 2 > max_texels or faces > shelves * (width // MIN_TILE):
-        raise SceneError(f"{scene.name}: {faces} faces are too many to draw: the lightmap holds at most "
-                         f"{min(max_texels // MIN_TILE ** 2, shelves * (width // MIN_TILE))}")
+    most = min(max_texels // MIN_TILE ** 2, shelves * (width // MIN_TILE))
+    too_many = SceneError(f"{scene.name}: {faces} faces are more than the renderer's lightmap holds ({most}, "
+                          f"{MIN_TILE}x{MIN_TILE} texels each at the least)")
+    if faces > most:
+        raise too_many
     for _ in range(200):
-        _, _, (w, h) = lightmap_layout(scene, texel)
+        _, n, (w, h) = lightmap_layout(scene, texel)
         if 2 * w <= max_side and h <= max_side and w * h <= max_texels:
             return texel
+        if np.all(n == 1):      # already one texel a face: coarser texels change nothing
+            raise too_many
         over = max(2.0 * w / max_side, h / max_side, w * h / max_texels)
         texel *= min(max(1.05, over ** 0.5), 1e6)    # cautious steps: shelves pack less densely than area
     raise SceneError(f"{scene.name}: no lightmap texel spacing fits the scene's faces into the atlas")
