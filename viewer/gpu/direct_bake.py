@@ -10,7 +10,8 @@ evaluates exactly what the per-fragment path does (shaders/direct_light.glsl: th
 their shadow atlas, the sun with its shadow map) in one full-screen pass over textures of texel
 positions and normals (shaders/direct_bake.glsl), for both sides of every face (surfaces reflect on both
 sides: the back sides' lightmap lies right of the front sides' in one texture, so the surface pass
-reads either with one fetch). Penumbrae are then linear between texels a few centimetres apart.
+reads either with one fetch). Penumbrae are then linear between texels about a hundredth of the scene's
+longest side apart (RenderSettings.lightmap_texel: 0.02 units in the Cornell box).
 """
 
 from __future__ import annotations
