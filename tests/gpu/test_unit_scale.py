@@ -132,3 +132,18 @@ def test_too_many_faces_for_any_lightmap_are_refused_in_one_line(tmp_path, monke
     error = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(error) == 1 and "1800 faces" in error[0], error
     assert not (tmp_path / "floor.png").exists()
+
+
+def test_a_renderer_refuses_a_scene_it_cannot_draw_and_keeps_its_own(gl_context, cornell, monkeypatch):
+    many = Scene.concatenate("many", [scaled(cornell, 1.0)] * 30)    # 1080 faces
+    monkeypatch.setattr(direct_bake, "MAX_ATLAS_TEXELS", 9 * 1000)
+    offscreen = OffscreenRenderer(SIZE, samples=0, ctx=gl_context)
+    try:
+        offscreen.renderer.set_scene(cornell)
+        with pytest.raises(SceneError, match="1080 faces"):
+            offscreen.renderer.check_scene(many)    # what the window asks before it opens a dropped file
+        with pytest.raises(SceneError, match="1080 faces"):
+            offscreen.renderer.set_scene(many)
+        assert offscreen.renderer.scene is cornell
+    finally:
+        offscreen.release()

@@ -35,26 +35,32 @@ MIN_TILE = 3
 """Texels along the side of the smallest tile: one texel inside and its border."""
 
 
+def faces_fit(scene: Scene, max_side: int, max_texels: int | None = None) -> None:
+    """Raise SceneError when the scene has more faces than a lightmap holds at any texel spacing: each face
+    needs a tile of at least MIN_TILE^2 texels (see `fitted_texel` for `max_side` and `max_texels`)."""
+    max_texels = MAX_ATLAS_TEXELS if max_texels is None else max_texels
+    faces = int(np.count_nonzero(scene.face_areas > 0))
+    width = min(ATLAS_WIDTH, max_side // 2)
+    most = min(max_texels // MIN_TILE ** 2, (max_side // MIN_TILE) * (width // MIN_TILE))
+    if faces > most:
+        raise SceneError(f"{scene.name}: {faces} faces are more than the renderer's lightmap holds ({most}, "
+                         f"{MIN_TILE}x{MIN_TILE} texels each at the least)")
+
+
 def fitted_texel(scene: Scene, texel: float, max_side: int, max_texels: int | None = None) -> float:
     """`texel`, or the smallest coarser spacing whose atlas fits: at most `max_texels` texels and a texture
     (twice the atlas's width, for the back sides) of at most `max_side` texels along each side (what the GL
     context allows; `max_texels`: MAX_ATLAS_TEXELS). Raises SceneError for a scene with too many faces
-    for any spacing: each face needs a tile of at least MIN_TILE^2 texels."""
+    for any spacing (`faces_fit`)."""
     max_texels = MAX_ATLAS_TEXELS if max_texels is None else max_texels
-    faces = int(np.count_nonzero(scene.face_areas > 0))
-    width = min(ATLAS_WIDTH, max_side // 2)
-    shelves = max_side // MIN_TILE
-    most = min(max_texels // MIN_TILE ** 2, shelves * (width // MIN_TILE))
-    too_many = SceneError(f"{scene.name}: {faces} faces are more than the renderer's lightmap holds ({most}, "
-                          f"{MIN_TILE}x{MIN_TILE} texels each at the least)")
-    if faces > most:
-        raise too_many
+    faces_fit(scene, max_side, max_texels)
     for _ in range(200):
         _, n, (w, h) = lightmap_layout(scene, texel)
         if 2 * w <= max_side and h <= max_side and w * h <= max_texels:
             return texel
         if np.all(n == 1):      # already one texel a face: coarser texels change nothing
-            raise too_many
+            raise SceneError(f"{scene.name}: {len(n)} faces are more than the renderer's lightmap holds "
+                             f"({w}x{h} texels at one texel a face)")
         over = max(2.0 * w / max_side, h / max_side, w * h / max_texels)
         texel *= min(max(1.05, over ** 0.5), 1e6)    # cautious steps: shelves pack less densely than area
     raise SceneError(f"{scene.name}: no lightmap texel spacing fits the scene's faces into the atlas")
