@@ -57,7 +57,7 @@ float emitter_visibility(LightSample s, vec3 d) {
     vec3 f = front ? a : (along_t ? vec3(a.y, a.z, m.x) : vec3(a.x, a.z, m.y));
     float face = front ? 0.0 : (along_t ? (a.x > 0.0 ? 1.0 : 2.0) : (a.y > 0.0 ? 3.0 : 4.0));
     float half_texel = 0.5 / shadow_tile_texels;
-    f.z = max(f.z, 1e-6);  // d = 0 (a receiver on the sample itself)
+    f.z = max(f.z, 1e-3 * shadow_near);  // d = 0 (a receiver on the sample itself); a length: scene-relative
     vec2 uv = clamp(f.xy / f.z * 0.5 + 0.5, vec2(half_texel), vec2(1.0 - half_texel));
     vec2 atlas = vec2(s.normal_atlas_u.w + face * shadow_tile_scale.x, s.tangent_atlas_v.w) + uv * shadow_tile_scale;
     // Window depth of the perspective projection with these near and far planes.
@@ -70,7 +70,7 @@ float emitter_visibility(LightSample s, vec3 d) {
 vec3 emitter_sample_irradiance(LightSample s, vec3 p, vec3 n) {
     vec3 d = p - s.position_area.xyz;
     float r2 = dot(d, d);
-    float inv_r = inversesqrt(max(r2, 1e-20));
+    float inv_r = inversesqrt(max(r2, 1e-12 * shadow_near * shadow_near));  // d = 0, in any unit
     float cos_p = -dot(n, d) * inv_r;
     float cos_k = dot(s.normal_atlas_u.xyz, d) * inv_r;
     // Normal offset grows with a shadow texel's footprint at this distance (2 r / tile texels).

@@ -10,7 +10,8 @@ evaluates exactly what the per-fragment path does (shaders/direct_light.glsl: th
 their shadow atlas, the sun with its shadow map) in one full-screen pass over textures of texel
 positions and normals (shaders/direct_bake.glsl), for both sides of every face (surfaces reflect on both
 sides: the back sides' lightmap lies right of the front sides' in one texture, so the surface pass
-reads either with one fetch). Penumbrae are then linear between texels a few centimetres apart.
+reads either with one fetch). Penumbrae are then linear between texels about a hundredth of the scene's
+longest side apart (RenderSettings.lightmap_texel: 0.02 units in the Cornell box).
 """
 
 from __future__ import annotations
@@ -19,10 +20,50 @@ import moderngl
 import numpy as np
 
 from viewer.gpu.mesh import TriangleBuffer
-from viewer.scene import Scene
+from viewer.scene import Scene, SceneError
 
 ATLAS_WIDTH = 2048
 """Texels along a row of the lightmap atlas (tiles are packed in shelves)."""
+MAX_ATLAS_TEXELS = 2048 * 2048
+"""The most texels of one side's lightmap (the texture holds both sides, twice this). Each costs about
+0.8 kB on the CPU and GPU together (positions, normals, probe weights, the final gather's rays): a room
+with 60 plates in it, a 1.96 M texel atlas, peaks at 1.8 GB resident against 0.53 GB for the room
+alone, so this bound keeps a scene's lightmap under about 3.5 GB (a room with 150 plates, 4.15 M texels
+5% coarser than asked, peaks at 3.3 GB). A scene that would need more gets coarser texels
+(`fitted_texel`), and one with more faces than fit at one texel each is refused."""
+MIN_TILE = 3
+"""Texels along the side of the smallest tile: one texel inside and its border."""
+
+
+def faces_fit(scene: Scene, max_side: int, max_texels: int | None = None) -> None:
+    """Raise SceneError when the scene has more faces than a lightmap holds at any texel spacing: each face
+    needs a tile of at least MIN_TILE^2 texels (see `fitted_texel` for `max_side` and `max_texels`)."""
+    max_texels = MAX_ATLAS_TEXELS if max_texels is None else max_texels
+    faces = int(np.count_nonzero(scene.face_areas > 0))
+    width = min(ATLAS_WIDTH, max_side // 2)
+    most = min(max_texels // MIN_TILE ** 2, (max_side // MIN_TILE) * (width // MIN_TILE))
+    if faces > most:
+        raise SceneError(f"{scene.name}: {faces} faces are more than the renderer's lightmap holds ({most}, "
+                         f"{MIN_TILE}x{MIN_TILE} texels each at the least)")
+
+
+def fitted_texel(scene: Scene, texel: float, max_side: int, max_texels: int | None = None) -> float:
+    """`texel`, or the smallest coarser spacing whose atlas fits: at most `max_texels` texels and a texture
+    (twice the atlas's width, for the back sides) of at most `max_side` texels along each side (what the GL
+    context allows; `max_texels`: MAX_ATLAS_TEXELS). Raises SceneError for a scene with too many faces
+    for any spacing (`faces_fit`)."""
+    max_texels = MAX_ATLAS_TEXELS if max_texels is None else max_texels
+    faces_fit(scene, max_side, max_texels)
+    for _ in range(200):
+        _, n, (w, h) = lightmap_layout(scene, texel)
+        if 2 * w <= max_side and h <= max_side and w * h <= max_texels:
+            return texel
+        if np.all(n == 1):      # already one texel a face: coarser texels change nothing
+            raise SceneError(f"{scene.name}: {len(n)} faces are more than the renderer's lightmap holds "
+                             f"({w}x{h} texels at one texel a face)")
+        over = max(2.0 * w / max_side, h / max_side, w * h / max_texels)
+        texel *= min(max(1.05, over ** 0.5), 1e6)    # cautious steps: shelves pack less densely than area
+    raise SceneError(f"{scene.name}: no lightmap texel spacing fits the scene's faces into the atlas")
 
 
 def lightmap_layout(scene: Scene, texel: float):

@@ -13,9 +13,9 @@ second for the Cornell box, numba) with each texel's (probe, normal) pairs (`Sur
 probe grid (a relight, a network update) is then evaluated on the CPU, about 24 multiply-adds a texel,
 and uploaded. On llvmpipe that is about 10x cheaper than the same weighted sum in a fragment shader
 (8 probes x 7 texel fetches a texel: ~300 ms for the Cornell box's 0.77 M atlas texels). Indirect light
-is smooth over a probe spacing and the texels are `RenderSettings.lightmap_texel` apart, so the surface
-pass needs no screen-space upsampling and has no edges to respect: a silhouette is a change of face,
-and each face reads its own texels.
+is smooth over a probe spacing and the texels are `RenderSettings.lightmap_texel` of the scene's size
+apart, so the surface pass needs no screen-space upsampling and has no edges to respect: a silhouette is
+a change of face, and each face reads its own texels.
 """
 
 from __future__ import annotations

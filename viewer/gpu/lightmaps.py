@@ -11,7 +11,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
+from viewer.gpu.direct_bake import BakedDirectLight, fitted_texel, same_atlas
 from viewer.gpu.indirect_bake import BakedIndirectLight
 from viewer.gpu.lights import emitter_samples
 from viewer.gpu.programs import set_uniforms
@@ -19,6 +19,14 @@ from viewer.gpu.shadows import EmitterShadows, SunShadow
 
 PROBE_UNIT, ATLAS_UNIT, SUN_UNIT, HDR_UNIT, INTERLEAVE_UNIT, BAKED_UNIT, INDIRECT_UNIT = 0, 7, 8, 9, 10, 14, 15
 """Texture units: the lightmaps' and the surface pass's, which reads them all in one draw."""
+
+
+def max_texture_side(ctx: moderngl.Context) -> int:
+    """The longest side of a texture the context can make and render into (llvmpipe: 16384)."""
+    info = ctx.info
+    viewport = info.get("GL_MAX_VIEWPORT_DIMS", (16384, 16384))
+    return int(min(info.get("GL_MAX_TEXTURE_SIZE", 16384), info.get("GL_MAX_RENDERBUFFER_SIZE", 16384),
+                   *viewport))
 
 
 class LightmapUpkeep:
@@ -62,7 +70,9 @@ class LightmapUpkeep:
         layout = (self._geometry, self.settings.lightmap_texel, self.settings.final_gather)
         if layout != self._layout_key:
             old, indirect = self._baked, self._indirect
-            baked = BakedDirectLight(self.ctx, self._draw_scene, self.settings.lightmap_texel)
+            texel = fitted_texel(self._draw_scene, self.settings.lightmap_texel * self._scene_size,
+                                 max_texture_side(self.ctx))
+            baked = BakedDirectLight(self.ctx, self._draw_scene, texel)
             if (old is not None and indirect is not None and self._layout_key[1:] == layout[1:]
                     and same_atlas(old, baked)):   # faces moved: the old rays, to trace only what changed
                 self._indirect = None

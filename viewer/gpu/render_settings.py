@@ -60,13 +60,17 @@ class RenderSettings:
     """`final`, `direct` and `indirect` views: the irradiance is read from a lightmap atlas with one
     bilinear fetch per fragment, instead of summing the emitter samples and interpolating the probe grid
     per fragment. The direct light is baked once per scene and light setting (viewer/gpu/direct_bake.py:
-    the same shadows and penumbrae, linear between texels `lightmap_texel` apart), the probe grid once
+    the same shadows and penumbrae, linear between texels `lightmap_texel` of the scene's size apart), the probe grid once
     per GI update (viewer/gpu/indirect_bake.py) with per-texel probe weights that add the probes'
     visibility to validity and back-face weights (viewer/probes/weights.py). False: the exact per-fragment
     path (direct light summed per fragment, probes interpolated with `probe_normal_offset` and
     `probe_plane_falloff`)."""
-    lightmap_texel: float = 0.02
-    """Lightmap texel spacing of the baked light, in scene units (metres for the Cornell box)."""
+    lightmap_texel: float = 0.02 / 2.01
+    """Lightmap texel spacing of the baked light, as a fraction of the scene's longest side: 0.02 units
+    for the built-in Cornell box (2.01 across), about 100 texels along it, whatever unit a scene is
+    modelled in (a room in metres or in centimetres gets the same lightmap). A scene whose atlas would
+    pass the texel budget or the GL context's texture size gets coarser texels instead
+    (viewer/gpu/direct_bake.py, `fitted_texel`)."""
     final_gather: int = 72
     """With `baked`: rays per lightmap sample of the final gather (viewer/gpu/final_gather.py), which takes each
     sample's indirect light from the direct and probe-lit light that its surroundings reflect, so that

@@ -24,12 +24,12 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from viewer.gpu.direct_bake import BakedDirectLight
+from viewer.gpu.direct_bake import BakedDirectLight, faces_fit
 from viewer.gpu.indirect_bake import BakedIndirectLight
 from viewer.gpu.camera import gl_bytes, view_projection
 from viewer.gpu.debug_views import DebugViews
 from viewer.gpu.lightmaps import (ATLAS_UNIT, BAKED_UNIT, HDR_UNIT, INDIRECT_UNIT, INTERLEAVE_UNIT, PROBE_UNIT,
-                                  SUN_UNIT, LightmapUpkeep)
+                                  SUN_UNIT, LightmapUpkeep, max_texture_side)
 from viewer.gpu.mesh import SceneMesh, in_draw_order, same_triangles
 from viewer.gpu.probe_textures import ProbeTextures, empty_grid
 from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
@@ -92,6 +92,9 @@ class Renderer(LightmapUpkeep):
         with GI comes a second later for a settled frame no sooner)."""
         self._baked: BakedDirectLight | None = None
         self._geometry = 0
+        self._scene_size = 1.0
+        """The longest side of the scene's box when its faces were set: lengths (the lightmap's texel) are
+        fractions of it, so that a scene renders alike in any unit."""
         """Counts the scenes whose triangles differ from the one before (a colour edit keeps them)."""
         self._layout_key = None
         """What the lightmap's layout and the indirect light's weights and rays were made for."""
@@ -118,6 +121,7 @@ class Renderer(LightmapUpkeep):
         depend on the geometry alone: its lightmap is baked again and the indirect light gathered again.
         The same faces moved (a lamp dragged) keep the old rays, for the worker to trace again only those
         the move can change (`_ensure_baked`)."""
+        self.check_scene(scene)
         if self.mesh is not None:
             self.mesh.release()
         draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
@@ -125,6 +129,8 @@ class Renderer(LightmapUpkeep):
             self._geometry += 1
             if self.scene is None or not np.array_equal(draw_scene.faces, self._draw_scene.faces):
                 self._release_baked()
+                lo, hi = scene.bounds
+                self._scene_size = float(np.max(hi - lo))   # kept while the same faces move
         elif self._baked is not None:
             self._baked.recolour(draw_scene)
             if self._indirect is not None:
@@ -135,6 +141,11 @@ class Renderer(LightmapUpkeep):
         self._draw_scene = draw_scene
         self.mesh = SceneMesh(self.ctx, self._draw_scene)
         self._scene_version += 1
+
+    def check_scene(self, scene: Scene) -> None:
+        """Raise SceneError, changing nothing, for a scene this renderer cannot draw (more faces than its
+        lightmap holds): a window keeps its scene and says why."""
+        faces_fit(scene, max_texture_side(self.ctx))
 
     def set_probes(self, probes: ProbeGrid | None) -> None:
         """The indirect light (incident radiance without emitters and sun), or None for GI off."""
