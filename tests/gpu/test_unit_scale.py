@@ -128,7 +128,8 @@ def test_too_many_faces_for_any_lightmap_are_refused_in_one_line(tmp_path, monke
     monkeypatch.setattr(direct_bake, "MAX_ATLAS_TEXELS", 9 * 1000)
     from viewer.cli import main
 
-    status = main(["capture", str(path), "--out", str(tmp_path / "floor.png"), "--size", "16x16", "--gi", "off"])
+    status = main(["capture", str(path), "--out", str(tmp_path / "floor.png"), "--size", "16x16", "--gi", "off",
+                   "--sun", "0,0,1,1,1,1"])   # lit, so that the refusal is the only line
     error = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(error) == 1 and "1800 faces" in error[0], error
     assert not (tmp_path / "floor.png").exists()
