@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from viewer.scene import SceneError, load
+from viewer.scene import DirectionalLight, SceneError, load
 
 ROOT = Path(__file__).resolve().parents[2]
 POSITIONS = np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0]], np.float32)
@@ -111,3 +111,74 @@ def test_an_mtl_colour_that_is_not_finite_says_colour(tmp_path):
     (tmp_path / "room.obj").write_text("v 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n")
     with pytest.raises(SceneError, match="NaN or infinite coordinate"):
         load(tmp_path / "room.obj")
+
+
+# ---- an OBJ's material libraries, pipes, sizes, and what its light and sidecar camera may hold ----------------------------------------------------------------------------------
+
+def write_obj(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+LAMP_MTL = "newmtl lamp\nKd 0 0 0\nKe 10 10 10\n"
+QUAD_USING_LAMP = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl lamp\nf 1 2 3 4\n"
+
+
+@pytest.mark.parametrize("name", ["../outside.mtl", "{outside}"])
+def test_material_libraries_outside_the_scenes_folder_are_skipped_with_a_line(tmp_path, capsys, name):
+    """`mtllib ../outside.mtl` (or an absolute path elsewhere) is not read: its lamp does not light the
+    scene, and stderr says what was skipped."""
+    (tmp_path / "outside.mtl").write_text(LAMP_MTL)
+    folder = tmp_path / "room"
+    folder.mkdir()
+    name = name.format(outside=tmp_path / "outside.mtl")
+    room = load(write_obj(folder / "room.obj", f"mtllib {name}\n{QUAD_USING_LAMP}"))
+    assert not room.emission.any()
+    assert "skipped" in capsys.readouterr().err
+
+
+def test_material_libraries_inside_the_scenes_folder_are_read(tmp_path):
+    (tmp_path / "materials").mkdir()
+    (tmp_path / "materials" / "lamp.mtl").write_text(LAMP_MTL)
+    room = load(write_obj(tmp_path / "room.obj", f"mtllib materials/lamp.mtl\n{QUAD_USING_LAMP}"))
+    assert room.emission.max() == 10.0
+
+
+def test_a_pipe_named_as_the_scene_is_refused_without_opening_it(tmp_path):
+    """Opening a FIFO would block until something writes to it: it is refused from its stat alone."""
+    pipe = tmp_path / "scene.obj"
+    os.mkfifo(pipe)
+    with pytest.raises(SceneError, match="not a regular file"):
+        load(pipe)
+
+
+def test_a_scene_file_past_the_size_limit_is_refused_before_it_is_read(tmp_path):
+    from viewer.scene.files import MAX_FILE_BYTES
+
+    huge = tmp_path / "huge.obj"
+    with open(huge, "wb") as fh:   # sparse: no disk used
+        fh.truncate(MAX_FILE_BYTES + 1)
+    with pytest.raises(SceneError, match="MiB"):
+        load(huge)
+
+
+def test_light_past_float32s_range_is_refused(tmp_path):
+    """Ke 1e39 and a sun of 1e39 are finite in float64 but put NaN into the float32 probes and picture."""
+    (tmp_path / "hot.mtl").write_text("newmtl lamp\nKe 1e39 1e39 1e39\n")
+    with pytest.raises(SceneError, match="emitted radiance beyond"):
+        load(write_obj(tmp_path / "hot.obj", f"mtllib hot.mtl\n{QUAD_USING_LAMP}"))
+    with pytest.raises(SceneError, match="irradiance beyond"):
+        DirectionalLight((0.0, 1.0, 0.0), (1e39, 1e39, 1e39))
+
+
+@pytest.mark.parametrize("camera, message", [
+    ({"origin": [""]}, "malformed"), ({"origin": "abc"}, "camera origin|malformed"),
+    ({"origin": [0, 0, 1], "target": [0, 0, 1]}, "same point"), ({"up": [0, 0, 0]}, "up is zero"),
+    ({"origin": [0, 0, 1e30]}, "three finite"), ({"fov": 0}, "fov")])
+def test_a_sidecar_camera_that_cannot_make_a_picture_is_refused(tmp_path, camera, message):
+    """A camera with no numbers, a target on its origin or no usable up gave a black picture or a
+    TypeError deep in the renderer; it is one line naming the sidecar."""
+    room = write_obj(tmp_path / "room.obj", QUAD_USING_LAMP)
+    (tmp_path / "room.json").write_text(json.dumps({"camera": camera}))
+    with pytest.raises(SceneError, match=message):
+        load(room)
