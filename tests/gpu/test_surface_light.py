@@ -295,7 +295,7 @@ def test_a_new_scenes_rays_are_traced_before_its_first_probes(gl_context, cornel
         renderer.background_bake = True
         renderer.set_scene(cornell)
         offscreen.render_hdr(view="final")          # no probes yet: direct light only
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + 600
         while not traced or renderer._indirect._made is None:
             assert time.monotonic() < deadline
             time.sleep(0.02)

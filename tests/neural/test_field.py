@@ -200,7 +200,7 @@ def test_mirror_augmentation_is_the_mirrored_scene():
     assert np.sqrt(np.mean(difference ** 2)) < 0.03 * np.sqrt(np.mean(bounce ** 2))
 
 
-def _wait_for_grid(gi, seconds: float = 60.0):
+def _wait_for_grid(gi, seconds: float = 600.0):
     import time
 
     deadline = time.monotonic() + seconds

@@ -81,7 +81,7 @@ def run(*args, env=None):
     environment = dict(os.environ, PYTHONPATH=str(ROOT), DISPLAY="", WAYLAND_DISPLAY="", **(env or {}))
     environment.pop(work.LIMIT_VARIABLE, None)
     return subprocess.run([sys.executable, "-m", "viewer", *map(str, args)], capture_output=True, text=True,
-                          cwd=ROOT, env=environment, timeout=120)
+                          cwd=ROOT, env=environment, timeout=600)
 
 
 def test_the_command_line_refuses_too_much_work_at_once_in_one_line(tmp_path):

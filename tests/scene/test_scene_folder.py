@@ -78,7 +78,7 @@ def test_a_buffer_that_is_a_pipe_is_refused_without_opening_it(folders):
     command = (f"from viewer.scene import load, SceneError\ntry: load({str(inner / 'pipe.gltf')!r})\n"
                "except SceneError as e: print(e)")
     # the timeout guards against the hang this test is about; what it asserts is the message
-    result = subprocess.run([sys.executable, "-c", command], capture_output=True, text=True, timeout=120,
+    result = subprocess.run([sys.executable, "-c", command], capture_output=True, text=True, timeout=600,
                             env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert "not a regular file" in result.stdout and result.stdout.count("\n") == 1, (result.stdout, result.stderr)
 
@@ -90,7 +90,7 @@ def test_a_sidecar_that_is_a_pipe_is_never_opened(tmp_path):
                "except SceneError as e: print(e)")
     # the timeout guards against the hang this test is about; what it asserts is the outcome: the pipe is
     # not a sidecar (the scene loads) or is refused as not a regular file
-    result = subprocess.run([sys.executable, "-c", command], capture_output=True, text=True, timeout=120,
+    result = subprocess.run([sys.executable, "-c", command], capture_output=True, text=True, timeout=600,
                             env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert result.stdout.strip() == "1" or "not a regular file" in result.stdout, (result.stdout, result.stderr)
 

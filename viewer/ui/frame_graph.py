@@ -71,7 +71,7 @@ class FrameTimes:
             started = time.perf_counter()
             yield
             self.ctx.finish()
-            self._record(1e6 * (time.perf_counter() - started))
+            self._record(1e9 * (time.perf_counter() - started))   # seconds to nanoseconds
             return
         slot = self._frame % QUERIES_IN_FLIGHT
         query = self._queries[slot]
