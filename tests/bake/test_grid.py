@@ -238,7 +238,7 @@ def test_the_window_opens_a_baked_file_on_its_scene_with_the_baked_probes(cornel
     view, stats = tmp_path / "view.png", tmp_path / "stats.json"
     server, display = start_xvfb()
     viewer = Viewer(display, [str(folder / "cornell.npz"), "--screenshot", str(view), "--stats", str(stats),
-                              "--quit-after", "120"], tmp_path)
+                              "--quit-after", "600"], tmp_path)
     try:
         assert viewer.wait_exit() == 0, viewer.log
     finally:

@@ -33,7 +33,7 @@ def test_the_c_key_gives_the_view_as_captures_flags(display, x11, tmp_path):
 
     from viewer.bench.x11 import REPO
 
-    viewer = Viewer(display, ["cornell", "--gi", "off", "--quit-after", "120"], tmp_path)
+    viewer = Viewer(display, ["cornell", "--gi", "off", "--quit-after", "600"], tmp_path)
     try:
         window = viewer.ready()
         x0, y0 = x11.origin(window)

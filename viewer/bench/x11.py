@@ -175,7 +175,7 @@ class X11:
         return None
 
     def drop(self, target: int, paths: list[str | Path], at: tuple[int, int] | None = None,
-             timeout: float = 60.0) -> dict:
+             timeout: float = 300.0) -> dict:
         """Drag `paths` onto window `target` and drop them at root position `at` (default: 100, 100 inside
         the window). Returns what happened: accepted (XdndStatus), requested (the target asked for the
         data), finished (XdndFinished)."""
@@ -261,7 +261,7 @@ def start_xvfb(size: str = "1600x1000x24") -> tuple[subprocess.Popen, str]:
 class Viewer:
     """`python -m viewer.app ARGS` on a display, with its stderr lines collected as they come."""
 
-    def __init__(self, display: str, args: list[str], cwd: Path, timeout: float = 240.0):
+    def __init__(self, display: str, args: list[str], cwd: Path, timeout: float = 600.0):
         env = dict(os.environ, DISPLAY=display, PYTHONPATH=str(REPO))
         env.pop("WAYLAND_DISPLAY", None)
         self.process = subprocess.Popen([sys.executable, "-m", "viewer.app", *args], cwd=cwd, env=env,
