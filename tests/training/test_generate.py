@@ -104,6 +104,32 @@ def test_resume_remakes_a_corrupt_shard_and_keeps_pending_rooms(made, tmp_path):
     assert manifest["timing"]["rooms_made"] == 6 and len(manifest["commands"]) == 3
 
 
+def test_resume_remakes_a_shard_with_a_flipped_bit_without_being_asked_to_verify(made, tmp_path):
+    """One bit flipped inside a room of a finished shard keeps the shard's size and index; the resume's own
+    check (each member's CRC-32) finds it and makes the shard again, the same bits as before, so training
+    never meets the damaged room."""
+    import shutil
+
+    source, rooms = made
+    root = tmp_path / "copy"
+    shutil.copytree(source, root)
+    damaged = root / "train" / "shard-00000.zip"
+    with zipfile.ZipFile(damaged) as archive:
+        member = archive.getinfo("train-00001.npz")
+    data = bytearray(damaged.read_bytes())
+    header = member.header_offset
+    name_length, extra_length = int.from_bytes(data[header + 26:header + 28], "little"), \
+        int.from_bytes(data[header + 28:header + 30], "little")
+    data[header + 30 + name_length + extra_length + member.compress_size // 2] ^= 0x10
+    damaged.write_bytes(bytes(data))
+    result = generate.run(root, settings_of(root), ("val", "train"), workers=2, stream=io.StringIO())
+    assert result.made == 2 and result.skipped == 2 and not result.failed
+    for ref in dataset.room_refs(root, "train"):
+        name = ref.partition("#")[2]
+        for key, value in room_arrays(ref).items():
+            assert np.array_equal(value, rooms[name][key]), f"{name} {key}"
+
+
 def test_other_settings_are_refused(made, tmp_path):
     import shutil
 

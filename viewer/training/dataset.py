@@ -304,8 +304,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="join an existing Ray cluster (e.g. auto, or ray://host:10001) instead of starting "
                         "one here")
     p.add_argument("--verify", action="store_true",
-                   help="check every finished shard in full (each room's CRC, shapes, finite values) before "
-                        "resuming, not only its size and index")
+                   help="check every room of every finished shard in full (shapes, finite values) before "
+                        "resuming, not only the shard's size, index and CRCs")
     p.add_argument("--dump-obj", type=Path, metavar="DIR",
                    help="instead of generating: write the scenes --indices of --split as OBJ+MTL+JSON "
                         "into DIR (for `python -m viewer capture DIR/NAME.obj`)")

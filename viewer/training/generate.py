@@ -8,8 +8,8 @@ are there. `ray.init()` starts Ray on this machine with every core (or `workers`
 `address` it joins a cluster the user runs (the workers there must import the same `viewer` package).
 
 Resuming: a packed shard is kept when its zip index lists exactly the rooms it should hold, its
-shard.json was made with the same settings and its size is the one the manifest recorded (`verify`
-also reads every room back: CRCs, shapes, finite values); a pending room is kept when it reads back
+shard.json was made with the same settings, its size is the one the manifest recorded and every
+member's CRC-32 holds (`verify` also reads every room back: shapes, finite values); a pending room is kept when it reads back
 whole. Settings that change what a room holds (seed, ranges, truth, directions, probes, voxels, shard
 size) must match the manifest's; room counts may grow.
 """
