@@ -118,6 +118,17 @@ def test_a_grid_opens_a_scene_only_inside_its_own_folder(tmp_path, monkeypatch):
     assert len(baked.load_scene(baked.read_npz(path), path).faces) > 0
 
 
+def test_a_grid_s_scene_beside_it_that_links_elsewhere_is_refused(tmp_path):
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "room.obj").write_text(CORNELL)
+    grids = tmp_path / "grids"
+    grids.mkdir()
+    (grids / "room.obj").symlink_to(tmp_path / "elsewhere" / "room.obj")
+    path = written(grids / "g.npz", scene="room.obj")
+    message = refused(path, "links to .*outside the baked file's folder")
+    assert "room.obj" in message
+
+
 def test_a_grid_s_scene_that_is_not_a_built_in_name_is_refused(tmp_path):
     path = written(tmp_path / "g.npz", scene="..")
     refused(path, "not a built-in scene")

@@ -137,6 +137,26 @@ def test_material_libraries_outside_the_scenes_folder_are_skipped_with_a_line(tm
     assert "skipped" in capsys.readouterr().err
 
 
+def test_links_that_point_outside_the_scenes_folder_are_not_followed(tmp_path, capsys):
+    """A material library and a sidecar that sit beside the scene by name but are symbolic links to files
+    elsewhere are not read: the lamp and the sun they hold stay out, and each gets a line saying why."""
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "lamp.mtl").write_text(LAMP_MTL)
+    (outside / "sun.json").write_text('{"sun": {"direction": [0, 1, 0], "irradiance": [5, 5, 5]}}')
+    folder = tmp_path / "room"
+    folder.mkdir()
+    (folder / "lamp.mtl").symlink_to(outside / "lamp.mtl")
+    (folder / "room.json").symlink_to(outside / "sun.json")
+    room = load(write_obj(folder / "room.obj", f"mtllib lamp.mtl\n{QUAD_USING_LAMP}"))
+    assert not room.emission.any() and room.sun is None
+    err = capsys.readouterr().err
+    assert "skipped 'lamp.mtl'" in err and "room.json is not read: it links to" in err
+    (folder / "room.json").unlink()                       # the same sidecar as a file of the folder is read
+    (folder / "room.json").write_text((outside / "sun.json").read_text())
+    assert load(folder / "room.obj").sun is not None
+
+
 def test_material_libraries_inside_the_scenes_folder_are_read(tmp_path):
     (tmp_path / "materials").mkdir()
     (tmp_path / "materials" / "lamp.mtl").write_text(LAMP_MTL)

@@ -38,7 +38,7 @@ import numpy as np
 
 from viewer.physical.work import MAX_PROBES, WorkError, check_probe_grid
 from viewer.probes.grid import ProbeGrid
-from viewer.scene.files import check_readable
+from viewer.scene.files import check_readable, inside as inside_folder
 from viewer.scene.types import MAX_COORDINATE, DirectionalLight, SceneError
 from viewer.output import replacing
 
@@ -240,13 +240,17 @@ def scene_source(baked: BakedGrid, path: str | Path) -> str:
     except (OSError, ValueError, RuntimeError):
         named = None
     inside = named is not None and named.is_relative_to(folder)
-    for candidate in ([named] if inside else []) + [folder / stored.name]:
+    beside = inside_folder(folder, stored.name)   # a link beside the grid that points elsewhere is not beside it
+    for candidate in ([named] if inside else []) + ([beside] if beside is not None else []):
         if candidate.exists():
             try:
                 check_readable(candidate)
             except SceneError as exc:
                 raise BakedError(f"{path}: its scene {exc}") from None
             return str(candidate)
+    if beside is None and (folder / stored.name).exists():
+        raise BakedError(f"{path}: its scene {stored.name} beside it links to {(folder / stored.name).resolve()}, "
+                         f"outside the baked file's folder {folder} (a grid opens only a scene beside it or below it)")
     if not inside and named is not None and named.exists():
         raise BakedError(f"{path}: its scene {baked.scene} lies outside the baked file's folder {folder} (a grid "
                          f"opens only a scene beside it or below it: move the grid next to its scene)")

@@ -35,15 +35,22 @@ def check_readable(path: Path, what: str = "scene file", limit: int = MAX_FILE_B
                          f"{what} may have")
 
 
-def companion(scene_path: Path, name: str) -> Path | None:
-    """The file `name` that the scene file names (a material library), resolved in the scene's folder;
-    None, with a line on stderr saying what was skipped, when it lies outside that folder."""
-    folder = scene_path.parent.resolve()
+def inside(folder: Path, name: str | Path) -> Path | None:
+    """`folder / name` with every link followed, or None when it lands outside `folder` (a `..`, an absolute
+    name, or a symbolic link that points elsewhere)."""
+    folder = folder.resolve()
     try:
         candidate = (folder / name).resolve()
     except (OSError, ValueError, RuntimeError):
         return None
-    if not candidate.is_relative_to(folder):
-        print(f"{scene_path}: skipped {name!r}: outside the scene's folder {folder}", file=sys.stderr)
-        return None
+    return candidate if candidate.is_relative_to(folder) else None
+
+
+def companion(scene_path: Path, name: str) -> Path | None:
+    """The file `name` that the scene file names (a material library), resolved in the scene's folder;
+    None, with a line on stderr saying what was skipped, when it lies outside that folder."""
+    candidate = inside(scene_path.parent, name)
+    if candidate is None:
+        print(f"{scene_path}: skipped {name!r}: outside the scene's folder {scene_path.parent.resolve()}",
+              file=sys.stderr)
     return candidate

@@ -18,7 +18,7 @@ import numpy as np
 
 from viewer.scene import loaders
 from viewer.scene import obj
-from viewer.scene.files import check_readable
+from viewer.scene.files import check_readable, inside
 from viewer.resources import SCENES
 from viewer.scene.types import MAX_COORDINATE, Camera, DirectionalLight, Scene, SceneError, note
 
@@ -110,10 +110,10 @@ def sidecar_path(path: Path) -> Path | None:
     `<name>.<suffix>.json` (`room.obj.json`), else `scene.json` when `path` is the only scene file in its
     folder; None when there is none."""
     for candidate in (path.with_suffix(".json"), path.with_name(path.name + ".json")):
-        if candidate.is_file() and candidate != path:
+        if candidate.is_file() and candidate != path and inside(path.parent, candidate.name):
             return candidate
     shared = path.with_name(SHARED_SIDECAR)
-    if shared.is_file() and _scene_files(path.parent) == [path.name]:
+    if shared.is_file() and inside(path.parent, shared.name) and _scene_files(path.parent) == [path.name]:
         return shared
     return None
 
@@ -130,6 +130,11 @@ def sidecar_notes(path: Path) -> list[str]:
     `scene.json` in a folder of several scene files, keys other than "sun" and "camera"."""
     found = sidecar_path(path)
     shared = path.with_name(SHARED_SIDECAR)
+    linked = [c for c in (path.with_suffix(".json"), path.with_name(path.name + ".json"), shared)
+              if c != path and c.is_file() and not inside(path.parent, c.name)]
+    if found is None and linked:
+        return [f"{linked[0]} is not read: it links to {linked[0].resolve()}, outside the scene's folder "
+                f"{path.parent.resolve()} (a scene reads only its own folder)"]
     if found is None and shared.is_file():
         count = len(_scene_files(path.parent))
         return [f"{shared} is not read for {path.name}: its folder holds {count} scene files, and scene.json "
