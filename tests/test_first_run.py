@@ -144,6 +144,25 @@ def test_each_kernel_compiled_is_said_once_the_first_saying_why():
     assert progress.compile_message("numpy.linalg", "solve") is None
 
 
+def test_a_bar_in_a_log_is_lines_with_the_count_and_the_lines_that_must_stay(monkeypatch):
+    """The dataset's and the benchmark's bar, written to a file: no carriage returns, the count of steps
+    and their unit on every line, the results written through it kept whole, the last line 5/5."""
+    import io
+
+    monkeypatch.setattr(progress, "LOG_SECONDS", 0.0)
+    log = io.StringIO()
+    bar = progress.bar(5, "room", "rooms", done=2, stream=log)
+    for i in range(3):
+        bar.write(f"packed train/shard-{i:05d}.zip")
+        bar.update(1)
+    bar.close()
+    lines = log.getvalue().splitlines()
+    assert "\r" not in log.getvalue() and all(line.strip() for line in lines)
+    assert [line for line in lines if line.startswith("packed")] == [f"packed train/shard-{i:05d}.zip" for i in range(3)]
+    counts = [line for line in lines if not line.startswith("packed")]
+    assert counts and all("room" in line for line in counts) and "5/5" in counts[-1], lines
+
+
 def test_capture_says_what_it_is_doing_when_asked(tmp_path):
     result = run("capture", "cornell", "--gi", "off", "--size", "32x24", "--out", tmp_path / "c.png",
                  env={"GI_VIEWER_PROGRESS": "1"})

@@ -9,7 +9,10 @@ this machine (the first run only: numba caches them, next to the package or in t
 
 The lines go to a terminal: where stderr is a file or a pipe (a script, a test) they are left out, so that
 what a command prints there stays its result. `GI_VIEWER_PROGRESS=1` prints them anywhere, `=0` nowhere.
-Cheap to import: numba is imported only by `announce_compiles`.
+
+Work counted in steps (the dataset's rooms, the benchmark's measurements) shows a bar instead (`bar`, on
+tqdm): rate and time left, redrawn in place on a terminal, a plain line now and then in a log.
+Cheap to import: numba is imported only by `announce_compiles`, tqdm only by `bar`.
 """
 
 from __future__ import annotations
@@ -25,6 +28,8 @@ HEARTBEAT = 8.0
 """While one kernel compiles, a line every this many seconds."""
 SLOW_SECONDS = 2.0
 """A step that took longer than this says how long it took when it ends."""
+LOG_SECONDS = 60.0
+"""Where a bar goes to a file or a pipe (a log of a long run), it writes a line at most this often."""
 
 
 def enabled() -> bool:
@@ -115,6 +120,47 @@ def announce_compiles() -> None:
     if enabled():
         threading.Thread(target=heartbeat, name="compile-heartbeat", daemon=True).start()
     _listening = True
+
+
+def bar(total: int, unit: str, description: str = "", done: int = 0, stream=None):
+    """A tqdm progress bar over `total` steps of `unit` (`done` of them finished before this run), on
+    stderr or `stream`: on a terminal it is redrawn in place; in a file or a pipe it is a line at most
+    every LOG_SECONDS (and at the end), each on a line of its own, so a log of an hours-long run stays
+    readable. Lines that must stay (a result, a failure) go through the bar's `write`."""
+    from tqdm import tqdm
+
+    stream = sys.stderr if stream is None else stream
+    try:
+        terminal = stream.isatty()
+    except (AttributeError, ValueError):
+        terminal = False
+    target = stream if terminal else _LogLines(stream)
+
+    class Bar(tqdm):
+        def write(self, line: str) -> None:
+            if terminal:   # above the bar, which tqdm redraws (its own `write` goes to stdout unless told)
+                tqdm.write(line, file=target)
+            else:
+                target.write(line + "\n")
+
+    return Bar(total=total, initial=done, unit=unit, desc=description or None, dynamic_ncols=terminal,
+               file=target, mininterval=0.5 if terminal else LOG_SECONDS, ascii=not terminal, smoothing=0.05)
+
+
+class _LogLines:
+    """A stream for a bar that is not on a terminal: tqdm redraws with a carriage return, which a log would
+    keep as one ever-growing line; here each redraw is a line of its own, and blank ones are dropped."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text: str) -> None:
+        for line in text.replace("\r", "\n").split("\n"):
+            if line.strip():
+                self.stream.write(line.rstrip() + "\n")
+
+    def flush(self) -> None:
+        self.stream.flush()
 
 
 def plural(count: int, word: str) -> str:

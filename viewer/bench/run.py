@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from viewer.errors import ArgumentParser, InputError, exit_status
+from viewer.progress import bar
 
 ROOT = Path(__file__).resolve().parents[2]
 SLOW_SECONDS = 10.0
@@ -181,20 +182,6 @@ def measure(produce, scene, points, truth) -> tuple[float, float, int, float]:
             float(np.mean(errors)))
 
 
-class Progress:
-    """One line per step on stderr: a bar, the step, its result, elapsed time."""
-
-    def __init__(self, total: int):
-        self.total, self.done, self.start = total, 0, time.perf_counter()
-
-    def step(self, text: str) -> None:
-        self.done += 1
-        filled = int(24 * self.done / max(self.total, 1))
-        elapsed = time.perf_counter() - self.start
-        print(f"[{'#' * filled}{'.' * (24 - filled)}] {self.done}/{self.total} {elapsed / 60:5.1f} min  {text}",
-              file=sys.stderr, flush=True)
-
-
 def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
     """Measure every (scene, method) not yet in the CSV; returns notes (skipped methods)."""
     from viewer.reference import mitsuba as reference
@@ -206,9 +193,9 @@ def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
     done = {key(r) for r in read_rows(paths.csv)}
     loaded = [scenes.load(s) for s in sources]
     todo = [(scene, m) for scene in loaded for m in methods.values() if (scene.name, m.family, m.setting) not in done]
-    progress = Progress(len(todo))
     print(f"bench: {len(loaded)} scenes x {len(methods)} methods, {len(todo)} to measure "
           f"({len(loaded) * len(methods) - len(todo)} already in {paths.csv})", file=sys.stderr, flush=True)
+    progress = bar(len(todo), "measurement", "bench")
     producers, notes = {}, []
     for scene in loaded:
         pending = [m for s, m in todo if s is scene]
@@ -224,7 +211,8 @@ def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
                     producers[method.name] = None
                     notes.append(f"`{method.name}` skipped: {exc}")
             if producers[method.name] is None:
-                progress.step(f"{scene.name} {method.name}: skipped")
+                progress.write(f"{scene.name} {method.name}: skipped")
+                progress.update(1)
                 continue
             ms, cpu_ms, repeats, error = measure(producers[method.name], scene, points, truth)
             append_row(paths.csv, {
@@ -233,8 +221,10 @@ def run_benchmark(sources: list[str], methods: dict, paths: Paths) -> list[str]:
                 "texture_bytes": method.texture_bytes, "model_bytes": method.model_bytes,
                 "memory_bytes": method.memory_bytes, "load_average": f"{os.getloadavg()[0]:.2f}",
                 "measured": time.strftime("%Y-%m-%d %H:%M:%S")})
-            progress.step(f"{scene.name} {method.name}: {ms:.0f} ms (CPU {cpu_ms:.0f}, x{repeats}), "
-                          f"rel. RMSE {error:.3f}")
+            progress.write(f"{scene.name} {method.name}: {ms:.0f} ms (CPU {cpu_ms:.0f}, x{repeats}), "
+                           f"rel. RMSE {error:.3f}")
+            progress.update(1)
+    progress.close()
     return notes
 
 

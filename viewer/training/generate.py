@@ -79,14 +79,16 @@ def _one_thread(mitsuba: bool) -> None:
 # ---- the run -------------------------------------------------------------------------------------------
 
 class Progress:
-    """`[train] 1234/5307 rooms  2410 rooms/h  1.5 s/room a worker  ETA 1:41:12` on stderr: rewritten in
-    place on a terminal; in a log, one line every `every` rooms and at every shard."""
+    """The run's counts (rooms made, worker seconds, wall clock) for the manifest, shown as a bar on stderr
+    (viewer.progress.bar): rooms done of all, rooms per hour, seconds a room takes in a worker, time left.
+    A failed room and a packed shard get lines of their own."""
 
-    def __init__(self, total: int, done: int, stream=sys.stderr, every: int = 10):
-        self.total, self.done, self.made, self.stream, self.every = total, done, 0, stream, every
-        self.seconds = 0.0
+    def __init__(self, total: int, done: int, stream=sys.stderr):
+        from viewer.progress import bar
+
+        self.made, self.seconds = 0, 0.0
         self.start = time.perf_counter()
-        self.tty = stream.isatty()
+        self.bar = bar(total, "room", "rooms", done=done, stream=stream)
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.start
@@ -96,25 +98,17 @@ class Progress:
         elapsed = self.elapsed()
         return 3600.0 * self.made / elapsed if self.made and elapsed > 0 else 0.0
 
-    def step(self, split: str, seconds: float, note: str = "") -> None:
-        self.done += 1
+    def step(self, split: str, seconds: float, notes: list[str] = ()) -> None:
         self.made += 1
         self.seconds += seconds
-        if self.tty or note or self.made % self.every == 0 or self.done == self.total:
-            self.show(split, note)
-
-    def show(self, split: str, note: str = "") -> None:
-        rate = self.rate()
-        eta = 3600.0 * (self.total - self.done) / rate if rate > 0 else float("nan")
-        eta_text = time.strftime("%H:%M:%S", time.gmtime(eta)) if np.isfinite(eta) and eta < 86400 * 30 else "?"
-        line = (f"[{split}] {self.done}/{self.total} rooms  {rate:.0f} rooms/h  "
-                f"{self.seconds / max(self.made, 1):.2f} s/room a worker  ETA {eta_text}{note}")
-        self.stream.write(("\r" + line) if self.tty else line + "\n")
-        self.stream.flush()
+        self.bar.set_postfix_str(f"{split}, {self.rate():.0f} rooms/h, {self.seconds / self.made:.2f} s/room "
+                                 f"a worker", refresh=False)
+        for note in notes:
+            self.bar.write(note)
+        self.bar.update(1)
 
     def close(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
+        self.bar.close()
 
 
 CONNECT_SECONDS = 10.0
@@ -236,18 +230,19 @@ def _schedule(todo, waiting, out: Path, settings: Settings, manifest: Manifest, 
         ready, _ = ray.wait(list(flight), num_returns=1)
         shard, index = flight.pop(ready[0])
         room = dataset.room_name(shard.split, index)
-        note = ""
+        notes = []
         try:
             name, payload, seconds = ray.get(ready[0])
             write_pending(out / shard.split, name, payload)
         except ray.exceptions.RayError as exc:  # the task raised, or its worker died (retried twice)
             failed[room] = str(exc).strip().splitlines()[-1][:300]
-            seconds, note = 0.0, f"  FAILED {room}: {failed[room]}"
+            seconds = 0.0
+            notes.append(f"FAILED {room}: {failed[room]}")
         waiting[shard].discard(room)
         if not waiting[shard]:
             manifest.record(shard, pack(out / shard.split, shard, settings, failed))
-            note += f"  packed {shard.split}/{shard.name}"
-        progress.step(shard.split, seconds, note)
-        if note:
+            notes.append(f"packed {shard.split}/{shard.name}")
+        progress.step(shard.split, seconds, notes)
+        if notes:
             manifest.data["failed"].update(failed)
             manifest.save(settings, progress.made, progress.seconds, progress.elapsed(), cpus)
