@@ -203,7 +203,7 @@ class ViewerApp(mglw.WindowConfig):
         self._frame_started = time.perf_counter()
         self.times.begin()
         session = self.session
-        session.update(self.view.view)
+        session.update(self.view.view, self._view_rect())
         self.controls.fly(frame_time)
         screen = self.wnd.fbo
         with self.times.gpu():

@@ -154,7 +154,7 @@ def render(request: CaptureRequest, probe_source: ProbeSource | None = None) -> 
     elif camera is None:  # the viewer's opening view: the file's camera, else one framing the scene
         from viewer.scene.camera import home_camera
 
-        camera = home_camera(scene, request.scene)
+        camera = home_camera(scene, request.scene, aspect=size[0] / size[1])
         if fov is not None:
             camera = replace(camera, fov=float(fov))
     settings = replace(request.render)   # the renderer may change its settings: not the request's

@@ -19,8 +19,12 @@ from viewer.scene.camera import home_camera
 from viewer.ui.background import BackgroundTask
 from viewer.ui.camera_controller import OrbitCamera
 from viewer.ui.gi_sources import GIController
-from viewer.ui.panels import Message
+from viewer.ui.panels import PANEL_WIDTH, Message
 from viewer.ui.scene_edits import SceneEdits
+
+
+VIEW_ASPECT = (1280 - PANEL_WIDTH) / 720
+"""The 3D view's shape in the window as it opens (1280 x 720, the panel on the right)."""
 
 
 class Session:
@@ -45,6 +49,8 @@ class Session:
         self._domain_message: Message | None = None   # the neural source's warning shown now
         self.loads = 0       # scenes loaded since start (for tests)
         self.load_errors = 0
+        self.view_aspect = VIEW_ASPECT
+        """The 3D view's width over its height, which a scene without a camera of its own is framed for."""
         self._open(scene, source)
 
     # ---- the scene ------------------------------------------------------------------------------------
@@ -59,7 +65,7 @@ class Session:
         self.renderer.set_voxels(None)
         self._voxels_key = None
         lo, hi = scene.bounds
-        self.camera = OrbitCamera(home_camera(scene, source), float(np.linalg.norm(hi - lo)))
+        self.camera = OrbitCamera(home_camera(scene, source, self.view_aspect), float(np.linalg.norm(hi - lo)))
         self.gi.set_scene(scene, self.scene_version, new_scene=True)
 
     @property
@@ -96,7 +102,11 @@ class Session:
         return (self.scene_version, self.probes_version, self._voxels_key)
 
     # ---- per frame --------------------------------------------------------------------------------------
-    def update(self, view: str) -> None:
+    def update(self, view: str, view_rect: tuple[int, int, int, int] | None = None) -> None:
+        """One frame's work: a finished load opened, edits applied, new probes installed. `view_rect`
+        (x, y, width, height) is where the 3D view is drawn: a scene opened later is framed for it."""
+        if view_rect is not None and view_rect[3] > 0:
+            self.view_aspect = view_rect[2] / view_rect[3]
         self._finish_loading()
         self._apply_edits()
         self.renderer.prefetch_new_scene = not self.gi.traces_on_every_core
