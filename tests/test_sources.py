@@ -121,3 +121,33 @@ def test_the_stability_suite_and_the_gallery_take_their_old_names():
 
     assert stability.method_names(["physical", "compute"]) == ["solver", "compute"]
     assert gallery.source_names(["physical", "neural"]) == ["compute", "neural"]
+
+
+def test_the_window_solves_nothing_for_an_unlit_scene_until_an_edit_lights_it(toy):
+    """A scene with no emitter and no sun: the window's GI source is not started (its probes would be
+    black after the scene's full solve time), the panel says why, and no indirect light is shown; an
+    emission given to a material starts the source."""
+    from dataclasses import replace
+
+    from viewer.physical.gi import GISettings
+    from viewer.scene import load
+    from viewer.ui.gi_sources import GIController
+
+    lit = load("cornell")
+    unlit = replace(lit, emission=np.zeros_like(lit.emission))
+    assert not unlit.has_emitters
+    gi = GIController(ctx=None, source="toy", settings=GISettings(voxels=8, probes=4))
+    try:
+        gi.set_scene(unlit, version=1, new_scene=True)
+        assert gi.update() == (True, None) and not gi.busy
+        assert "Nothing emits light" in gi.status()[0]
+        gi.set_scene(lit, version=2)
+        deadline = time.monotonic() + 600.0
+        grid = None
+        while grid is None and time.monotonic() < deadline:
+            changed, grid = gi.update()
+            time.sleep(0.01)
+        assert grid is not None and grid.coefficients == pytest.approx(np.broadcast_to(CONSTANT, (4, 4, 4, 9, 3)))
+        assert "Nothing emits light" not in gi.status()[0]
+    finally:
+        gi.close()

@@ -61,6 +61,7 @@ class GIController:
         self.refused: str | None = None   # why the last settings change was not made (too much work)
         self._outgoing: list[ProbeGrid | None] = []   # grids for the render loop to show, oldest first
         self.ready_seconds: float | None = None        # how long the last finished solve took
+        self.unlit = False   # the scene has no emitter and no sun: no source solves it
 
     @property
     def spec(self) -> sources.Source | None:
@@ -141,9 +142,15 @@ class GIController:
     def _restart(self) -> None:
         if self.scene is None:
             return
+        # Nothing emits and there is no sun: every bounce of black is black, so no source solves it (a
+        # solve would take the scene's full time for zeros); an edit that lights it restarts the source.
+        self.unlit = not self.scene.has_emitters and sources.SOURCES[self.source].solve is not None
         for name, live in self._live.items():
-            if name != self.source:
+            if name != self.source or self.unlit:
                 live.leave()
+        if self.unlit:
+            self._outgoing.append(None)
+            return
         live = self._adapter(self.source)
         if live is None:
             return
@@ -161,7 +168,7 @@ class GIController:
     def update(self) -> tuple[bool, ProbeGrid | None]:
         """(changed, grid): whether the shown probes should change, and to what (None: no indirect)."""
         for name, live in list(self._live.items()):
-            if name == self.source:
+            if name == self.source and not self.unlit:
                 live.step()
             else:
                 live.idle()
@@ -182,10 +189,12 @@ class GIController:
     def busy(self) -> bool:
         """Still working towards the probes for the current scene and settings."""
         live = self._live.get(self.source)
-        return live is not None and live.busy
+        return live is not None and live.busy and not self.unlit
 
     def status(self) -> tuple[str, float | None, str | None]:
         """(one line for the panel, progress 0..1 or None, error or None)."""
+        if self.unlit:
+            return "Nothing emits light and there is no sun: nothing to solve.", None, None
         live = self._adapter(self.source)
         return ("Not available.", None, None) if live is None else live.status()
 
