@@ -100,14 +100,15 @@ class _Builder:
                  f"({', '.join(sorted(set(self.wires)))}): only surfaces take part in the light")
         if not self.faces:
             raise SceneError(f"{self.path}: no triangles found")
-        scene = Scene(self.path.stem, np.concatenate(self.vertices), np.concatenate(self.faces),
-                      np.concatenate(self.albedo), np.concatenate(self.emission), np.concatenate(self.group),
-                      tuple(self.groups), sun=self._sun())
-        centre = 0.5 * (scene.bounds[0] + scene.bounds[1])
-        cameras = tuple(c for c in (self._camera(i, world, centre) for i, world in self.cameras) if c is not None)
-        if cameras:
-            scene = Scene(scene.name, scene.vertices, scene.faces, scene.albedo, scene.emission, scene.face_group,
-                          scene.groups, sun=scene.sun, camera=cameras[0], cameras=cameras)
+        vertices = np.concatenate(self.vertices)
+        cameras = ()
+        if self.cameras:
+            with np.errstate(over="ignore", invalid="ignore"):   # Scene refuses non-finite vertices below
+                centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
+            cameras = tuple(c for c in (self._camera(i, world, centre) for i, world in self.cameras) if c is not None)
+        scene = Scene(self.path.stem, vertices, np.concatenate(self.faces), np.concatenate(self.albedo),
+                      np.concatenate(self.emission), np.concatenate(self.group), tuple(self.groups),
+                      sun=self._sun(), **({"camera": cameras[0], "cameras": cameras} if cameras else {}))
         has_strength = any(m[3] for m in self.materials.values())
         return scene, has_strength
 
