@@ -203,3 +203,48 @@ def test_a_glb_buffer_without_uri_is_the_binary_chunk(tmp_path):
     chunks = struct.pack("<I4s", len(text), b"JSON") + text + struct.pack("<I4s", len(binary), b"BIN\0") + binary
     (tmp_path / "sparse.glb").write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks)
     assert {(5.0, 4.0, 0.0), (3.0, 3.0, 0.0)} <= {tuple(p) for p in corners(load(tmp_path / "sparse.glb"))}
+
+
+# ---- lights ----------------------------------------------------------------------------------------------
+
+def lamp_gltf(path: Path, light: dict, position) -> Path:
+    """A 4 x 4 floor at y = 0 facing up, and one KHR_lights_punctual light at `position`."""
+    floor = np.array([[-2, 0, -2], [2, 0, -2], [2, 0, 2], [-2, 0, 2]], np.float32)
+    indices = np.array([0, 3, 2, 0, 2, 1], np.uint16)
+    binary = floor.tobytes() + indices.tobytes()
+    document = {"asset": {"version": "2.0"}, "extensionsUsed": ["KHR_lights_punctual"],
+                "scene": 0, "scenes": [{"nodes": [0, 1]}],
+                "nodes": [{"mesh": 0}, {"translation": list(map(float, position)),
+                                        "extensions": {"KHR_lights_punctual": {"light": 0}}}],
+                "meshes": [{"name": "floor", "primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+                "extensions": {"KHR_lights_punctual": {"lights": [light]}},
+                "buffers": [{"uri": "data:application/octet-stream;base64," + base64.b64encode(binary).decode(),
+                             "byteLength": len(binary)}],
+                "bufferViews": [{"buffer": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 12}],
+                "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"},
+                              {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}]}
+    return write(path, document)
+
+
+def test_a_point_light_is_a_small_closed_sphere_of_the_same_power(tmp_path):
+    """A Lambertian emitter of radiance L and area A sends pi L A; an isotropic point light of intensity I
+    sends 4 pi I: the sphere that stands for it sends the same, from around the light's position."""
+    s = load(lamp_gltf(tmp_path / "lamp.gltf", {"type": "point", "name": "bulb", "color": [1.0, 0.5, 0.25],
+                                                "intensity": 8.0}, [0.5, 1.0, 0.0]))
+    bulb = s.face_group == s.group_index("bulb")
+    corners = s.vertices[s.faces[bulb]].reshape(-1, 3)
+    size = np.linalg.norm([4.0, 0.0, 4.0])
+    np.testing.assert_allclose(np.linalg.norm(corners - [0.5, 1.0, 0.0], axis=1), 0.005 * size, rtol=1e-6)
+    power = np.pi * (s.emission[bulb] * s.face_areas[bulb, None]).sum(axis=0)
+    np.testing.assert_allclose(power, 4 * np.pi * 8.0 * np.array([1.0, 0.5, 0.25]), rtol=1e-9)
+    centre = corners.mean(axis=0)   # every face seen from outside: the normals point away from the centre
+    assert np.all(np.einsum("ij,ij->i", s.face_normals[bulb], s.triangles[bulb].mean(axis=1) - centre) > 0)
+    assert np.all(s.albedo[bulb] == 0)
+
+
+def test_a_spot_light_shines_everywhere_and_says_so(tmp_path, capsys):
+    s = load(lamp_gltf(tmp_path / "spot.gltf", {"type": "spot", "intensity": 5.0, "spot": {"outerConeAngle": 0.3}},
+                       [0.0, 1.0, 0.0]))
+    assert s.group_index("light-0") >= 0 and s.emission.max() > 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "spot" in err[0] and "cone" in err[0], err

@@ -10,8 +10,8 @@ specification and the Khronos sample models define it.
   (linear, averaged per face); a primitive without a material gets glTF's default material, white.
   Emission = emissiveFactor x KHR_materials_emissive_strength (a file whose emitters all stay at or
   under 1 without it gets a hint: such a lamp barely lights a room).
-- Lights (KHR_lights_punctual): the first directional light is the sun (`intensity` x `color` read as
-  irradiance in W/m^2); point and spot lights are not read (said in one line).
+- Lights (KHR_lights_punctual, viewer.scene.gltf_lights): the first directional light is the sun; a
+  point or spot light is a small emitting sphere of the same radiant intensity (a spot's cone left out).
 - Cameras: every perspective camera in the node tree, in the tree's order; the first is the scene's
   opening view (a sidecar camera overrides it).
 - `extensionsRequired`: an extension the viewer does not read is refused in one line naming it.
@@ -27,8 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer.scene.gltf_data import MALFORMED, GltfData, integer, one_line
-from viewer.scene.types import Camera, DirectionalLight, Scene, SceneError, note, srgb_to_linear
+from viewer.scene.gltf_data import MALFORMED, GltfData, integer, one_line, rgb
+from viewer.scene.gltf_lights import punctual_lights
+from viewer.scene.types import Camera, Scene, SceneError, note, srgb_to_linear
 
 DRACO = "KHR_draco_mesh_compression"
 SUPPORTED_EXTENSIONS = {
@@ -49,14 +50,14 @@ def read(path: Path) -> Scene:
     data = GltfData(path)
     try:
         _check_extensions(path, data.document)
-        scene, has_strength = _Builder(path, data).scene()
+        scene, dim = _Builder(path, data).scene()
     except SceneError:   # already one line that names the file (SceneError is a ValueError)
         raise
     except MALFORMED as exc:
         raise SceneError(f"{path}: malformed glTF ({one_line(exc)})") from None
     for line in data.refused:
         print(f"{line}; skipped", file=sys.stderr)
-    if 0.0 < float(scene.emission.max(initial=0.0)) <= 1.0 and not has_strength:
+    if dim:   # the materials' emission, not the lamps'
         note(f"{path}: its emitters' emissiveFactor is at most 1, which lights a room only dimly; glTF "
              f"raises it with KHR_materials_emissive_strength, e.g. \"extensions\": "
              f"{{\"KHR_materials_emissive_strength\": {{\"emissiveStrength\": 20}}}} on the lamp's material")
@@ -87,6 +88,7 @@ class _Builder:
         self.cameras, self.lights, self.wires, self.offset = [], [], [], 0
 
     def scene(self) -> tuple[Scene, bool]:
+        """The Scene, and whether its emitting materials are dim (at most 1, without emissive strength)."""
         for node, world in self._walk():
             if node.get("mesh") is not None:
                 self._mesh(node, world)
@@ -101,16 +103,19 @@ class _Builder:
         if not self.faces:
             raise SceneError(f"{self.path}: no triangles found")
         vertices = np.concatenate(self.vertices)
-        cameras = ()
-        if self.cameras:
-            with np.errstate(over="ignore", invalid="ignore"):   # Scene refuses non-finite vertices below
-                centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
-            cameras = tuple(c for c in (self._camera(i, world, centre) for i, world in self.cameras) if c is not None)
-        scene = Scene(self.path.stem, vertices, np.concatenate(self.faces), np.concatenate(self.albedo),
-                      np.concatenate(self.emission), np.concatenate(self.group), tuple(self.groups),
-                      sun=self._sun(), **({"camera": cameras[0], "cameras": cameras} if cameras else {}))
-        has_strength = any(m[3] for m in self.materials.values())
-        return scene, has_strength
+        with np.errstate(over="ignore", invalid="ignore"):   # Scene refuses non-finite vertices below
+            lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+            size = float(np.linalg.norm(hi - lo)) if np.all(np.isfinite(hi - lo)) else 1.0
+        sun, lamps = punctual_lights(self.path, self.data.document, self.lights, size or 1.0)
+        for lamp in lamps:
+            self._add(lamp.vertices, lamp.faces, np.zeros((len(lamp.faces), 3)), lamp.radiance, lamp.name)
+        cameras = tuple(c for c in (self._camera(i, world, 0.5 * (lo + hi)) for i, world in self.cameras)
+                        if c is not None)
+        scene = Scene(self.path.stem, np.concatenate(self.vertices), np.concatenate(self.faces),
+                      np.concatenate(self.albedo), np.concatenate(self.emission), np.concatenate(self.group),
+                      tuple(self.groups), sun=sun, **({"camera": cameras[0], "cameras": cameras} if cameras else {}))
+        glow = max((float(m[1].max()) for m in self.materials.values()), default=0.0)
+        return scene, 0.0 < glow <= 1.0 and not any(m[3] for m in self.materials.values())
 
     # ---- the node tree ------------------------------------------------------------------------------------
     def _walk(self):
@@ -197,12 +202,17 @@ class _Builder:
         face_albedo = np.tile(albedo, (len(faces), 1))
         if colours is not None:   # glTF multiplies the base colour by COLOR_0 (linear): per face, the mean
             face_albedo = face_albedo * colours[faces].mean(axis=1)
+        self._add(vertices, faces, face_albedo, emission, group)
+
+    def _add(self, vertices: np.ndarray, faces: np.ndarray, albedo: np.ndarray, emission: np.ndarray,
+             group: str) -> None:
+        """Triangles into the scene: per-face albedo (F, 3), one emitted radiance (3,) for all, a group."""
         if group not in self.groups:
             self.groups.append(group)
         self.vertices.append(vertices)
         self.faces.append(faces + self.offset)
         self.offset += len(vertices)
-        self.albedo.append(face_albedo)
+        self.albedo.append(albedo)
         self.emission.append(np.tile(emission, (len(faces), 1)))
         self.group.append(np.full(len(faces), self.groups.index(group), np.int64))
 
@@ -286,29 +296,6 @@ class _Builder:
         return Camera(tuple(map(float, origin)), tuple(map(float, origin + depth * forward)),
                       tuple(map(float, up / np.linalg.norm(up))), math.degrees(yfov))
 
-    def _sun(self) -> DirectionalLight | None:
-        """The first directional light, as the sun; point and spot lights are named as not read."""
-        lights = (self.data.document.get("extensions") or {}).get("KHR_lights_punctual", {}).get("lights") or []
-        sun, others = None, []
-        try:
-            for index, world in self.lights:
-                light = lights[integer(index, f"{self.path}: KHR_lights_punctual light index", 0)]
-                kind = light.get("type")
-                if kind != "directional":
-                    others.append(str(kind))
-                    continue
-                if sun is None:   # it shines along its node's local -Z; the sun's direction points back
-                    towards = world[:3, :3] @ np.array([0.0, 0.0, 1.0])
-                    sun = DirectionalLight(towards, rgb(light.get("color", (1, 1, 1))) * float(light.get("intensity", 1)))
-        except SceneError as exc:  # e.g. a zero direction or a negative colour: say which file
-            raise SceneError(str(exc) if str(exc).startswith(str(self.path)) else f"{self.path}: {exc}") from None
-        except MALFORMED as exc:
-            raise SceneError(f"{self.path}: malformed KHR_lights_punctual light ({one_line(exc)})") from None
-        if others:
-            note(f"{self.path}: {len(others)} KHR_lights_punctual light(s) not read ({', '.join(sorted(set(others)))}"
-                 f"): the viewer reads directional lights (as the sun)")
-        return sun
-
 
 def triangles(mode: int, indices: np.ndarray) -> np.ndarray:
     """(F, 3) faces of a primitive, counter-clockwise from the front, as glTF 2.0 (3.7.2.1) orders them:
@@ -323,13 +310,6 @@ def triangles(mode: int, indices: np.ndarray) -> np.ndarray:
         faces = np.stack([indices[i + 1], indices[i + 2], np.full(len(i), indices[0] if len(indices) else 0)], axis=1)
     distinct = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
     return faces[distinct].reshape(-1, 3)
-
-
-def rgb(values) -> np.ndarray:
-    colour = np.asarray([float(v) for v in list(values)[:3]], np.float64)
-    if colour.shape != (3,) or not np.all(np.isfinite(colour)):
-        raise ValueError(f"{values!r} is not an RGB colour")
-    return colour
 
 
 def node_matrix(node: dict) -> np.ndarray:

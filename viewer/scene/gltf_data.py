@@ -44,6 +44,14 @@ def integer(value, what: str, lo: int = 0, hi: int = 1 << 62) -> int:
     return value
 
 
+def rgb(values) -> np.ndarray:
+    """The first three numbers of a JSON colour, finite (ValueError otherwise)."""
+    colour = np.asarray([float(v) for v in list(values)[:3]], np.float64)
+    if colour.shape != (3,) or not np.all(np.isfinite(colour)):
+        raise ValueError(f"{values!r} is not an RGB colour")
+    return colour
+
+
 class GltfData:
     """The document of one .gltf or .glb file and its binary data, read when first asked for."""
 
