@@ -248,3 +248,15 @@ def test_a_spot_light_shines_everywhere_and_says_so(tmp_path, capsys):
     assert s.group_index("light-0") >= 0 and s.emission.max() > 0
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "spot" in err[0] and "cone" in err[0], err
+
+
+def test_draco_primitives_without_their_own_data_are_refused_even_when_not_declared_required(tmp_path):
+    """A file that lists KHR_draco_mesh_compression as used only, yet leaves its positions to Draco (an
+    accessor without a buffer view): the positions would read as zeros, so it is refused by name."""
+    document = sample("Cameras")
+    document["extensionsUsed"] = ["KHR_draco_mesh_compression"]
+    document["meshes"][0]["primitives"][0]["extensions"] = {
+        "KHR_draco_mesh_compression": {"bufferView": 0, "attributes": {"POSITION": 0}}}
+    del document["accessors"][1]["bufferView"]
+    with pytest.raises(SceneError, match="KHR_draco_mesh_compression"):
+        load(write(tmp_path / "draco.gltf", document))
