@@ -230,7 +230,11 @@ GLTF_PATHS = [
     ("nodes", 0, "scale"), ("nodes", 0, "mesh"), ("nodes", 0, "children"), ("scene",), ("scenes", 0, "nodes"),
     ("materials", 0, "emissiveFactor"), ("materials", 0, "pbrMetallicRoughness"),
     ("materials", 0, "extensions"), ("materials",), ("extensions",), ("nodes",), ("accessors",), ("images",),
-    ("textures",), ("materials", 0, "pbrMetallicRoughness", "baseColorTexture")]
+    ("textures",), ("materials", 0, "pbrMetallicRoughness", "baseColorTexture"),
+    # what the glTF reader reads beyond plain triangles: sparse accessors, morph targets and their
+    # weights, cameras, required extensions
+    ("accessors", 0, "sparse"), ("meshes", 0, "primitives", 0, "targets"), ("meshes", 0, "weights"),
+    ("nodes", 0, "weights"), ("nodes", 0, "camera"), ("cameras",), ("extensionsRequired",)]
 
 
 def png(mode: str) -> str:

@@ -3,7 +3,10 @@
     types.py     Scene, DirectionalLight, Camera, SceneError: the data type (imports nothing of ours)
     loading.py   load(source): built-in names, the sidecar JSON, which reader reads a file
     obj.py       OBJ + MTL -> Scene
-    loaders.py   glTF, GLB, PLY (through trimesh) -> Scene
+    gltf.py      glTF, GLB -> Scene: the node tree, primitives, materials, cameras, lights
+    gltf_data.py a glTF's JSON and binary data: buffers (confined to its folder), accessors, images
+    gltf_lights.py  KHR_lights_punctual: the sun, point and spot lights as small emitting spheres
+    loaders.py   PLY (through trimesh) -> Scene
     meshes.py    built-in meshes (boxes, spheres, ...) for procedural scenes
     camera.py    the camera a scene opens with (its file's own, or one framing it)
     files.py     what a scene may open: regular files of bounded size, companions from its own folder

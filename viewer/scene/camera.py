@@ -46,8 +46,11 @@ def framing_camera(lo: np.ndarray, hi: np.ndarray, fov: float = Camera.fov,
 
 
 def home_camera(scene: Scene, source: str | Path, aspect: float = FRAMING_ASPECT) -> Camera:
-    """The scene's own camera when its file comes with one (a sidecar .json), else one that frames it in a
-    picture `aspect` wide: what the viewer opens a scene with, and what a headless capture shows."""
+    """The scene's own camera when its file comes with one (a sidecar .json, or a glTF camera: the sidecar's
+    wins), else one that frames it in a picture `aspect` wide: what the viewer opens a scene with, and what
+    a headless capture shows."""
+    if scene.cameras:
+        return scene.camera
     try:
         has_camera = "camera" in read_sidecar(scene_file(source))
     except ValueError:

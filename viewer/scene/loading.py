@@ -1,7 +1,7 @@
 """Scenes from files and by name: the top of the scene modules.
 
     viewer.scene        load(source): built-in names, the sidecar JSON, which reader reads a file
-    viewer.scene.obj          OBJ + MTL -> Scene          viewer.scene.loaders   glTF, GLB, PLY (trimesh) -> Scene
+    viewer.scene.obj    OBJ + MTL -> Scene      viewer.scene.gltf   glTF, GLB -> Scene      viewer.scene.loaders   PLY -> Scene
     viewer.scene.types  Scene, DirectionalLight, Camera, SceneError: the data type, imports neither
 
 Imports run downwards only. The data type is re-exported here, so `from viewer.scene import Scene,
@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from viewer.scene import gltf
 from viewer.scene import loaders
 from viewer.scene import obj
 from viewer.scene.files import check_readable, inside
@@ -87,7 +88,10 @@ def _read(path: Path) -> Scene:
     """The reader of the file's format (the suffix was checked by `load`)."""
     if path.stat().st_size == 0:
         raise SceneError(f"{path}: empty file")
-    return obj.read(path) if path.suffix.lower() == ".obj" else loaders.read(path)
+    suffix = path.suffix.lower()
+    if suffix == ".obj":
+        return obj.read(path)
+    return gltf.read(path) if suffix in (".gltf", ".glb") else loaders.read(path)
 
 
 def _separate_groups(scene: Scene) -> Scene:

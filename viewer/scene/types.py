@@ -40,6 +40,11 @@ def note(message: str) -> None:
     print(f"viewer: {message}", file=sys.stderr, flush=True)
 
 
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 decoding of colours in 0..1 (8-bit file colours, textures): albedo is linear."""
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
 @dataclass(frozen=True)
 class DirectionalLight:
     """A sun: parallel light from one direction."""
@@ -91,6 +96,9 @@ class Scene:
     """Names of the materials / objects, for editing colours by name."""
     sun: DirectionalLight | None = None
     camera: Camera = field(default_factory=Camera)
+    cameras: tuple[Camera, ...] = ()
+    """The file's own cameras (a glTF's perspective cameras, in its node tree's order); the first is the
+    opening view, `camera`, unless a sidecar gives one. Empty: the file has none."""
 
     def __post_init__(self):
         v = np.ascontiguousarray(self.vertices, np.float64)

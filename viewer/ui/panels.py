@@ -373,6 +373,13 @@ def draw_windows(session, view: ViewOptions, settings: RenderSettings, viewport,
         imgui.same_line()
         if imgui.button("Reset camera (Z)"):
             session.camera.reset()
+        cameras = session.scene.cameras   # a glTF's own cameras: the first opened the scene
+        for index, camera in enumerate(cameras if len(cameras) > 1 else ()):
+            if index % 4:
+                imgui.same_line()
+            if imgui.button(f"Camera {index + 1}"):   # Z comes back to the camera chosen last
+                session.camera.home = camera
+                session.camera.reset()
 
     settings_panel(view.show_panel, {
         "Scene": (scene, True),
