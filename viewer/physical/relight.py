@@ -291,10 +291,12 @@ def _project(hits, basis_t, radiance):
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _fill(values, waves, m):
     """Each probe of wave w > 0 takes the mean of its 6-neighbours of waves 0..w-1, wave after wave
-    (the same as viewer.probes.grid.fill_invalid; probe p = (x M + y) M + z)."""
+    (the same as viewer.probes.grid.fill_invalid; probe p = (x M + y) M + z). A probe of wave w has a
+    neighbour of wave w - 1 by construction; numpy's error model drops Python's ZeroDivisionError path,
+    whose message formatting took numba 8 s of a first run to compile."""
     last = waves.max()
     for wave in range(1, last + 1):
         for p in range(m * m * m):
