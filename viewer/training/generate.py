@@ -84,11 +84,15 @@ class Progress:
     A failed room and a packed shard get lines of their own."""
 
     def __init__(self, total: int, done: int, stream=sys.stderr):
-        from viewer.progress import bar
-
+        self.total, self.done, self.stream = total, done, stream
         self.made, self.seconds = 0, 0.0
         self.start = time.perf_counter()
-        self.bar = bar(total, "room", "rooms", done=done, stream=stream)
+        self.bar = None   # shown once the workers are up: a run refused before that prints its error alone
+
+    def show(self) -> None:
+        from viewer.progress import bar
+
+        self.bar = bar(self.total, "room", "rooms", done=self.done, stream=self.stream)
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.start
@@ -108,7 +112,8 @@ class Progress:
         self.bar.update(1)
 
     def close(self) -> None:
-        self.bar.close()
+        if self.bar is not None:
+            self.bar.close()
 
 
 CONNECT_SECONDS = 10.0
@@ -200,6 +205,7 @@ def run(out: Path, settings: Settings, splits=dataset.SPLITS, workers: int | Non
     cpus = 0
     if todo:
         started, cpus = start_ray(workers, address)
+        progress.show()
         try:
             _schedule(todo, waiting, out, settings, manifest, progress, failed, cpus)
         finally:
