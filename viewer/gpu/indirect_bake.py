@@ -26,6 +26,7 @@ import moderngl
 import numpy as np
 
 from viewer.rays import dda
+from viewer.rays.cast import TriangleCaster
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.gpu.texel_samples import SAMPLE_STRIDE, gather_texels, strided_samples, tent_neighbours
@@ -242,7 +243,8 @@ class BakedIndirectLight:
         face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
         width = lightmap.covered.shape[1]
         lo, hi = scene.bounds
-        layout = (cells, face_tile, lightmap.tile_origin, lightmap.tile_n, width, 4e-6 * float(np.min(hi - lo)))
+        caster = TriangleCaster(scene, cells)   # Embree where installed, else these cells' DDA
+        layout = (caster, face_tile, lightmap.tile_origin, lightmap.tile_n, width, 4e-6 * float(np.min(hi - lo)))
         moved = self._moved_tiles(scene, lightmap)
         if moved is None:
             return GatherRays.of(points, normals, *layout, self.gather_rays)
