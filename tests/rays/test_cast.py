@@ -73,3 +73,18 @@ def test_without_embreex_the_dda_answers(monkeypatch):
     assert cast.TriangleCaster(box(inward=True)).backend == "dda"
     with pytest.raises(ValueError, match="embreex"):
         cast.TriangleCaster(box(inward=True), backend="embree")
+
+
+@pytest.mark.parametrize("backend", [pytest.param("embree", marks=needs_embree), "dda"])
+def test_a_segment_is_blocked_where_the_closest_hit_lies_within_it(backend):
+    """The occlusion query (the probes' visibility) says blocked exactly where the closest hit is nearer
+    than the segment's end, in the Cornell box (segments ending well away from any face)."""
+    scene = load("cornell")
+    origins, directions = cornell_rays(5000, seed=4)
+    caster = cast.TriangleCaster(scene, backend=backend)
+    t = caster.closest_hits(origins, directions).t
+    lengths = np.random.default_rng(5).uniform(0.05, 2.5, len(origins))
+    clear_of_ends = np.abs(t - lengths) > 1e-3
+    blocked = caster.blocked(origins, directions, lengths)
+    np.testing.assert_array_equal(blocked[clear_of_ends], (t <= lengths)[clear_of_ends])
+    assert 0.2 < blocked.mean() < 0.8

@@ -74,20 +74,47 @@ class TriangleCaster:
         if backend not in ("embree", "dda"):
             raise ValueError(f"unknown ray-casting backend {backend!r}")
         self.backend = backend
+        if backend == "dda":
+            if cells is None:
+                from viewer.rays.voxels import grid_frame
+                cells = dda.Cells.blocking(scene, *grid_frame(scene, 32), 32)
+            self._march(cells)
+            return
         triangles = np.asarray(scene.triangles, np.float64)
         self.v0 = np.ascontiguousarray(triangles[:, 0])
         self.e1 = np.ascontiguousarray(triangles[:, 1] - triangles[:, 0])
         self.e2 = np.ascontiguousarray(triangles[:, 2] - triangles[:, 0])
-        if backend == "embree":
-            self._faces = usable_faces(scene)
-            self._embree = rtcore_scene.EmbreeScene()
-            TriangleMesh(self._embree, np.ascontiguousarray(triangles[self._faces], np.float32))
-        else:
-            if cells is None:
-                from viewer.rays.voxels import grid_frame
-                cells = dda.Cells.blocking(scene, *grid_frame(scene, 32), 32)
-            by_face = replace(cells, voxel=cells.triangle)                     # a front hit names its face
-            self._marched = (by_face.args(), replace(by_face, e1=cells.e2, e2=cells.e1).args())   # and a back one
+        self._faces = usable_faces(scene)
+        self._embree = rtcore_scene.EmbreeScene()
+        TriangleMesh(self._embree, np.ascontiguousarray(triangles[self._faces], np.float32))
+
+    @staticmethod
+    def marching(cells: dda.Cells) -> "TriangleCaster":
+        """The DDA's caster over `cells` alone (their triangles are the scene's)."""
+        caster = TriangleCaster.__new__(TriangleCaster)
+        caster.backend = "dda"
+        caster._march(cells)
+        return caster
+
+    def _march(self, cells: dda.Cells) -> None:
+        self.v0, self.e1, self.e2 = cells.v0, cells.e1, cells.e2
+        by_face = replace(cells, voxel=cells.triangle)                     # a front hit names its face
+        self._marched = (by_face.args(), replace(by_face, e1=cells.e2, e2=cells.e1).args())   # and a back one
+
+    def blocked(self, origins: np.ndarray, directions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+        """(R,) bool: whether the segment o + t d, 0 < t <= length, crosses a face from either side (Embree's
+        occlusion query: the first hit found, not the closest)."""
+        o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
+        d = np.ascontiguousarray(directions, np.float64).reshape(-1, 3)
+        length = np.ascontiguousarray(np.broadcast_to(lengths, (len(o),)), np.float64)
+        if self.backend == "dda":
+            return _marched_blocked(o, d, length, self._marched[0])
+        out = np.empty(len(o), bool)
+        o32, d32, far = o.astype(np.float32), d.astype(np.float32), length.astype(np.float32)
+        for start in range(0, len(o), EMBREE_CHUNK):
+            part = slice(start, start + EMBREE_CHUNK)
+            out[part] = self._embree.run(o32[part], d32[part], dists=far[part], query="OCCLUDED") >= 0
+        return out
 
     def closest_hits(self, origins: np.ndarray, directions: np.ndarray, t_max: float = np.inf) -> Hits:
         """The first face each ray o + t d, 0 < t <= t_max, meets; `directions` (R, 3) of unit length."""
@@ -161,3 +188,13 @@ def _marched_hits(o, d, t_max, by_face, flipped):
         if det > 0.0:
             u[r], v[r] = (bb * wa - ab * wb) / det, (aa * wb - ab * wa) / det
     return face, t, u, v, front
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _marched_blocked(o, d, length, cells):
+    out = np.zeros(o.shape[0], np.bool_)
+    none = np.zeros(0, np.int64)
+    for r in numba.prange(o.shape[0]):
+        hit, _ = dda.march(o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2], length[r], cells, none)
+        out[r] = hit != dda.MISS
+    return out
