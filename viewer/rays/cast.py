@@ -5,9 +5,10 @@ Two backends answer alike. Embree (the `embreex` package) traverses a bounding-v
 costs about log(faces) a ray; the project's numba DDA (viewer/rays/dda.py) marches a fixed grid of
 cells and tests every triangle listed in each cell it crosses, so on a detailed mesh, where one cell of a
 32^3 grid lists a couple of hundred of a bunny's triangles, each ray costs hundreds of triangle tests.
-Measured on the final gather's rays (docs/PERFORMANCE.md): the same rays 2.7x faster through Embree in a
-Cornell box and 7x faster with a 28k-triangle bunny in it. The DDA stays the fallback where embreex
-is not installed, and the caster of the stages that need a cell's voxel rather than a face.
+Measured on the final gather's rays (docs/PERFORMANCE.md): the same rays 1.5-2.7x faster through
+Embree in a Cornell box and 7x faster with a 28k-triangle bunny in it, on one core (embreex holds
+Python's lock while it traces) against the DDA's two. The DDA stays the fallback where embreex is not
+installed, and the caster of the stages that need a cell's voxel rather than a face.
 
 A hit's side comes from the face's own normal (e1 x e2, counter-clockwise front) against the ray's
 direction, as the DDA's BACKFACE does: light reflected by the back of a face is the back side's.
