@@ -8,6 +8,7 @@ import pytest
 from scenes import box, CUBE_QUADS
 
 from viewer.rays import dda
+from viewer.rays.cast import TriangleCaster, embree_available
 from viewer.gpu.final_gather import GatherRays
 from viewer.physical.geometry import voxelize_with_faces
 from viewer.gpu.direct_bake import lightmap_layout, lightmap_texels
@@ -16,13 +17,18 @@ from viewer.scene import Scene, load
 TEXEL = 0.05
 
 
-def gather(scene: Scene, points, normals, rays: int = 72, seed: int = 0):
-    """The rays of the samples, and the lightmap's texel positions ((H, 2W, 3): front | back)."""
+BACKENDS = [pytest.param("embree", marks=pytest.mark.skipif(not embree_available(), reason="no embreex")), "dda"]
+
+
+def gather(scene: Scene, points, normals, rays: int = 72, seed: int = 0, backend: str | None = None):
+    """The rays of the samples, and the lightmap's texel positions ((H, 2W, 3): front | back), cast by
+    `backend` (None: Embree where it is installed)."""
     origin, n, size = lightmap_layout(scene, TEXEL)
     keep = scene.face_areas > 0
     face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
     cells = dda.Cells.of(voxelize_with_faces(scene, 16), scene)
-    rays = GatherRays.of(np.asarray(points, np.float64), np.asarray(normals, np.float64), cells, face_tile, origin,
+    caster = TriangleCaster(scene, cells, backend)
+    rays = GatherRays.of(np.asarray(points, np.float64), np.asarray(normals, np.float64), caster, face_tile, origin,
                          n, size[0], 1e-6, rays, seed)
     position = lightmap_texels(scene, origin, n, size)[0][..., :3]
     return rays, np.concatenate([position, position], axis=1)
@@ -45,23 +51,25 @@ def floor_points(count: int, spread: float = 0.0, seed: int = 0):
     return points, np.tile([0.0, 1.0, 0.0], (count, 1))
 
 
-def test_a_closed_room_sends_every_ray_back_and_the_sum_is_what_it_reflects():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_closed_room_sends_every_ray_back_and_the_sum_is_what_it_reflects(backend):
     """In a closed room every ray lands on a texel, so a lightmap that reflects 1 everywhere gives
     irradiance 1 (the furnace), and 0.3 where the room reflects 0.3."""
     scene = box(inward=True, albedo=0.5)
-    rays, position = gather(scene, *floor_points(300, spread=0.9))
+    rays, position = gather(scene, *floor_points(300, spread=0.9), backend=backend)
     assert (rays.hits >= 0).all()
     pixels = position.shape[0] * position.shape[1]
     np.testing.assert_allclose(rays.irradiance(np.ones((pixels, 3), np.float32)), 1.0, rtol=1e-6)
     np.testing.assert_allclose(rays.irradiance(np.full((pixels, 3), 0.3, np.float32)), 0.3, rtol=1e-5)
 
 
-def test_rays_out_of_an_open_side_bring_nothing_and_the_rest_is_the_form_factor():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_rays_out_of_an_open_side_bring_nothing_and_the_rest_is_the_form_factor(backend):
     """From the centre of the floor of a room without a ceiling, the cosine-weighted share of the
     hemisphere that escapes is the form factor to the opening, 0.2394 (a point to a parallel 2 x 2
     square 2 above its centre: four corner rectangles of A = B = 1/2). Each sample shifts its strata at
     random, so their mean converges to the integral (a fixed pattern would err alike on every sample)."""
-    rays, position = gather(open_top_room(), *floor_points(400))
+    rays, position = gather(open_top_room(), *floor_points(400), backend=backend)
     escaped = (rays.hits == -1).mean()
     a = b = 0.5
     corner = (a / np.sqrt(1 + a * a) * np.arctan(b / np.sqrt(1 + a * a))
@@ -72,7 +80,8 @@ def test_rays_out_of_an_open_side_bring_nothing_and_the_rest_is_the_form_factor(
     assert light.mean() == pytest.approx(1.0 - 4 * corner, abs=0.006)
 
 
-def test_a_ray_lands_on_the_texel_of_the_surface_it_hits():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_ray_lands_on_the_texel_of_the_surface_it_hits(backend):
     """Texel-accurate hits in the Cornell box: each texel a sample's ray lands on lies in front of the
     sample, and the segment to it is clear, but for a few grazing rays that land a texel off a corner."""
     scene = load("cornell")
@@ -81,7 +90,7 @@ def test_a_ray_lands_on_the_texel_of_the_surface_it_hits():
     covered = texels[..., 3] > 0
     pick = np.random.default_rng(1).choice(int(covered.sum()), 300, replace=False)
     points, normals = texels[covered][pick, :3].astype(np.float64), normals[covered][pick, :3].astype(np.float64)
-    rays, position = gather(scene, points, normals, rays=32)
+    rays, position = gather(scene, points, normals, rays=32, backend=backend)
     sample, ray = np.nonzero(rays.hits >= 0)
     landed = position.reshape(-1, 3)[rays.hits[sample, ray]]
     ahead = np.einsum("ij,ij->i", landed - points[sample], normals[sample])
@@ -92,14 +101,32 @@ def test_a_ray_lands_on_the_texel_of_the_surface_it_hits():
     assert clear.mean() > 0.98
 
 
-def test_a_ray_that_meets_the_back_of_a_face_reads_its_back_side():
+@pytest.mark.skipif(not embree_available(), reason="no embreex")
+def test_embree_and_the_dda_land_the_rays_on_the_same_texels():
+    """The same gather rays from texels all over the Cornell box land on the same lightmap pixel through
+    either caster, but for the few that pass within float32's precision of an edge or a texel's border,
+    or meet the bottom of a box where it lies on the floor (two faces at the same distance)."""
+    scene = load("cornell")
+    origin, n, size = lightmap_layout(scene, TEXEL)
+    texels, normals, _ = lightmap_texels(scene, origin, n, size)
+    covered = texels[..., 3] > 0
+    pick = np.random.default_rng(2).choice(int(covered.sum()), 500, replace=False)
+    points, normals = texels[covered][pick, :3].astype(np.float64), normals[covered][pick, :3].astype(np.float64)
+    embree = gather(scene, points, normals, backend="embree")[0].hits
+    marched = gather(scene, points, normals, backend="dda")[0].hits
+    assert (embree == marched).mean() > 0.997
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_ray_that_meets_the_back_of_a_face_reads_its_back_side(backend):
     """A one-sided wall across a closed room, its front towards +x: rays from a point facing it from
     -x meet its back, and read the back sides' half of the lightmap (the right half)."""
     wall = np.array([[0.02, -1, -1], [0.02, 1, -1], [0.02, 1, 1], [0.02, -1, 1]], np.float64)
     partition = Scene("partition", wall, np.array([[0, 1, 2], [0, 2, 3]]), 0.5, 0.0, 0, ("partition",))
     assert (partition.face_normals[:, 0] > 0.99).all()
     scene = Scene.concatenate("partitioned", [box(inward=True, albedo=0.5, name="room"), partition])
-    rays, position = gather(scene, np.tile([-0.5, 0.0, 0.0], (20, 1)), np.tile([1.0, 0.0, 0.0], (20, 1)))
+    rays, position = gather(scene, np.tile([-0.5, 0.0, 0.0], (20, 1)), np.tile([1.0, 0.0, 0.0], (20, 1)),
+                            backend=backend)
     width = position.shape[1] // 2
     assert (rays.hits >= 0).all()
     back = rays.hits % (2 * width) >= width

@@ -96,22 +96,22 @@ def lightmap_texels(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple
     position = np.zeros((size[1], size[0], 4), np.float32)
     normal = np.zeros((size[1], size[0], 4), np.float32)
     tile = np.full((size[1], size[0]), -1, np.int64)
-    for f in range(len(n)):
-        m = int(n[f])
+    for m in np.unique(n):   # the tiles of one size together: a scanned mesh has tens of thousands of m = 1
+        faces = np.flatnonzero(n == m)
         k = np.arange(m + 2)
         u, v = np.meshgrid((k - 0.5) / m, (k - 0.5) / m)          # u along columns, v along rows
         lo = inset / m
         u, v = np.maximum(u, lo), np.maximum(v, lo)
         over = (u + v) / (1.0 - lo)
         scale = np.where(over > 1.0, 1.0 / np.maximum(over, 1e-9), 1.0)
-        u, v = u * scale, v * scale
-        a, b, c = corners[f]
-        points = a + u[..., None] * (b - a) + v[..., None] * (c - a)
-        x, y = origin[f]
-        position[y:y + m + 2, x:x + m + 2, :3] = points
-        position[y:y + m + 2, x:x + m + 2, 3] = 1.0
-        normal[y:y + m + 2, x:x + m + 2, :3] = normals[f]
-        tile[y:y + m + 2, x:x + m + 2] = f
+        u, v = (u * scale)[None, ..., None], (v * scale)[None, ..., None]
+        a, b, c = (corners[faces, i][:, None, None, :] for i in range(3))
+        rows = origin[faces, 1][:, None, None] + k[None, :, None]
+        columns = origin[faces, 0][:, None, None] + k[None, None, :]
+        position[rows, columns, :3] = a + u * (b - a) + v * (c - a)
+        position[rows, columns, 3] = 1.0
+        normal[rows, columns, :3] = normals[faces][:, None, None, :]
+        tile[rows, columns] = faces[:, None, None]
     return position, normal, tile
 
 

@@ -7,7 +7,8 @@ spacing, and their L2 SH cannot say that part of a hemisphere is dark: a box fac
 the Cornell box's open side, or down at a floor it stands on, gets the probes' blur. Lightmap bakers fix
 this with a final gather. From each sample point, K cosine-weighted rays (one per cell of an r x 2r grid
 of strata, the grid shifted at random per sample so that no fixed pattern errs alike over a whole face)
-are traced against the scene's triangles once per geometry (`GatherRays.of`); each remembers the
+are cast against the scene's triangles once per geometry (`GatherRays.of`, through Embree where it is
+installed: viewer/rays/cast.py); each remembers the
 lightmap pixel it lands on, front or back side, or that it left the scene. Every GI update then sums
 
     E(p) = (1 / K) sum_k  albedo(x_k) (E_direct(x_k) + E_indirect(x_k))
@@ -21,12 +22,12 @@ lightmap holds the lamps' light. A ray that leaves the scene brings nothing (the
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numba
 import numpy as np
 
-from viewer.rays import dda
+from viewer.rays.cast import TriangleCaster
 from viewer.physical.geometry import tangent_frames
 
 RAYS = 72
@@ -44,24 +45,25 @@ class GatherRays:
     """(S, K) int32."""
 
     @staticmethod
-    def of(points: np.ndarray, normals: np.ndarray, cells: dda.Cells, face_tile: np.ndarray,
+    def of(points: np.ndarray, normals: np.ndarray, caster: TriangleCaster, face_tile: np.ndarray,
            tile_origin: np.ndarray, tile_n: np.ndarray, width: int, lift: float, rays: int = RAYS,
            seed: int = 0) -> "GatherRays":
-        """points, normals (S, 3): the samples; cells: the scene's triangles (`cells.triangle` indexes
-        the scene's faces); face_tile (F,): each scene face's lightmap tile, -1 for none; tile_origin
+        """points, normals (S, 3): the samples; caster: the scene's triangles (its faces are the scene's
+        faces); face_tile (F,): each scene face's lightmap tile, -1 for none; tile_origin
         (tiles, 2) and tile_n (tiles,): the atlas layout (viewer.gpu.direct_bake.lightmap_layout),
         `width` texels a side; lift: how far off the surface the rays start."""
         frame = _Frame.of(points, normals, rays, seed)
         hits = np.empty((frame.count, rays), np.int32)
-        _trace(*frame.args(lift), *_tracing_args(cells, face_tile, tile_origin, tile_n, width), hits)
+        for todo in _every_ray(frame.count, rays):
+            _cast(frame, lift, todo, caster, face_tile, tile_origin, tile_n, width, hits)
         return GatherRays(hits)
 
     def after_moving(self, sample_moved: np.ndarray, pixel_moved: np.ndarray, pixel_points: np.ndarray,
-                     moved: np.ndarray, slack: float, points: np.ndarray, normals: np.ndarray, cells: dda.Cells,
+                     moved: np.ndarray, slack: float, points: np.ndarray, normals: np.ndarray, caster: TriangleCaster,
                      face_tile: np.ndarray, tile_origin: np.ndarray, tile_n: np.ndarray, width: int, lift: float,
                      seed: int = 0) -> "GatherRays":
         """The rays of the same samples after some faces moved (a lamp dragged: the same faces, the same
-        lightmap layout), without tracing them all again. `points`, `normals`, `cells` and the layout are
+        lightmap layout), without tracing them all again. `points`, `normals`, `caster` and the layout are
         as for `of`, of the scene after the move; sample_moved (S,): the samples on moved faces;
         pixel_moved (pixels,): the pixels of their tiles; pixel_points (pixels, 3): each pixel's world
         point before the move (within a texel of where a ray that landed on it met its face); moved
@@ -79,7 +81,7 @@ class GatherRays:
         hits = self.hits.copy()
         rows = np.argwhere(todo).astype(np.int64)
         hits[todo] = ESCAPED
-        _retrace(*frame.args(lift), *_tracing_args(cells, face_tile, tile_origin, tile_n, width), rows, hits)
+        _cast(frame, lift, rows, caster, face_tile, tile_origin, tile_n, width, hits)
         return GatherRays(hits)
 
     def inside(self, width: int) -> np.ndarray:
@@ -130,13 +132,6 @@ class _Frame:
             float(lift)
 
 
-def _tracing_args(cells: dda.Cells, face_tile, tile_origin, tile_n, width: int) -> tuple:
-    by_face = replace(cells, voxel=cells.triangle)                   # a front hit names its face
-    flipped = replace(by_face, e1=cells.e2, e2=cells.e1)             # a back hit, seen from the front
-    return (by_face.args(), flipped.args(), np.ascontiguousarray(face_tile, np.int64),
-            np.ascontiguousarray(tile_origin, np.int64), np.ascontiguousarray(tile_n, np.int64), int(width))
-
-
 @numba.njit(cache=True, nogil=True, inline="always")
 def _direction(s, k, normals, tangents, bitangents, rows, columns, shift):
     """Ray k of sample s: stratum (k // columns, k % columns) of (u1, u2), shifted by the sample's shift,
@@ -151,60 +146,63 @@ def _direction(s, k, normals, tangents, bitangents, rows, columns, shift):
     return dx, dy, dz
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _landing(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile,
-             tile_origin, tile_n, width, none):
-    """The pixel ray k of sample s lands on, ESCAPED if none."""
-    v0, e1, e2 = cells[6], cells[7], cells[8]
-    ox = points[s, 0] + lift * normals[s, 0]
-    oy = points[s, 1] + lift * normals[s, 1]
-    oz = points[s, 2] + lift * normals[s, 2]
-    dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
-    face, t = dda.march(ox, oy, oz, dx, dy, dz, np.inf, cells, none)
-    side = 0
-    if face == dda.BACKFACE:
-        face, t = dda.march(ox, oy, oz, dx, dy, dz, np.inf, flipped, none)
-        side = 1
-    if face < 0 or face_tile[face] < 0:
-        return ESCAPED
-    wx, wy, wz = ox + t * dx - v0[face, 0], oy + t * dy - v0[face, 1], oz + t * dz - v0[face, 2]
-    aa = e1[face, 0] ** 2 + e1[face, 1] ** 2 + e1[face, 2] ** 2
-    ab = e1[face, 0] * e2[face, 0] + e1[face, 1] * e2[face, 1] + e1[face, 2] * e2[face, 2]
-    bb = e2[face, 0] ** 2 + e2[face, 1] ** 2 + e2[face, 2] ** 2
-    wa = wx * e1[face, 0] + wy * e1[face, 1] + wz * e1[face, 2]
-    wb = wx * e2[face, 0] + wy * e2[face, 1] + wz * e2[face, 2]
-    det = aa * bb - ab * ab
-    if det <= 0.0:
-        return ESCAPED
-    u, v = (bb * wa - ab * wb) / det, (aa * wb - ab * wa) / det
-    tile = face_tile[face]
-    m = tile_n[tile]
-    # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
-    ku = min(max(int(np.floor(u * m + 1.0)), 0), m + 1)
-    kv = min(max(int(np.floor(v * m + 1.0)), 0), m + 1)
-    return (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side * width
+CHUNK = 1 << 18
+"""Rays cast at a time: their origins and directions take 12 MB, where all of a detailed mesh's take a gigabyte."""
+
+
+def _cast(frame: "_Frame", lift: float, todo: np.ndarray, caster: TriangleCaster, face_tile, tile_origin, tile_n,
+          width: int, hits: np.ndarray) -> None:
+    """Cast the rays todo (N, 2) = (sample, ray) of `frame` and write the pixel each lands on into hits."""
+    face_tile = np.ascontiguousarray(face_tile, np.int64)
+    tile_origin, tile_n = np.ascontiguousarray(tile_origin, np.int64), np.ascontiguousarray(tile_n, np.int64)
+    for start in range(0, len(todo), CHUNK):
+        part = np.ascontiguousarray(todo[start:start + CHUNK], np.int64)
+        origins, directions = _rays(*frame.args(lift), part)
+        found = caster.closest_hits(origins, directions)
+        hits[part[:, 0], part[:, 1]] = _pixels(found.face, found.u, found.v, found.front, face_tile, tile_origin,
+                                               tile_n, int(width))
+
+
+def _every_ray(samples: int, rays: int):
+    """(sample, ray) of every ray, CHUNK at a time."""
+    per = max(CHUNK // rays, 1)
+    for first in range(0, samples, per):
+        s = np.arange(first, min(first + per, samples))
+        yield np.column_stack([np.repeat(s, rays), np.tile(np.arange(rays), len(s))])
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _trace(points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile, tile_origin,
-           tile_n, width, hits):
-    """Trace every ray of every sample into hits (S, K)."""
-    none = np.zeros(0, np.int64)
-    for s in numba.prange(hits.shape[0]):
-        for k in range(hits.shape[1]):
-            hits[s, k] = _landing(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, cells,
-                                  flipped, face_tile, tile_origin, tile_n, width, none)
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _retrace(points, normals, tangents, bitangents, rows, columns, shift, lift, cells, flipped, face_tile, tile_origin,
-             tile_n, width, todo, hits):
-    """Trace the rays todo (N, 2) = (sample, ray) into hits."""
-    none = np.zeros(0, np.int64)
+def _rays(points, normals, tangents, bitangents, rows, columns, shift, lift, todo):
+    """The origins (lifted off the surface) and directions of the rays todo (N, 2) = (sample, ray)."""
+    origins = np.empty((todo.shape[0], 3))
+    directions = np.empty((todo.shape[0], 3))
     for i in numba.prange(todo.shape[0]):
         s, k = todo[i, 0], todo[i, 1]
-        hits[s, k] = _landing(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, cells,
-                              flipped, face_tile, tile_origin, tile_n, width, none)
+        for a in range(3):
+            origins[i, a] = points[s, a] + lift * normals[s, a]
+        directions[i, 0], directions[i, 1], directions[i, 2] = _direction(s, k, normals, tangents, bitangents, rows,
+                                                                          columns, shift)
+    return origins, directions
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _pixels(face, u, v, front, face_tile, tile_origin, tile_n, width):
+    """The lightmap pixel of each hit (face, barycentrics u, v, side), ESCAPED for none or a face without
+    a tile: the front image's for a front hit, the back image's (`width` further along the row) else."""
+    out = np.empty(face.shape[0], np.int32)
+    for r in numba.prange(face.shape[0]):
+        f = face[r]
+        if f < 0 or face_tile[f] < 0:
+            out[r] = ESCAPED
+            continue
+        tile = face_tile[f]
+        m = tile_n[tile]
+        # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
+        ku = min(max(int(np.floor(u[r] * m + 1.0)), 0), m + 1)
+        kv = min(max(int(np.floor(v[r] * m + 1.0)), 0), m + 1)
+        side = 0 if front[r] else width
+        out[r] = (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side
+    return out
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

@@ -26,6 +26,7 @@ import moderngl
 import numpy as np
 
 from viewer.rays import dda
+from viewer.rays.cast import TriangleCaster
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.gpu.texel_samples import SAMPLE_STRIDE, gather_texels, strided_samples, tent_neighbours
@@ -116,6 +117,7 @@ class BakedIndirectLight:
         moved faces covered before would stay dark: the old rays met the lamp's back there), but the
         rays are what the worker traces the move's changes from."""
         self._last_key: tuple[ProbeGrid, tuple] | None = None
+        self._caster: tuple[dda.Cells, TriangleCaster] | None = None
         self._kept: dict[tuple, SurfaceBake] = {}
         """The weights of the last KEPT_LATTICES lattices, newest last."""
 
@@ -193,7 +195,7 @@ class BakedIndirectLight:
             geometry, scene, lightmap, rays = self._geometry_now()
         cells, gather = self._geometry_work(geometry, scene, lightmap, rays)
         points, normals, normal_id = self._sample_points(lightmap)
-        weights = SurfaceWeights.of(points, normals[normal_id], probes, cells)
+        weights = SurfaceWeights.of(points, normals[normal_id], probes, self._caster_of(scene, cells))
         return SurfaceBake.of(weights, normal_id, normals), cells, gather
 
     def _geometry_work(self, geometry: int, scene: Scene, lightmap: BakedDirectLight,
@@ -214,6 +216,13 @@ class BakedIndirectLight:
             self._traced = (scene, lightmap, traced)
         self._made = (geometry, cells, gather)
         return cells, gather
+
+    def _caster_of(self, scene: Scene, cells: dda.Cells) -> TriangleCaster:
+        """The rays' caster of the geometry whose cells these are (Embree where installed, else these cells'
+        DDA), made once for the gather and the weights."""
+        if self._caster is None or self._caster[0] is not cells:
+            self._caster = (cells, TriangleCaster(scene, cells))
+        return self._caster[1]
 
     def _sample_points(self, lightmap: BakedDirectLight) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(points (S, 3), normals (N, 3), normal_id (S,)): the samples of both sides, the distinct normals
@@ -242,7 +251,8 @@ class BakedIndirectLight:
         face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
         width = lightmap.covered.shape[1]
         lo, hi = scene.bounds
-        layout = (cells, face_tile, lightmap.tile_origin, lightmap.tile_n, width, 4e-6 * float(np.min(hi - lo)))
+        layout = (self._caster_of(scene, cells), face_tile, lightmap.tile_origin, lightmap.tile_n, width,
+                  4e-6 * float(np.min(hi - lo)))
         moved = self._moved_tiles(scene, lightmap)
         if moved is None:
             return GatherRays.of(points, normals, *layout, self.gather_rays)

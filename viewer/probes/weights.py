@@ -10,7 +10,7 @@ p + offset x spacing x n, each weighted by
                       x  visibility (1 if the segment p -> probe crosses no surface, else 0)
 
 (w the unit direction from p to the probe) and renormalized. The visibility is exact: each segment is
-traced against the scene's triangles (viewer.rays.dda), so a face never mixes in a probe it cannot see (the
+cast against the scene's triangles (viewer/rays/cast.py), so a face never mixes in a probe it cannot see (the
 inside of a box, the far side of a thin wall), which the lattice alone cannot tell. A point that sees
 none of its 8 probes lies in a gap narrower than the lattice (the ceiling above a lamp hung 1 cm below
 it, the floor under a box): it gets no indirect light, as in Mitsuba, instead of light from probes
@@ -29,6 +29,7 @@ import numba
 import numpy as np
 
 from viewer.rays import dda
+from viewer.rays.cast import TriangleCaster
 from viewer.probes import sh
 from viewer.probes.grid import ProbeGrid
 
@@ -58,15 +59,26 @@ class SurfaceWeights:
     resolution: int
 
     @staticmethod
-    def of(points: np.ndarray, normals: np.ndarray, probes: ProbeGrid, cells: dda.Cells,
+    def of(points: np.ndarray, normals: np.ndarray, probes: ProbeGrid, occluders: dda.Cells | TriangleCaster,
            normal_offset: float = NORMAL_OFFSET) -> "SurfaceWeights":
         """The weights of points (P, 3) with unit normals (P, 3) against the lattice of `probes`, with
-        the visibility traced against `cells` (the scene's triangles)."""
+        the visibility cast against `occluders`, the scene's triangles: a TriangleCaster (Embree, where a
+        detailed mesh's cells list hundreds of triangles each), or their dda.Cells."""
+        caster = occluders if isinstance(occluders, TriangleCaster) else TriangleCaster.marching(occluders)
         p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
         n = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
-        base, weights = _weights(p, n, np.asarray(probes.lo, np.float64), np.asarray(probes.spacing, np.float64),
-                                 int(probes.resolution), np.ascontiguousarray(probes.probe_weights(), np.float64),
-                                 float(normal_offset), SURFACE_LIFT, BACKFACE_FLOOR, cells.args())
+        lattice = (np.asarray(probes.lo, np.float64), np.asarray(probes.spacing, np.float64), int(probes.resolution),
+                   np.ascontiguousarray(probes.probe_weights(), np.float64), float(normal_offset), SURFACE_LIFT,
+                   BACKFACE_FLOOR)
+        base, weights = np.empty((len(p), 3), np.int32), np.empty((len(p), 8), np.float32)
+        for start in range(0, len(p), CHUNK):
+            part = slice(start, start + CHUNK)
+            base[part], w, origins, directions, lengths, asked = _lattice_weights(p[part], n[part], *lattice)
+            seen = np.zeros(w.shape)
+            ask = np.flatnonzero(asked)
+            seen.reshape(-1)[ask] = ~caster.blocked(origins.reshape(-1, 3)[ask], directions.reshape(-1, 3)[ask],
+                                                    lengths.reshape(-1)[ask])
+            weights[part] = _normalized(w, seen)
         return SurfaceWeights(base, weights, int(probes.resolution))
 
     def irradiance(self, probes: ProbeGrid, normals: np.ndarray) -> np.ndarray:
@@ -78,13 +90,23 @@ class SurfaceWeights:
         return np.maximum(np.einsum("pj,pjc->pc", y, mixed), 0.0)
 
 
+CHUNK = 1 << 16
+"""Points weighed at a time: their visibility rays take 27 MB."""
+
+
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _weights(points, normals, lo, spacing, m, probe_weight, offset, lift, floor, cells):
+def _lattice_weights(points, normals, lo, spacing, m, probe_weight, offset, lift, floor):
+    """Each point's lattice cell (P, 3), its 8 probes' weights before visibility (P, 8), and the segments
+    from the point to the probes (origins, unit directions, lengths: (P, 8, 3), (P, 8, 3), (P, 8)) that
+    visibility decides, `asked` (P, 8) (the probes in front of the point's plane with a weight)."""
     count = points.shape[0]
     base = np.empty((count, 3), np.int32)
-    weights = np.empty((count, 8), np.float32)
+    weights = np.zeros((count, 8))
+    origins = np.zeros((count, 8, 3))
+    directions = np.zeros((count, 8, 3))
+    lengths = np.zeros((count, 8))
+    asked = np.zeros((count, 8), np.bool_)
     unit = spacing.min()
-    none = np.zeros(0, np.int64)
     for r in numba.prange(count):
         cell = np.empty(3, np.int64)
         f = np.empty(3)
@@ -94,8 +116,6 @@ def _weights(points, normals, lo, spacing, m, probe_weight, offset, lift, floor,
             cell[a] = min(int(np.floor(u)), max(m - 2, 0))
             f[a] = u - cell[a]
             base[r, a] = cell[a]
-        w = np.zeros(8)
-        seen = np.zeros(8)
         ox = points[r, 0] + lift * unit * normals[r, 0]
         oy = points[r, 1] + lift * unit * normals[r, 1]
         oz = points[r, 2] + lift * unit * normals[r, 2]
@@ -111,21 +131,33 @@ def _weights(points, normals, lo, spacing, m, probe_weight, offset, lift, floor,
             distance = np.sqrt(toward[0] ** 2 + toward[1] ** 2 + toward[2] ** 2)
             cosine = (toward[0] * normals[r, 0] + toward[1] * normals[r, 1] + toward[2] * normals[r, 2]) \
                 / max(distance, 1e-300)
-            w[c] = trilinear * probe_weight[index[0], index[1], index[2]] * (((cosine + 1.0) / 2.0) ** 2 + floor)
-            if cosine > 0.0 and w[c] > 0.0:   # behind the point's plane the surface itself is in the way
+            weights[r, c] = trilinear * probe_weight[index[0], index[1], index[2]] \
+                * (((cosine + 1.0) / 2.0) ** 2 + floor)
+            if cosine > 0.0 and weights[r, c] > 0.0:   # behind the point's plane the surface itself is in the way
                 tx, ty, tz = (lo[0] + (index[0] + 0.5) * spacing[0] - ox, lo[1] + (index[1] + 0.5) * spacing[1] - oy,
                               lo[2] + (index[2] + 0.5) * spacing[2] - oz)
                 length = np.sqrt(tx * tx + ty * ty + tz * tz)
-                hit, _ = dda.march(ox, oy, oz, tx / length, ty / length, tz / length, length, cells, none)
-                seen[c] = 1.0 if hit == dda.MISS else 0.0
+                origins[r, c, 0], origins[r, c, 1], origins[r, c, 2] = ox, oy, oz
+                directions[r, c, 0], directions[r, c, 1] = tx / length, ty / length
+                directions[r, c, 2] = tz / length
+                lengths[r, c] = length
+                asked[r, c] = True
+    return base, weights, origins, directions, lengths, asked
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _normalized(w, seen):
+    """The visible probes' weights (P, 8) summing to 1; none where no probe is visible."""
+    weights = np.zeros(w.shape, np.float32)
+    for r in numba.prange(w.shape[0]):
         total = 0.0
         total_seen = 0.0
         for c in range(8):
-            total += w[c]
-            total_seen += w[c] * seen[c]
+            total += w[r, c]
+            total_seen += w[r, c] * seen[r, c]
         for c in range(8):   # no probe visible: a gap narrower than the lattice, left dark
-            weights[r, c] = w[c] * seen[c] / total_seen if total_seen > 1e-6 * total else 0.0
-    return base, weights
+            weights[r, c] = w[r, c] * seen[r, c] / total_seen if total_seen > 1e-6 * total else 0.0
+    return weights
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,90 @@
+"""The ray-casting layer (viewer/rays/cast.py): Embree and the DDA meet the same faces at the same
+points from the same sides, and the DDA answers where embreex is missing."""
+
+import numpy as np
+import pytest
+
+from viewer.rays import cast
+from viewer.scene import load
+from scenes import box
+
+needs_embree = pytest.mark.skipif(not cast.embree_available(), reason="embreex is not installed")
+
+
+def unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def cornell_rays(count: int, seed: int = 3):
+    """Rays in every direction from points in the Cornell box's free space above both boxes."""
+    rng = np.random.default_rng(seed)
+    origins = np.column_stack([rng.uniform(-0.95, 0.95, count), rng.uniform(0.25, 0.95, count),
+                               rng.uniform(-0.95, 0.95, count)])
+    return origins, unit(rng.normal(size=(count, 3)))
+
+
+@needs_embree
+def test_both_backends_meet_the_same_face_at_the_same_point_in_the_cornell_box():
+    """Away from the edges (a ray through a shared edge may name either face), Embree (float32) and the
+    DDA (float64) agree on the face, the side, the distance and the barycentrics to float32's precision;
+    the rays out of the open front meet nothing in both."""
+    scene = load("cornell")
+    origins, directions = cornell_rays(20000)
+    embree = cast.closest_hits(scene, origins, directions, backend="embree")
+    marched = cast.closest_hits(scene, origins, directions, backend="dda")
+    np.testing.assert_array_equal(embree.face < 0, marched.face < 0)
+    assert 0.1 < (embree.face < 0).mean() < 0.4                        # the open front
+    edge = np.minimum(np.minimum(marched.u, marched.v), 1.0 - marched.u - marched.v)
+    inside = (marched.face >= 0) & (edge > 1e-4)
+    assert inside.sum() > 0.99 * (marched.face >= 0).sum()
+    np.testing.assert_array_equal(embree.face[inside], marched.face[inside])
+    np.testing.assert_array_equal(embree.front[inside], marched.front[inside])
+    np.testing.assert_allclose(embree.t[inside], marched.t[inside], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(embree.u[inside], marched.u[inside], atol=1e-5)
+    np.testing.assert_allclose(embree.v[inside], marched.v[inside], atol=1e-5)
+    points = origins + marched.t[:, None] * directions
+    corners = scene.triangles[marched.face[inside]]
+    on_face = corners[:, 0] + marched.u[inside, None] * (corners[:, 1] - corners[:, 0]) \
+        + marched.v[inside, None] * (corners[:, 2] - corners[:, 0])
+    np.testing.assert_allclose(on_face, points[inside], atol=1e-9)     # the barycentrics name the hit point
+
+
+@pytest.mark.parametrize("backend", [pytest.param("embree", marks=needs_embree), "dda"])
+def test_a_ray_from_inside_a_solid_meets_a_back_and_a_short_ray_meets_nothing(backend):
+    """From inside an outward-facing cube every ray meets the back of the face ahead, at the distance
+    to its plane; a ray shorter than that distance meets nothing."""
+    cube = box(half_size=0.5)
+    directions = unit(np.array([[1.0, 0.1, 0.05], [0.0, -1.0, 0.0], [0.2, 0.3, 1.0]]))
+    origins = np.zeros((3, 3))
+    hits = cast.closest_hits(cube, origins, directions, backend=backend)
+    assert (hits.face >= 0).all() and not hits.front.any()
+    normals = cube.face_normals[hits.face]
+    np.testing.assert_allclose(hits.t, 0.5 / np.einsum("ij,ij->i", normals, directions), rtol=1e-6)
+    short = cast.closest_hits(cube, origins, directions, t_max=0.45, backend=backend)
+    assert (short.face == cast.NO_FACE).all() and np.isinf(short.t).all()
+    outside = cast.closest_hits(cube, np.array([[0.0, 0.0, -2.0]]), np.array([[0.0, 0.0, 1.0]]), backend=backend)
+    assert outside.front[0] and outside.t[0] == pytest.approx(1.5, rel=1e-6)
+
+
+def test_without_embreex_the_dda_answers(monkeypatch):
+    """Where embreex does not import, the caster is the DDA's, and asking for Embree says why it cannot."""
+    monkeypatch.setattr(cast, "rtcore_scene", None)
+    assert not cast.embree_available()
+    assert cast.TriangleCaster(box(inward=True)).backend == "dda"
+    with pytest.raises(ValueError, match="embreex"):
+        cast.TriangleCaster(box(inward=True), backend="embree")
+
+
+@pytest.mark.parametrize("backend", [pytest.param("embree", marks=needs_embree), "dda"])
+def test_a_segment_is_blocked_where_the_closest_hit_lies_within_it(backend):
+    """The occlusion query (the probes' visibility) says blocked exactly where the closest hit is nearer
+    than the segment's end, in the Cornell box (segments ending well away from any face)."""
+    scene = load("cornell")
+    origins, directions = cornell_rays(5000, seed=4)
+    caster = cast.TriangleCaster(scene, backend=backend)
+    t = caster.closest_hits(origins, directions).t
+    lengths = np.random.default_rng(5).uniform(0.05, 2.5, len(origins))
+    clear_of_ends = np.abs(t - lengths) > 1e-3
+    blocked = caster.blocked(origins, directions, lengths)
+    np.testing.assert_array_equal(blocked[clear_of_ends], (t <= lengths)[clear_of_ends])
+    assert 0.2 < blocked.mean() < 0.8
