@@ -1,0 +1,78 @@
+"""Textures in the picture: a glTF's base-colour texture sampled per fragment (its texture coordinates,
+KHR_texture_transform, sRGB decoded to linear), in the albedo view and lit in the final view."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from textured import CHECKER, checker_quad
+from viewer.gpu.camera import view_projection
+from viewer.gpu.offscreen import OffscreenRenderer
+from viewer.gpu.renderer import RenderSettings
+from viewer.scene import Camera, Scene, load
+from scenes import ceiling_lamp
+
+SIZE = (96, 96)
+CAMERA = Camera((0.0, 0.0, 2.6), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 50.0)
+QUADRANTS = [(-0.5, 0.5), (0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)]
+"""World (x, y) of the centres of the quad's top-left, top-right, bottom-left and bottom-right quarters."""
+RED, GREEN, BLUE, GREY = (CHECKER[i, j].astype(float) for i, j in ((0, 0), (0, 1), (1, 0), (1, 1)))
+
+
+@pytest.fixture(scope="module")
+def offscreen(gl_context):
+    renderer = OffscreenRenderer(SIZE, RenderSettings(), samples=0, ctx=gl_context)
+    yield renderer
+    renderer.release()
+
+
+def pixel(scene: Scene, point) -> tuple[int, int]:
+    """(row, column) of the pixel that shows the world point (x, y, 0)."""
+    clip = view_projection(CAMERA, SIZE[0] / SIZE[1], *scene.bounds) @ np.array([*point, 0.0, 1.0])
+    ndc = clip[:2] / clip[3]
+    return int((1 - ndc[1]) / 2 * SIZE[1]), int((ndc[0] + 1) / 2 * SIZE[0])
+
+
+def colours(offscreen, scene: Scene, view: str = "albedo") -> np.ndarray:
+    offscreen.renderer.set_scene(scene)
+    image = offscreen.render(CAMERA, view=view).astype(float)
+    return np.array([image[pixel(scene, p)][:3] for p in QUADRANTS])
+
+
+def test_the_albedo_view_shows_the_checker_upright(offscreen, tmp_path):
+    """glTF's UV (0, 0) is the image's top-left: the albedo view shows each quarter in the texture's own
+    8-bit colour (the sRGB texture decoded to linear, shown as the albedo view shows albedo: re-encoded)."""
+    scene = load(checker_quad(tmp_path / "checker.gltf"))
+    np.testing.assert_allclose(colours(offscreen, scene), [RED, GREEN, BLUE, GREY], atol=6)
+
+
+@pytest.mark.parametrize("transform, expected", [
+    ({"offset": [0.5, 0.0]}, [GREEN, RED, GREY, BLUE]),
+    ({"rotation": np.pi / 2}, [BLUE, RED, GREY, GREEN]),
+    ({"scale": [-1.0, 1.0]}, [GREEN, RED, GREY, BLUE]),
+])
+def test_texture_transform_moves_the_checker_on_screen(offscreen, tmp_path, transform, expected):
+    scene = load(checker_quad(tmp_path / "checker.gltf", transform=transform))
+    np.testing.assert_allclose(colours(offscreen, scene), expected, atol=6)
+
+
+def test_mirrored_repeat_folds_the_checker(offscreen, tmp_path):
+    """Coordinates 1..2 along u read the image mirrored (MIRRORED_REPEAT): the quad's uv from (1, 0) to
+    (2, 1) shows green at the left, red at the right."""
+    uv = np.array([[1.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0]])
+    scene = load(checker_quad(tmp_path / "checker.gltf", wrap=(33648, 10497), uv=uv))
+    np.testing.assert_allclose(colours(offscreen, scene), [GREEN, RED, GREY, BLUE], atol=6)
+
+
+def test_a_lit_textured_quad_is_brighter_where_its_texture_is(offscreen, tmp_path):
+    """In the final view the texture is the albedo the light reflects from: under one lamp, each quarter's
+    colour follows its texel (red quarter reddest, green greenest, ...)."""
+    quad = load(checker_quad(tmp_path / "checker.gltf"))
+    lamp = ceiling_lamp(half_size=0.3, height=1.0, radiance=10.0)
+    lamp = Scene("lamp", lamp.vertices[:, [0, 2, 1]] * [1, 1, -1] + [0, 0, 2.0], lamp.faces[:, ::-1], 0.0, 10.0, 0,
+                 ("lamp",))   # facing -z, towards the quad
+    lit = colours(offscreen, Scene.concatenate("lit", [quad, lamp]), view="final")
+    assert np.all(lit > 5), lit
+    for quarter, channel in ((0, 0), (1, 1), (2, 2)):
+        assert np.argmax(lit[quarter]) == channel, lit
