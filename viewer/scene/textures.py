@@ -114,6 +114,39 @@ def surface_albedo(scene, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
     return np.minimum(albedo, 0.999)   # as Scene keeps albedo: the bounces converge
 
 
+def relative_at(scene, face: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N, 3) texture(uv) / texture.mean at world points on the scene's faces `face` (N,) (1 on faces without
+    a texture): what the face's albedo is multiplied by there. The points' barycentric weights are those of
+    their projection onto the face's plane."""
+    face = np.asarray(face, np.int64)
+    ratio = np.ones((len(face), 3))
+    if not scene.textured:
+        return ratio
+    textured = np.array([t is not None for t in scene.textures])[scene.face_group[face]]
+    chosen = np.flatnonzero(textured)
+    corners = scene.triangles[face[chosen]]
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    e1, e2, d = b - a, c - a, np.asarray(points, np.float64)[chosen] - a
+    dot = lambda x, y: np.einsum("ij,ij->i", x, y)
+    d11, d12, d22, d1, d2 = dot(e1, e1), dot(e1, e2), dot(e2, e2), dot(d, e1), dot(d, e2)
+    det = np.where(np.abs(d11 * d22 - d12 * d12) > 0, d11 * d22 - d12 * d12, 1.0)
+    v, w = (d22 * d1 - d12 * d2) / det, (d11 * d2 - d12 * d1) / det
+    uv = np.einsum("nk,nkj->nj", np.stack([1 - v - w, v, w], axis=1), scene.uv[face[chosen]])
+    group = scene.face_group[face[chosen]]
+    for index, texture in enumerate(scene.textures):
+        mine = group == index
+        if texture is not None and np.any(mine):
+            ratio[chosen[mine]] = texture.relative(uv[mine])
+    return ratio
+
+
+def textured_faces(scene) -> np.ndarray:
+    """(F,) bool: the faces whose group shows a texture."""
+    if not scene.textured:
+        return np.zeros(len(scene.faces), bool)
+    return np.array([t is not None for t in scene.textures])[scene.face_group]
+
+
 def wrapped(index: np.ndarray, count: int, mode: str) -> np.ndarray:
     """Integer texel indices wrapped into [0, count) by `mode` (one of WRAPS)."""
     index = index.astype(np.int64)
