@@ -76,3 +76,28 @@ def test_a_lit_textured_quad_is_brighter_where_its_texture_is(offscreen, tmp_pat
     assert np.all(lit > 5), lit
     for quarter, channel in ((0, 0), (1, 1), (2, 2)):
         assert np.argmax(lit[quarter]) == channel, lit
+
+
+def test_khronos_texture_coordinate_test_shows_as_its_screenshot(offscreen):
+    """TextureCoordinateTest seen from -z, as its screenshot shows it: yellow top-left, red top-right, blue
+    bottom-left, green bottom-right, each the image's own corner (four greys here) times its factor."""
+    from pathlib import Path
+
+    from viewer.gpu.camera import view_projection
+    from viewer.scene.textures import SRGB_TABLE
+
+    scene = load(Path(__file__).resolve().parent.parent / "data" / "gltf" / "TextureCoordinateTest-greys.gltf")
+    camera = Camera((0.0, 0.0, -4.0), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 45.0)
+    offscreen.renderer.set_scene(scene)
+    image = offscreen.render(camera, view="albedo").astype(float)
+    matrix = view_projection(camera, 1.0, *scene.bounds)
+    squares = {(0.7, 0.7): ((1, 1, 0), 255), (-0.7, 0.7): ((1, 0.1, 0), 200), (0.7, -0.7): ((0, 0.2, 1), 150),
+               (-0.7, -0.7): ((0, 1, 0), 100)}
+    for (x, y), (factor, grey) in squares.items():
+        clip = matrix @ np.array([x, y, 0.0, 1.0])
+        column, row = ((clip[:2] / clip[3] * [1, -1] + 1) / 2 * SIZE).astype(int)
+        linear = np.asarray(factor) * SRGB_TABLE[grey]
+        encoded = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055) * 255
+        np.testing.assert_allclose(image[row, column, :3], encoded, atol=3, err_msg=f"square at {x}, {y}")
+        # seen from -z, +x is on the picture's left: TopLeft (x, y > 0) is the top-left square
+        assert (column < SIZE[0] // 2) == (x > 0) and (row < SIZE[1] // 2) == (y > 0)

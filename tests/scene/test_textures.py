@@ -115,3 +115,21 @@ def test_a_texture_without_its_coordinates_shows_its_mean(tmp_path):
     scene = load(checker_quad(tmp_path / "checker.gltf", transform={"texCoord": 1}))
     assert not scene.textured
     np.testing.assert_allclose(scene.albedo[0], np.mean([RED, GREEN, BLUE, GREY], axis=0), atol=1e-6)
+
+
+def test_khronos_texture_coordinate_test_reads_each_corner_of_the_image():
+    """TextureCoordinateTest (its geometry, coordinates and materials; the image four flat greys, white
+    top-left, 200 top-right, 150 bottom-left, 100 bottom-right): each small square shows the image's corner
+    of its name, tinted by its baseColorFactor; seen from -z, TopLeft is top-left."""
+    from pathlib import Path
+
+    scene = load(Path(__file__).resolve().parent.parent / "data" / "gltf" / "TextureCoordinateTest-greys.gltf")
+    grey = {"TopLeft": 255, "TopRight": 200, "BottomLeft": 150, "BottomRight": 100}
+    factor = {"TopLeft": (1, 1, 0), "TopRight": (1, 0.1, 0), "BottomLeft": (0, 0.2, 1), "BottomRight": (0, 1, 0)}
+    for name in grey:
+        faces = np.flatnonzero(scene.face_group == scene.group_index(f"{name}Material"))
+        albedo = surface_albedo(scene, faces, np.full((len(faces), 3), 1 / 3))
+        expected = np.minimum(np.asarray(factor[name]) * SRGB_TABLE[grey[name]], 0.999)
+        np.testing.assert_allclose(albedo, np.tile(expected, (len(faces), 1)), atol=1e-6, err_msg=name)
+        centre = scene.triangles[faces].mean(axis=(0, 1))
+        assert (centre[0] > 0) == name.endswith("Left") and (centre[1] > 0) == name.startswith("Top")
