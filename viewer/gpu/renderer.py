@@ -320,17 +320,20 @@ class Renderer(LightmapUpkeep):
         if display:
             extra.update(exposure_scale=float(2.0 ** s.exposure))
         program = self.programs.get("surface", **defines)
+        # a textured scene's groups without a texture are drawn by the variant that samples nothing
+        plain = self.programs.get("surface", **{**defines, "TEXTURED": 0}) if defines["TEXTURED"] else program
         units = self._probe_textures.use(PROBE_UNIT)
         self._emitter_shadows.use(ATLAS_UNIT)
         self._sun_shadow.use(SUN_UNIT)
-        set_uniforms(program, view_proj=gl_bytes(view_proj), probe_sh=units, **self._probe_uniforms(probes),
-                     shadow_bias=float(s.shadow_bias),
-                     **self._emitter_shadows.uniforms(ATLAS_UNIT), **self._sun_shadow.uniforms(SUN_UNIT), **extra)
+        for shader in {id(program): program, id(plain): plain}.values():
+            set_uniforms(shader, view_proj=gl_bytes(view_proj), probe_sh=units, **self._probe_uniforms(probes),
+                         shadow_bias=float(s.shadow_bias), **self._emitter_shadows.uniforms(ATLAS_UNIT),
+                         **self._sun_shadow.uniforms(SUN_UNIT), **extra)
         if baked:   # a cheap shader (two fetches): early z on the draw order costs less than a pre-pass
             self.ctx.depth_func = "<"
         else:
             self._depth_prepass(view_proj, framebuffer, mesh)
-        self._textures.draw(mesh, program)
+        self._textures.draw(mesh, program, plain)
         self.ctx.depth_func = "<"
 
     def _surface_defines(self, view: str, indirect: bool, interleave: bool, baked: bool, baked_indirect: bool,

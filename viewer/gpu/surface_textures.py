@@ -3,9 +3,10 @@ scene has them.
 
 Each textured group's image is one mipmapped 2D texture (sRGB images as SRGB8, so the texture unit decodes
 to linear before it filters, as GL does for sRGB formats; linear images as RGB32F), filtered trilinearly.
-A scene with textures is drawn in one draw per run of a group's faces (the draw order keeps a group's
-faces together, viewer/gpu/mesh.py), binding the group's texture, or a white texel for a group without
-one; a scene without textures is one draw, with a shader that samples nothing. Textures are kept while
+A scene with textures is drawn in one draw per run of a textured group's faces (the draw order keeps a
+group's faces together, viewer/gpu/mesh.py), binding the group's texture, and one draw per run of groups
+without one, by the shader variant that samples nothing (on llvmpipe a trilinear sRGB fetch costs about
+as much per pixel as the rest of the albedo view); a scene without textures is one draw of that variant. Textures are kept while
 the same Texture objects come back (a colour edit), so an edit uploads nothing.
 """
 
@@ -29,9 +30,8 @@ class SurfaceTextures:
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
         self._uploaded: dict[int, tuple[object, moderngl.Texture]] = {}   # id(Texture) -> (it, GL texture)
-        self._white = ctx.texture((1, 1), 3, bytes([255, 255, 255]), internal_format=GL_SRGB8)
         self._groups: list = []
-        self._runs: list[tuple[int, int, int]] = []
+        self._runs: list[tuple[object, int, int]] = []   # (Texture or None, first vertex, vertex count)
 
     @property
     def active(self) -> bool:
@@ -41,7 +41,13 @@ class SurfaceTextures:
     def set_scene(self, scene: Scene) -> None:
         """`scene` in the renderer's draw order (its groups' faces together)."""
         self._groups = list(scene.textures)
-        self._runs = group_runs(scene) if scene.textured else []
+        self._runs = []
+        for group, first, count in (group_runs(scene) if scene.textured else []):
+            texture = self._groups[group]
+            if texture is None and self._runs and self._runs[-1][0] is None:   # untextured runs: one draw
+                self._runs[-1] = (None, self._runs[-1][1], self._runs[-1][2] + count)
+            else:
+                self._runs.append((texture, first, count))
         wanted = {id(t) for t in self._groups if t is not None}
         for key in [k for k in self._uploaded if k not in wanted]:
             self._uploaded.pop(key)[1].release()
@@ -49,26 +55,27 @@ class SurfaceTextures:
             if texture is not None and id(texture) not in self._uploaded:
                 self._uploaded[id(texture)] = (texture, upload(self.ctx, texture))
 
-    def draw(self, mesh: TriangleBuffer, program: moderngl.Program) -> None:
-        """The mesh's triangles with `program`: one draw per group run where the scene has textures."""
+    def draw(self, mesh: TriangleBuffer, program: moderngl.Program, plain: moderngl.Program) -> None:
+        """The mesh's triangles: the textured groups' runs with `program` (the surface shader's TEXTURED
+        variant), each with its texture bound, the others with `plain`; all of them with `plain` in a
+        scene without textures."""
         if not self.active:
-            mesh.render(program)
+            mesh.render(plain)
             return
         program["base_colour"] = BASE_COLOUR_UNIT
-        for group, first, count in self._runs:
-            texture = self._groups[group]
-            gl_texture = self._uploaded[id(texture)][1] if texture is not None else self._white
-            gl_texture.use(location=BASE_COLOUR_UNIT)
+        for texture, first, count in self._runs:
+            if texture is None:
+                mesh.render(plain, first, count)
+                continue
+            self._uploaded[id(texture)][1].use(location=BASE_COLOUR_UNIT)
             if "mirror_uv" in program:
-                program["mirror_uv"] = (tuple(float(w == "mirror") for w in texture.wrap) if texture is not None
-                                        else (0.0, 0.0))
+                program["mirror_uv"] = tuple(float(w == "mirror") for w in texture.wrap)
             mesh.render(program, first, count)
 
     def release(self) -> None:
         for _, texture in self._uploaded.values():
             texture.release()
         self._uploaded.clear()
-        self._white.release()
 
 
 def upload(ctx: moderngl.Context, texture) -> moderngl.Texture:
