@@ -30,9 +30,12 @@ def data_uri(data: bytes, kind: str) -> str:
 
 
 def checker_quad(path: Path, transform: dict | None = None, wrap=(10497, 10497), factor=(1.0, 1.0, 1.0, 1.0),
-                 uv: np.ndarray = QUAD_UV, pixels: np.ndarray = CHECKER) -> Path:
+                 uv: np.ndarray = QUAD_UV, pixels: np.ndarray = CHECKER, mag_filter: int | None = None) -> Path:
     """Write the quad with the checker as its base-colour texture (KHR_texture_transform `transform` on the
-    textureInfo when given; the sampler's wrapS, wrapT) to `path`, a .gltf."""
+    textureInfo when given; the sampler's wrapS, wrapT and magFilter) to `path`, a .gltf."""
+    sampler = {"wrapS": wrap[0], "wrapT": wrap[1]}
+    if mag_filter is not None:
+        sampler["magFilter"] = mag_filter
     positions = QUAD.astype(np.float32).tobytes()
     coordinates = np.asarray(uv, np.float32).tobytes()
     indices = np.array([0, 3, 2, 0, 2, 1], np.uint16).tobytes()   # counter-clockwise seen from +z
@@ -49,7 +52,7 @@ def checker_quad(path: Path, transform: dict | None = None, wrap=(10497, 10497),
         "materials": [{"name": "checker", "pbrMetallicRoughness": {"baseColorTexture": info,
                                                                    "baseColorFactor": list(factor)}}],
         "textures": [{"source": 0, "sampler": 0}],
-        "samplers": [{"wrapS": wrap[0], "wrapT": wrap[1]}],
+        "samplers": [sampler],
         "images": [{"uri": data_uri(png(pixels), "image/png")}],
         "buffers": [{"byteLength": len(blob), "uri": data_uri(blob, "application/octet-stream")}],
         "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},

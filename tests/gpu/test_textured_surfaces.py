@@ -65,6 +65,17 @@ def test_mirrored_repeat_folds_the_checker(offscreen, tmp_path):
     np.testing.assert_allclose(colours(offscreen, scene), [GREEN, RED, GREY, BLUE], atol=6)
 
 
+def test_a_nearest_sampler_keeps_texels_sharp(offscreen, tmp_path):
+    """magFilter NEAREST: a pixel just left of the quad's middle shows the red texel itself; linear
+    filtering shows it blended towards green."""
+    near = load(checker_quad(tmp_path / "near.gltf", mag_filter=9728))
+    smooth = load(checker_quad(tmp_path / "smooth.gltf"))
+    at = lambda scene: (offscreen.renderer.set_scene(scene),
+                        offscreen.render(CAMERA, view="albedo")[pixel(scene, (-0.08, 0.5))][:3].astype(float))[1]
+    np.testing.assert_allclose(at(near), RED, atol=3)
+    assert np.abs(at(smooth) - RED).max() > 30
+
+
 def test_a_lit_textured_quad_is_brighter_where_its_texture_is(offscreen, tmp_path):
     """In the final view the texture is the albedo the light reflects from: under one lamp, each quarter's
     colour follows its texel (red quarter reddest, green greenest, ...)."""

@@ -45,7 +45,7 @@ def viewer_albedo(scene, points) -> np.ndarray:
     {}, {"transform": {"offset": [0.25, 0.5], "rotation": 0.392699, "scale": [1.5, 1.5]}},
     {"wrap": (33648, 33648), "uv": np.array([[1.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0]])},
     {"wrap": (33071, 33071), "uv": np.array([[-0.5, 0.0], [1.5, 0.0], [1.5, 1.0], [-0.5, 1.0]])},
-    {"factor": (0.5, 0.8, 1.0, 1.0)}])
+    {"factor": (0.5, 0.8, 1.0, 1.0)}, {"mag_filter": 9728}])
 def test_mitsuba_reflects_the_texture_the_viewer_shows(tmp_path, options):
     scene = load(checker_quad(tmp_path / "checker.gltf", **options))
     assert scene.textured

@@ -85,6 +85,16 @@ def test_wrap_modes(wrap, u, expected):
     assert at(u) == pytest.approx(at(expected) if wrap != "clamp" else 1.0, abs=1e-6)
 
 
+def test_a_nearest_sampler_shows_each_texel_flat(tmp_path):
+    """magFilter NEAREST (pixel art): just left of the quad's middle and at its left edge the quad is the
+    red texel itself, where linear filtering blends it towards green (beside it, and repeated past the edge)."""
+    near = load(checker_quad(tmp_path / "near.gltf", mag_filter=9728))
+    smooth = load(checker_quad(tmp_path / "smooth.gltf"))
+    points = [(-0.05, 0.5), (-0.99, 0.5)]
+    np.testing.assert_allclose(albedo_at(near, points), [RED, RED], atol=1e-6)
+    assert np.all(np.abs(albedo_at(smooth, points) - RED).max(axis=1) > 0.1)
+
+
 def test_a_recoloured_group_keeps_its_pattern_around_the_new_colour(tmp_path):
     """Recolouring multiplies the texture by the new colour over the old: the mean is the new colour and
     the checker still shows; a colour the texture cannot carry (a channel black throughout) drops it."""

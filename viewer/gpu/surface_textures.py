@@ -79,7 +79,8 @@ class SurfaceTextures:
 
 
 def upload(ctx: moderngl.Context, texture) -> moderngl.Texture:
-    """A viewer.scene.textures.Texture as a mipmapped GL texture: trilinear, REPEAT along an axis whose
+    """A viewer.scene.textures.Texture as a mipmapped GL texture: trilinear (magnified: linear, or nearest
+    for a `nearest` texture), REPEAT along an axis whose
     wrap mode repeats, else CLAMP_TO_EDGE (mirrored repeat folds the coordinate in the shader first)."""
     width, height = texture.size
     if texture.srgb:
@@ -89,7 +90,7 @@ def upload(ctx: moderngl.Context, texture) -> moderngl.Texture:
         gl_texture = ctx.texture((width, height), 3, texture.pixels.astype(np.float32).tobytes(), dtype="f4",
                                  internal_format=GL_RGB32F)
     gl_texture.build_mipmaps()
-    gl_texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+    gl_texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.NEAREST if texture.nearest else moderngl.LINEAR)
     gl_texture.repeat_x = texture.wrap[0] == "repeat"
     gl_texture.repeat_y = texture.wrap[1] == "repeat"
     return gl_texture

@@ -106,7 +106,8 @@ def _textured_mesh(mi, scene: Scene, face_ids: np.ndarray, name: str):
     scale = np.where(texture.mean > 0, albedo / np.where(texture.mean > 0, texture.mean, 1.0), 0.0)
     image = np.minimum(texture.linear() * scale.astype(np.float32), 0.999).astype(np.float32)
     wrap = texture.wrap[0] if texture.wrap[0] == texture.wrap[1] else "repeat"   # Mitsuba: one mode for both
-    bitmap = {"type": "bitmap", "data": mi.TensorXf(image), "raw": True, "filter_type": "bilinear", "wrap_mode": wrap}
+    bitmap = {"type": "bitmap", "data": mi.TensorXf(image), "raw": True, "wrap_mode": wrap,
+              "filter_type": "nearest" if texture.nearest else "bilinear"}
     props = mi.Properties()
     props["bsdf"] = mi.load_dict({"type": "twosided", "material": {"type": "diffuse", "reflectance": bitmap}})
     mesh = mi.Mesh(name, 3 * len(face_ids), len(face_ids), props=props, has_vertex_texcoords=True)

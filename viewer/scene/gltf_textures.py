@@ -14,6 +14,8 @@ from viewer.scene.types import SceneError
 
 WRAP_MODES = {10497: "repeat", 33648: "mirror", 33071: "clamp"}
 """glTF sampler wrapS / wrapT -> viewer.scene.textures.WRAPS."""
+NEAREST = 9728
+"""glTF sampler magFilter NEAREST (else LINEAR, 9729, or undefined: the viewer filters linearly)."""
 
 
 def read_texture(path: Path, data: GltfData, index: int, material: int) -> Texture | None:
@@ -36,11 +38,12 @@ def read_texture(path: Path, data: GltfData, index: int, material: int) -> Textu
     except Exception as exc:  # PIL raises OSError, SyntaxError, zlib.error, ... on bad image data
         raise SceneError(f"{path}: unreadable base-colour texture in glTF material {material} "
                          f"({one_line(exc)})") from None
-    wrap = ("repeat", "repeat")
+    wrap, nearest = ("repeat", "repeat"), False
     if texture.get("sampler") is not None:
         sampler = data.item("samplers", texture["sampler"])
         wrap = tuple(WRAP_MODES.get(sampler.get(key, 10497), "repeat") for key in ("wrapS", "wrapT"))
-    return Texture(pixels, srgb=True, wrap=wrap, name=f"texture-{index}")
+        nearest = sampler.get("magFilter") == NEAREST
+    return Texture(pixels, srgb=True, wrap=wrap, nearest=nearest, name=f"texture-{index}")
 
 
 def face_uv(data: GltfData, attributes: dict, info: dict, faces: np.ndarray, count: int) -> np.ndarray | None:

@@ -34,6 +34,9 @@ class Texture:
     srgb: bool = True
     wrap: tuple[str, str] = ("repeat", "repeat")
     """Wrap mode along u and along v, each one of WRAPS."""
+    nearest: bool = False
+    """Magnified, each texel is a flat square (glTF's magFilter NEAREST: pixel art), not blended with its
+    neighbours; minified, the renderer filters trilinearly either way."""
     name: str = ""
     mean: np.ndarray = field(init=False, repr=False)
     """(3,) the image's mean linear colour."""
@@ -75,9 +78,15 @@ class Texture:
 
     def sample(self, uv: np.ndarray) -> np.ndarray:
         """(N, 3) linear colours at (N, 2) texture coordinates: bilinear between texel centres (as the
-        renderer's finest mip level), the wrap modes applied to the texel indices."""
+        renderer's finest mip level), or the texel itself for a `nearest` texture, the wrap modes applied
+        to the texel indices."""
         uv = np.asarray(uv, np.float64).reshape(-1, 2)
         height, width = self.pixels.shape[:2]
+        if self.nearest:
+            x = wrapped(np.floor(uv[:, 0] * width), width, self.wrap[0])
+            y = wrapped(np.floor(uv[:, 1] * height), height, self.wrap[1])
+            texel = self.pixels[y, x]
+            return (SRGB_TABLE[texel] if self.srgb else np.maximum(texel, 0.0)).astype(np.float64)
         x = uv[:, 0] * width - 0.5
         y = uv[:, 1] * height - 0.5
         x0, y0 = np.floor(x), np.floor(y)
