@@ -143,3 +143,34 @@ def test_khronos_texture_coordinate_test_reads_each_corner_of_the_image():
         np.testing.assert_allclose(albedo, np.tile(expected, (len(faces), 1)), atol=1e-6, err_msg=name)
         centre = scene.triangles[faces].mean(axis=(0, 1))
         assert (centre[0] > 0) == name.endswith("Left") and (centre[1] > 0) == name.startswith("Top")
+
+
+def test_faces_that_show_another_texture_or_none_get_a_group_of_their_own(tmp_path):
+    """A group shows one texture: a same-named group with another texture, or none (a part without texture
+    coordinates), becomes "NAME (2)", so neither shows the other's image."""
+    from scenes import box
+
+    quad = load(checker_quad(tmp_path / "checker.gltf"))
+    other = load(checker_quad(tmp_path / "other.gltf", pixels=CHECKER[::-1]))
+    plain = box(name="checker")
+    both = Scene.concatenate("all", [quad, other, plain, quad])
+    assert both.groups == ("checker", "checker (2)", "checker (3)")
+    assert both.texture_of(0) is quad.textures[0] and both.texture_of(1) is other.textures[0]
+    assert both.texture_of(2) is None
+    assert both.face_group[-1] == 0   # the same Texture again: the same group
+
+
+def test_a_primitive_without_the_coordinates_of_its_material_s_texture_is_a_group_apart(tmp_path):
+    """One material on two primitives, one of them without TEXCOORD_0: its faces show the mean colour in a
+    group "NAME (2)" and never read the texture at a made-up coordinate."""
+    import json
+
+    path = checker_quad(tmp_path / "checker.gltf")
+    document = json.loads(path.read_text())
+    bare = {"attributes": {"POSITION": 0}, "indices": 2, "material": 0}
+    document["meshes"][0]["primitives"].append(bare)
+    path.write_text(json.dumps(document))
+    scene = load(path)
+    assert scene.groups == ("checker", "checker (2)")
+    assert scene.texture_of(0) is not None and scene.texture_of(1) is None
+    np.testing.assert_allclose(scene.albedo[2:], np.tile(scene.albedo[0], (2, 1)))

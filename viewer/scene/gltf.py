@@ -211,16 +211,19 @@ class _Builder:
         if colours is not None:   # glTF multiplies the base colour by COLOR_0 (linear): per face, the mean
             face_albedo = face_albedo * colours[faces].mean(axis=1)
         uv = None
-        if texture is not None:
+        if texture is not None:   # without the coordinates it names, the texture shows its mean colour
             uv = face_uv(self.data, attributes, texture[0], faces, len(positions))
-            if uv is not None and self.textures.setdefault(group, texture[1]) is not texture[1]:
-                uv = None   # a group shows one texture: a second material of the same name shows its mean
-        self._add(vertices, faces, face_albedo, emission, group, uv)
+        self._add(vertices, faces, face_albedo, emission, group, uv, texture[1] if uv is not None else None)
 
     def _add(self, vertices: np.ndarray, faces: np.ndarray, albedo: np.ndarray, emission: np.ndarray,
-             group: str, uv: np.ndarray | None = None) -> None:
-        """Triangles into the scene: per-face albedo (F, 3), one emitted radiance (3,) for all, a group,
-        texture coordinates (F, 3, 2) where the group shows a texture."""
+             group: str, uv: np.ndarray | None = None, texture=None) -> None:
+        """Triangles into the scene: per-face albedo (F, 3), one emitted radiance (3,) for all, a group, and
+        the texture they show with their coordinates (F, 3, 2), or None. A group shows one texture (or
+        none): faces of a same-named group that show another go to a group "NAME (2)", "NAME (3)", ..."""
+        name, copy = group, 2
+        while group in self.textures and self.textures[group] is not texture:
+            group, copy = f"{name} ({copy})", copy + 1
+        self.textures[group] = texture
         self.uv.append(uv if uv is not None else np.zeros((len(faces), 3, 2)))
         if group not in self.groups:
             self.groups.append(group)

@@ -262,7 +262,8 @@ class Scene:
     @staticmethod
     def concatenate(name: str, parts: list["Scene"], sun: DirectionalLight | None = None,
                     camera: Camera | None = None) -> "Scene":
-        """The parts as one scene; groups of the same name merge (the first part's texture for it wins)."""
+        """The parts as one scene; groups of the same name merge, unless they show different textures (or
+        one shows a texture and the other none): then the later one is named "NAME (2)", "NAME (3)", ..."""
         verts, faces, alb, emi, grp, uvs, names, textures = [], [], [], [], [], [], [], []
         offset = 0
         for p in parts:
@@ -274,10 +275,13 @@ class Scene:
             uvs.append(p.uv if p.uv is not None else np.zeros((len(p.faces), 3, 2)))
             lookup = []
             for index, g in enumerate(p.groups):
-                if g not in names:
-                    names.append(g)
-                    textures.append(p.texture_of(index))
-                lookup.append(names.index(g))
+                texture, name, copy = p.texture_of(index), g, 2
+                while name in names and textures[names.index(name)] is not texture:
+                    name, copy = f"{g} ({copy})", copy + 1
+                if name not in names:
+                    names.append(name)
+                    textures.append(texture)
+                lookup.append(names.index(name))
             grp.append(np.asarray(lookup)[p.face_group])
         return Scene(name, np.concatenate(verts), np.concatenate(faces), np.concatenate(alb),
                      np.concatenate(emi), np.concatenate(grp), tuple(names), sun=sun,
