@@ -112,3 +112,13 @@ def test_khronos_texture_coordinate_test_shows_as_its_screenshot(offscreen):
         np.testing.assert_allclose(image[row, column, :3], encoded, atol=3, err_msg=f"square at {x}, {y}")
         # seen from -z, +x is on the picture's left: TopLeft (x, y > 0) is the top-left square
         assert (column < SIZE[0] // 2) == (x > 0) and (row < SIZE[1] // 2) == (y > 0)
+
+
+def test_srgb_texels_are_decoded_to_linear_before_they_are_blended(offscreen, tmp_path):
+    """Halfway between a black and a white texel the albedo is linear 0.5 (shown as sRGB 188), not the
+    sRGB code halfway between them (128, linear 0.21): the texture unit decodes, then filters."""
+    pixels = np.array([[[0, 0, 0], [255, 255, 255]]], np.uint8)
+    scene = load(checker_quad(tmp_path / "ramp.gltf", pixels=pixels, wrap=(33071, 33071)))
+    offscreen.renderer.set_scene(scene)
+    image = offscreen.render(CAMERA, view="albedo").astype(float)
+    np.testing.assert_allclose(image[pixel(scene, (0.0, 0.0))][:3], [188, 188, 188], atol=5)

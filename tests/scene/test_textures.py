@@ -174,3 +174,12 @@ def test_a_primitive_without_the_coordinates_of_its_material_s_texture_is_a_grou
     assert scene.groups == ("checker", "checker (2)")
     assert scene.texture_of(0) is not None and scene.texture_of(1) is None
     np.testing.assert_allclose(scene.albedo[2:], np.tile(scene.albedo[0], (2, 1)))
+
+
+def test_the_documented_textured_room_loads_with_its_textures():
+    """docs/data/textured-room.gltf, the room docs/PERFORMANCE.md times: its floor and back wall textured."""
+    from pathlib import Path
+
+    room = load(Path(__file__).resolve().parents[2] / "docs" / "data" / "textured-room.gltf")
+    textured = {g for i, g in enumerate(room.groups) if room.texture_of(i) is not None}
+    assert textured == {"floor", "back"} and room.has_emitters
