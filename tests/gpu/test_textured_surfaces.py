@@ -122,3 +122,17 @@ def test_srgb_texels_are_decoded_to_linear_before_they_are_blended(offscreen, tm
     offscreen.renderer.set_scene(scene)
     image = offscreen.render(CAMERA, view="albedo").astype(float)
     np.testing.assert_allclose(image[pixel(scene, (0.0, 0.0))][:3], [188, 188, 188], atol=5)
+
+
+def test_every_view_draws_a_textured_scene(offscreen, tmp_path):
+    """Every view draws a textured scene, those that show no albedo (normals, voxels) among them; the lit
+    views are black here (no lamp)."""
+    from viewer.gpu.renderer import VIEWS
+    from viewer.rays.voxels import voxelize
+
+    scene = load(checker_quad(tmp_path / "checker.gltf"))
+    offscreen.renderer.set_scene(scene)
+    offscreen.renderer.set_voxels(voxelize(scene, 8))
+    for view in VIEWS:
+        image = offscreen.render(CAMERA, view=view)
+        assert image[pixel(scene, (0.0, 0.0))][:3].max() > 0 or view in ("final", "direct", "indirect", "probes"), view

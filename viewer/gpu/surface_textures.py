@@ -62,7 +62,8 @@ class SurfaceTextures:
         if not self.active:
             mesh.render(plain)
             return
-        program["base_colour"] = BASE_COLOUR_UNIT
+        if "base_colour" in program:   # a view that shows no albedo (normals) samples nothing
+            program["base_colour"] = BASE_COLOUR_UNIT
         for texture, first, count in self._runs:
             if texture is None:
                 mesh.render(plain, first, count)
