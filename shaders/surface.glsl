@@ -18,7 +18,10 @@
 // fragment, as without BAKED). DISPLAY (1: write
 // the sRGB-encoded display value, exposure and tone curve applied as present.glsl does (display_value,
 // tonemap.glsl, with its TONE_CURVE and RAW): one pass into an 8-bit image instead of a float image and
-// a full-screen tone-mapping pass, which cost about a third of a frame on llvmpipe).
+// a full-screen tone-mapping pass, which cost about a third of a frame on llvmpipe). TEXTURED (1: the
+// albedo is the vertex albedo times the base-colour texture at the fragment's texture coordinate:
+// mipmapped, trilinear, sRGB decoded to linear by the texture unit before it is filtered; the vertex
+// albedo is then the face's albedo over the texture's mean colour, viewer/gpu/mesh.py).
 
 #define VIEW_FINAL 0
 #define VIEW_DIRECT 1
@@ -44,6 +47,9 @@
 #ifndef DISPLAY
 #define DISPLAY 0
 #endif
+#ifndef TEXTURED
+#define TEXTURED 0
+#endif
 
 #if defined VERTEX_SHADER
 
@@ -64,8 +70,15 @@ flat out vec3 v_emission;
 in vec2 in_lightmap;             // atlas coordinate of this corner
 out vec2 v_lightmap;
 #endif
+#if TEXTURED
+in vec2 in_uv;                   // texture coordinate: (0, 0) is the image's top-left (glTF)
+out vec2 v_uv;
+#endif
 
 void main() {
+#if TEXTURED
+    v_uv = in_uv;
+#endif
 #if BAKED
     v_lightmap = in_lightmap;
 #endif
@@ -91,6 +104,22 @@ in vec2 v_lightmap;
 uniform sampler2D lightmap;            // direct irradiance: front sides of the faces left, back sides right
 uniform sampler2D indirect_lightmap;   // the probe grid's indirect irradiance, the same texels
 #endif
+#if TEXTURED
+in vec2 v_uv;
+uniform sampler2D base_colour;   // the group's texture: repeat or clamp set on it, mirrored repeat here
+uniform vec2 mirror_uv;          // 1 along an axis whose wrap mode is mirrored repeat, else 0
+
+vec3 surface_albedo() {
+    vec2 mirrored = 1.0 - abs(mod(v_uv, 2.0) - 1.0);
+    vec2 uv = mix(v_uv, mirrored, mirror_uv);
+    // the unwrapped coordinate's derivatives pick the mip level: no seam where the mirror folds
+    return min(v_albedo * textureGrad(base_colour, uv, dFdx(v_uv), dFdy(v_uv)).rgb, vec3(0.999));
+}
+#else
+vec3 surface_albedo() {
+    return v_albedo;
+}
+#endif
 layout(location = 0) out vec4 frag_color;
 #if INTERLEAVE
 layout(location = 1) out vec4 frag_direct_irradiance;
@@ -102,8 +131,9 @@ void main() {
     // Surfaces reflect on both sides (Mitsuba's two-sided diffuse); emitters emit from the front only.
     vec3 n = gl_FrontFacing ? v_normal : -v_normal;
     vec3 emission = gl_FrontFacing ? v_emission : vec3(0.0);
+    vec3 albedo = surface_albedo();
 #if VIEW == VIEW_ALBEDO
-    vec3 result = v_albedo;
+    vec3 result = albedo;
 #elif VIEW == VIEW_NORMALS
     vec3 result = srgb_to_linear(n * 0.5 + 0.5);  // the sRGB encoding undoes this: it shows n/2 + 1/2 as is
 #else
@@ -113,7 +143,7 @@ void main() {
     vec3 irradiance = emitter_irradiance_interleaved(v_position, n, block.x + 2 * block.y)
                     + sun_irradiance_at(v_position, n);
     frag_direct_irradiance = vec4(irradiance, 1.0);
-    frag_albedo_over_pi = vec4(v_albedo / PI, 1.0);
+    frag_albedo_over_pi = vec4(albedo / PI, 1.0);
     // 1 / view depth is linear in screen space on a plane: its value and gradient identify the plane.
     frag_plane = vec4(gl_FragCoord.w, dFdx(gl_FragCoord.w), dFdy(gl_FragCoord.w), 1.0);
     result += emission;
@@ -128,12 +158,12 @@ void main() {
 #if VIEW != VIEW_DIRECT && INDIRECT && BAKED_INDIRECT
     irradiance += textureLod(indirect_lightmap, texel, 0.0).rgb;
 #endif
-    result += v_albedo / PI * irradiance;
+    result += albedo / PI * irradiance;
 #elif VIEW != VIEW_INDIRECT
-    result += v_albedo / PI * direct_irradiance(v_position, n) + emission;
+    result += albedo / PI * direct_irradiance(v_position, n) + emission;
 #endif
 #if VIEW != VIEW_DIRECT && INDIRECT && !BAKED_INDIRECT
-    result += v_albedo / PI * probe_irradiance(v_position, n);
+    result += albedo / PI * probe_irradiance(v_position, n);
 #endif
 #endif
 #if DISPLAY

@@ -19,7 +19,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from viewer.gpu.mesh import TriangleBuffer
+from viewer.gpu.mesh import TriangleBuffer, face_uv, vertex_albedo
 from viewer.scene import Scene, SceneError
 
 ATLAS_WIDTH = 2048
@@ -116,16 +116,16 @@ def lightmap_texels(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple
 
 
 def lightmap_vertices(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """(3F, 14) float32: the SceneMesh vertex layout (position, normal, albedo, emission) plus each
-    corner's front-side lightmap coordinate (the back side's is 0.5 further along u)."""
+    """(3F, 16) float32: the SceneMesh vertex layout (position, normal, albedo, emission, texture
+    coordinate) plus each corner's front-side lightmap coordinate (the back side's is 0.5 further along u)."""
     keep = scene.face_areas > 0
     corners = scene.triangles[keep]
-    per_face = [scene.face_normals[keep], scene.albedo[keep], scene.emission[keep]]
+    per_face = [scene.face_normals[keep], vertex_albedo(scene)[keep], scene.emission[keep]]
     uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     texel = origin[:, None, :] + 1.0 + n[:, None, None] * uv[None]          # (F, 3, 2) texel units
     atlas = texel / np.asarray((2 * size[0], size[1]), np.float64)
-    columns = [corners] + [np.repeat(a[:, None, :], 3, axis=1) for a in per_face] + [atlas]
-    return np.concatenate(columns, axis=2).reshape(-1, 14).astype(np.float32)
+    columns = [corners] + [np.repeat(a[:, None, :], 3, axis=1) for a in per_face] + [face_uv(scene)[keep], atlas]
+    return np.concatenate(columns, axis=2).reshape(-1, 16).astype(np.float32)
 
 
 def same_atlas(a: "BakedDirectLight", b: "BakedDirectLight") -> bool:
@@ -138,8 +138,8 @@ class BakedDirectLight(TriangleBuffer):
     """The scene's triangles with lightmap coordinates (the same vertices as SceneMesh, in the same
     order, so the renderer draws either), and the lightmap (front sides | back sides)."""
 
-    ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission", "in_lightmap")
-    SIZES = {"in_lightmap": 2}
+    ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission", "in_uv", "in_lightmap")
+    SIZES = {"in_uv": 2, "in_lightmap": 2}
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, texel: float):
         super().__init__(ctx)

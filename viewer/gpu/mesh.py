@@ -9,7 +9,7 @@ import numpy as np
 
 from viewer.scene import Scene
 
-SCENE_ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission")
+SCENE_ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission", "in_uv")
 
 
 class TriangleBuffer:
@@ -18,7 +18,7 @@ class TriangleBuffer:
     `vertex_count`, and may change `ATTRIBUTES` and `SIZES` (floats per attribute, 3 unless listed)."""
 
     ATTRIBUTES: tuple[str, ...] = SCENE_ATTRIBUTES
-    SIZES: dict[str, int] = {}
+    SIZES: dict[str, int] = {"in_uv": 2}
 
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
@@ -34,8 +34,10 @@ class TriangleBuffer:
             self._arrays[key] = self.ctx.vertex_array(program, [(self.buffer, layout, *names)])
         return self._arrays[key]
 
-    def render(self, program: moderngl.Program) -> None:
-        self.vertex_array(program).render(moderngl.TRIANGLES, vertices=self.vertex_count)
+    def render(self, program: moderngl.Program, first: int = 0, count: int | None = None) -> None:
+        """Draw the triangles, or `count` vertices from vertex `first` (one group's, see `group_runs`)."""
+        count = self.vertex_count - first if count is None else count
+        self.vertex_array(program).render(moderngl.TRIANGLES, vertices=count, first=first)
 
     def forget_programs(self) -> None:
         """Drop the vertex arrays (after shaders were reloaded: they point at the old programs)."""
@@ -52,11 +54,39 @@ def in_draw_order(scene: Scene) -> Scene:
     """The scene with its faces reordered, groups of small total area first. A room's walls, floor and
     ceiling (its largest groups) lie behind what stands in it, so drawing them last lets the depth test
     reject their hidden fragments before they are shaded (llvmpipe tests depth early), which on the
-    Cornell box costs less than a depth pre-pass (about 40% less for the surface pass at 1280x720)."""
+    Cornell box costs less than a depth pre-pass (about 40% less for the surface pass at 1280x720).
+    Each group's faces come together (groups of the same area by index), so a textured group is one draw."""
     area = np.bincount(scene.face_group, weights=scene.face_areas, minlength=len(scene.groups))
-    order = np.argsort(area[scene.face_group], kind="stable")
+    order = np.lexsort((scene.face_group, area[scene.face_group]))
+    uv = scene.uv[order] if scene.uv is not None else None
     return replace(scene, faces=scene.faces[order], albedo=scene.albedo[order], emission=scene.emission[order],
-                   face_group=scene.face_group[order])
+                   face_group=scene.face_group[order], uv=uv)
+
+
+def group_runs(scene: Scene) -> list[tuple[int, int, int]]:
+    """(group, first vertex, vertex count) of each run of faces of one group among the drawn
+    (non-degenerate) faces, in order: what one draw of a textured group covers."""
+    group = scene.face_group[scene.face_areas > 0]
+    starts = np.flatnonzero(np.diff(group, prepend=-1) != 0)
+    ends = np.append(starts[1:], len(group))
+    return [(int(group[a]), 3 * int(a), 3 * int(b - a)) for a, b in zip(starts, ends)]
+
+
+def vertex_albedo(scene: Scene) -> np.ndarray:
+    """(F, 3) what the surface shader multiplies the texture's colour by: a textured face's albedo over
+    its texture's mean colour (the shader's product is then the albedo at the fragment), else the albedo."""
+    albedo = scene.albedo.copy()
+    for index, texture in enumerate(scene.textures):
+        if texture is not None:
+            mean = texture.mean
+            chosen = scene.face_group == index
+            albedo[chosen] = np.where(mean > 0, albedo[chosen] / np.where(mean > 0, mean, 1.0), albedo[chosen])
+    return albedo
+
+
+def face_uv(scene: Scene) -> np.ndarray:
+    """(F, 3, 2) the faces' corners' texture coordinates (zeros for a scene without textures)."""
+    return scene.uv if scene.uv is not None else np.zeros((len(scene.faces), 3, 2))
 
 
 def same_triangles(a: Scene, b: Scene) -> bool:
@@ -67,15 +97,16 @@ def same_triangles(a: Scene, b: Scene) -> bool:
 
 class SceneMesh(TriangleBuffer):
     """The scene as a non-indexed triangle list: every vertex carries its face's normal, albedo and
-    emission (flat shading, one material per face). Degenerate faces are dropped (no normal)."""
+    emission (flat shading, one material per face) and its texture coordinate. Degenerate faces are
+    dropped (no normal)."""
 
     def __init__(self, ctx: moderngl.Context, scene: Scene):
         super().__init__(ctx)
         keep = scene.face_areas > 0
         corners = scene.triangles[keep]                                   # (F, 3, 3)
-        per_face = [scene.face_normals[keep], scene.albedo[keep], scene.emission[keep]]
-        columns = [corners] + [np.repeat(a[:, None, :], 3, axis=1) for a in per_face]
-        vertices = np.concatenate(columns, axis=2).astype(np.float32)     # (F, 3, 12)
+        per_face = [scene.face_normals[keep], vertex_albedo(scene)[keep], scene.emission[keep]]
+        columns = [corners] + [np.repeat(a[:, None, :], 3, axis=1) for a in per_face] + [face_uv(scene)[keep]]
+        vertices = np.concatenate(columns, axis=2).astype(np.float32)     # (F, 3, 14)
         self.vertex_count = 3 * len(corners)
         self.buffer = ctx.buffer(vertices.tobytes())
 

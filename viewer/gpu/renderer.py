@@ -35,6 +35,7 @@ from viewer.gpu.probe_textures import ProbeTextures, empty_grid
 from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
 from viewer.gpu.render_settings import TONEMAPS, VIEWS, VOXEL_COLORS, RenderSettings  # noqa: F401 (re-exported)
 from viewer.gpu.shadows import EmitterShadows, SunShadow
+from viewer.gpu.surface_textures import SurfaceTextures
 from viewer.gpu.targets import DisplayTarget, HdrTarget, InterleaveBuffers
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Camera, Scene
@@ -69,6 +70,7 @@ class Renderer(LightmapUpkeep):
         self.scene: Scene | None = None
         self.bounds: tuple[np.ndarray, np.ndarray] | None = None
         self.mesh: SceneMesh | None = None
+        self._textures = SurfaceTextures(ctx)
         self._emitter_shadows: EmitterShadows | None = None
         self._sun_shadow: SunShadow | None = None
         self._shadow_key = None
@@ -140,6 +142,7 @@ class Renderer(LightmapUpkeep):
         self.bounds = scene.bounds   # (lo, hi); Scene.bounds scans the faces, so not once per frame
         self._draw_scene = draw_scene
         self.mesh = SceneMesh(self.ctx, self._draw_scene)
+        self._textures.set_scene(self._draw_scene)
         self._scene_version += 1
 
     def check_scene(self, scene: Scene) -> None:
@@ -317,23 +320,27 @@ class Renderer(LightmapUpkeep):
         if display:
             extra.update(exposure_scale=float(2.0 ** s.exposure))
         program = self.programs.get("surface", **defines)
+        # a textured scene's groups without a texture are drawn by the variant that samples nothing
+        plain = self.programs.get("surface", **{**defines, "TEXTURED": 0}) if defines["TEXTURED"] else program
         units = self._probe_textures.use(PROBE_UNIT)
         self._emitter_shadows.use(ATLAS_UNIT)
         self._sun_shadow.use(SUN_UNIT)
-        set_uniforms(program, view_proj=gl_bytes(view_proj), probe_sh=units, **self._probe_uniforms(probes),
-                     shadow_bias=float(s.shadow_bias),
-                     **self._emitter_shadows.uniforms(ATLAS_UNIT), **self._sun_shadow.uniforms(SUN_UNIT), **extra)
+        for shader in {id(program): program, id(plain): plain}.values():
+            set_uniforms(shader, view_proj=gl_bytes(view_proj), probe_sh=units, **self._probe_uniforms(probes),
+                         shadow_bias=float(s.shadow_bias), **self._emitter_shadows.uniforms(ATLAS_UNIT),
+                         **self._sun_shadow.uniforms(SUN_UNIT), **extra)
         if baked:   # a cheap shader (two fetches): early z on the draw order costs less than a pre-pass
             self.ctx.depth_func = "<"
         else:
             self._depth_prepass(view_proj, framebuffer, mesh)
-        mesh.render(program)
+        self._textures.draw(mesh, program, plain)
         self.ctx.depth_func = "<"
 
     def _surface_defines(self, view: str, indirect: bool, interleave: bool, baked: bool, baked_indirect: bool,
                          display: bool) -> dict:
         defines = dict(VIEW=SURFACE_VIEWS[view], INDIRECT=int(indirect), INTERLEAVE=int(interleave),
-                       BAKED=int(baked), BAKED_INDIRECT=int(baked_indirect), DISPLAY=int(display))
+                       BAKED=int(baked), BAKED_INDIRECT=int(baked_indirect), DISPLAY=int(display),
+                       TEXTURED=int(self._textures.active))
         if display:   # tone mapping as present.glsl does it (tonemap.glsl)
             defines.update(TONE_CURVE=TONEMAPS[self.settings.tonemap], RAW=int(view in ("albedo", "normals")))
         return defines
@@ -370,7 +377,8 @@ class Renderer(LightmapUpkeep):
 
     def release(self) -> None:
         self._release_baked()
-        for obj in (self.mesh, self._emitter_shadows, self._sun_shadow, self._probe_textures, self._scratch):
+        for obj in (self.mesh, self._emitter_shadows, self._sun_shadow, self._probe_textures, self._scratch,
+                    self._textures):
             if obj is not None:
                 obj.release()
         self._debug.release()

@@ -67,6 +67,11 @@ def scene_key(scene: Scene, settings: GeometrySettings) -> str:
     """What a Geometry depends on: the triangles, the bounds and the settings (not colours or lights)."""
     digest = hashlib.blake2b(digest_size=16)
     digest.update(np.ascontiguousarray(scene.triangles).tobytes())
+    if scene.textured:   # the voxels' texture shares (Geometry.tint) depend on the coordinates and images
+        digest.update(np.ascontiguousarray(scene.uv).tobytes())
+        for texture in scene.textures:
+            digest.update(repr(None if texture is None else (texture.pixels.shape, texture.mean.tobytes(),
+                                                             texture.wrap)).encode())
     digest.update(repr(settings).encode())
     return digest.hexdigest()
 
@@ -143,6 +148,8 @@ class Geometry:
     gather_hits: np.ndarray
     """(K, gather_rays) int32 the voxel each gather ray hits, dda.MISS or dda.BACKFACE (the transport
     matrix's entries before they are summed: what viewer.physical.retrace keeps when faces move)."""
+    tint: tuple | None = None
+    """What textured faces add to the voxel albedo (viewer.rays.voxels.Voxelization.tint, `voxel_albedo`)."""
 
     @property
     def probe_resolution(self) -> int:
@@ -166,7 +173,7 @@ def trace(scene: Scene, voxelization: Voxelization, settings: GeometrySettings) 
     probe_part = _probe_rays(cells, k, np.asarray(lo, np.float64), np.asarray(hi, np.float64), settings)
     return Geometry(scene_key(scene, settings), settings, grid, cells, faces, lamp_faces(scene),
                     transport_matrix(hits), *probe_part, voxel_keys=np.asarray(voxelization.keys, np.int64),
-                    gather_hits=hits)
+                    gather_hits=hits, tint=voxelization.tint)
 
 
 def transport_matrix(hits: np.ndarray) -> sparse.csr_matrix:

@@ -78,7 +78,7 @@ def after_moving(before: Geometry, scene: Scene, voxelization: Voxelization,
         stats.update(gather_rays=int(redo.sum()), gather_total=redo.size, probe_rays=int(probe_redo.sum()),
                      probe_total=probe_redo.size, changed_cells=int(changed.sum()), boxes=len(boxes))
     return replace(before, key=scene_key(scene, settings), voxels=grid, cells=cells, faces=voxelization.faces,
-                   lamp=lamp_faces(scene), transport=transport_matrix(gather), probe_hits=hits, valid=valid,
+                   tint=voxelization.tint, lamp=lamp_faces(scene), transport=transport_matrix(gather), probe_hits=hits, valid=valid,
                    fill_waves=waves, probe_backface=backface, voxel_keys=keys, gather_hits=gather)
 
 

@@ -20,8 +20,9 @@ import numpy as np
 from scipy import sparse
 
 from viewer.scene import Scene
+from viewer.scene.textures import relative_at
 from viewer.rays.voxels import (FACINGS, VoxelGrid, Voxelization, light_samples, subdivide, face_facing,
-                           grid_frame)
+                           grid_frame, voxel_albedo)
 
 MOVED_SHARE = 0.5
 """Past this share of the surface moved (its pieces are the work), voxelizing afresh is as quick."""
@@ -47,19 +48,22 @@ class FaceVoxels:
     """(Q,) the area of the face's pieces in the voxel."""
     moment: np.ndarray
     """(Q, 3) their area-weighted centroids, summed."""
+    tint: np.ndarray | None = None
+    """(Q, 3) their area times (texture / texture mean - 1) where they lie, summed; None without textures
+    (viewer.rays.voxels.Voxelization.tint)."""
 
     @staticmethod
     def of(scene: Scene, resolution: int) -> "FaceVoxels":
         lo, size = grid_frame(scene, resolution)
         triangles = scene.triangles
         kept = _kept(scene.face_areas)
-        key, face, area, moment = _pairs(triangles, np.flatnonzero(kept), scene.face_normals, lo, size, resolution)
-        return FaceVoxels(resolution, lo, size, triangles, kept, key, face, area, moment)
+        key, face, area, moment, tint = _pairs(scene, triangles, np.flatnonzero(kept), lo, size, resolution)
+        return FaceVoxels(resolution, lo, size, triangles, kept, key, face, area, moment, tint)
 
     def moved(self, scene: Scene) -> "FaceVoxels | None":
         """The pairs of `scene`, whose faces are these but some moved: the moved faces' pairs made anew,
         the others kept. None when that does not apply (another frame, other faces, most faces moved)."""
-        if scene.triangles.shape != self.triangles.shape:
+        if scene.triangles.shape != self.triangles.shape or scene.textured != (self.tint is not None):
             return None
         lo, size = grid_frame(scene, self.resolution)
         if size != self.size or not np.array_equal(lo, self.lo):
@@ -71,11 +75,12 @@ class FaceVoxels:
         if areas[moved].sum() > MOVED_SHARE * areas.sum() or np.any(kept[~moved] != self.kept[~moved]):
             return None
         stay = ~moved[self.face]
-        key, face, area, moment = _pairs(triangles, np.flatnonzero(moved & kept), scene.face_normals, lo, size,
-                                         self.resolution)
+        key, face, area, moment, tint = _pairs(scene, triangles, np.flatnonzero(moved & kept), lo, size,
+                                               self.resolution)
         return FaceVoxels(self.resolution, lo, size, triangles, kept, np.concatenate([self.key[stay], key]),
                           np.concatenate([self.face[stay], face]), np.concatenate([self.area[stay], area]),
-                          np.concatenate([self.moment[stay], moment]))
+                          np.concatenate([self.moment[stay], moment]),
+                          None if tint is None else np.concatenate([self.tint[stay], tint]))
 
     def voxelization(self, scene: Scene) -> Voxelization:
         """`voxelize_with_faces(scene, resolution)` (area normals) from the pairs."""
@@ -94,12 +99,16 @@ class FaceVoxels:
         normal = np.where(length > 1e-12, normal / np.maximum(length, 1e-30), FACINGS[keys % 6])
         share = self.area / np.maximum(area[inverse], 1e-300)
         faces = sparse.csr_matrix((share, (inverse, self.face)), shape=(count, len(scene.faces)))
+        tint = None if self.tint is None else tuple(
+            sparse.csr_matrix((self.tint[:, c] / np.maximum(area[inverse], 1e-300), (inverse, self.face)),
+                              shape=faces.shape) for c in range(3))
         cell = keys // 6
         coords = np.stack([cell % n, (cell // n) % n, cell // n ** 2], axis=1)
         grid = VoxelGrid(lo=self.lo, voxel_size=self.size, resolution=n, coords=coords, position=position,
-                         normal=normal, area=area, albedo=faces @ scene.albedo, emission=faces @ scene.emission,
+                         normal=normal, area=area, albedo=voxel_albedo(faces, tint, scene),
+                         emission=faces @ scene.emission,
                          lights=light_samples(scene, np.flatnonzero(self.kept), self.lo, self.size, n, keys))
-        return Voxelization(grid, faces, keys)
+        return Voxelization(grid, faces, keys, tint)
 
 
 def _kept(areas: np.ndarray) -> np.ndarray:
@@ -107,12 +116,13 @@ def _kept(areas: np.ndarray) -> np.ndarray:
     return areas > 1e-12 * max(float(areas.max()), 1e-30)
 
 
-def _pairs(triangles: np.ndarray, faces: np.ndarray, normals: np.ndarray, lo: np.ndarray, size: float,
-           resolution: int):
-    """(key, face, area, moment) per (voxel, face) pair of the pieces of `faces`, as viewer.rays.voxels cuts
-    and bins them."""
+def _pairs(scene: Scene, triangles: np.ndarray, faces: np.ndarray, lo: np.ndarray, size: float, resolution: int):
+    """(key, face, area, moment, tint) per (voxel, face) pair of the pieces of `faces`, as viewer.rays.voxels
+    cuts and bins them (tint None for a scene without textures)."""
+    normals = scene.face_normals
     if len(faces) == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3))
+        return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)),
+                np.zeros((0, 3)) if scene.textured else None)
     centroid, piece_area, source = subdivide(triangles[faces], 0.25 * size)
     piece_face = faces[source]
     coords = np.clip(np.floor((centroid - lo) / size).astype(np.int64), 0, resolution - 1)
@@ -123,4 +133,8 @@ def _pairs(triangles: np.ndarray, faces: np.ndarray, normals: np.ndarray, lo: np
     area = np.bincount(inverse, piece_area, minlength=len(pair))
     moment = np.stack([np.bincount(inverse, centroid[:, c] * piece_area, minlength=len(pair)) for c in range(3)],
                       axis=1)
-    return pair // len(normals), pair % len(normals), area, moment
+    tint = None
+    if scene.textured:
+        excess = (relative_at(scene, piece_face, centroid) - 1.0) * piece_area[:, None]
+        tint = np.stack([np.bincount(inverse, excess[:, c], minlength=len(pair)) for c in range(3)], axis=1)
+    return pair // len(normals), pair % len(normals), area, moment, tint

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from viewer.scene import Scene
+from viewer.scene.textures import relative_at, textured_faces
 
 if TYPE_CHECKING:  # scipy is imported when a voxelization needs it
     from scipy import sparse
@@ -197,16 +198,33 @@ class Voxelization:
     """(K, F) share of each voxel's area that each scene face covers: voxel albedo = faces @ face albedo."""
     keys: np.ndarray
     """(K,) sorted voxel keys: flat cell index * 6 + facing (the index of FACINGS)."""
+    tint: tuple | None = None
+    """Textured faces: per RGB channel a (K, F) matrix of each voxel's share of each face times the face's
+    texture over its mean there, less 1 (see `voxel_albedo`); None for a scene without textures."""
+
+
+def voxel_albedo(faces: "sparse.csr_matrix", tint: tuple | None, scene: Scene) -> np.ndarray:
+    """(K, 3) voxel albedo from per-face albedo: the faces' area shares, plus on textured faces what their
+    texture adds where each voxel lies (a recoloured group scales its texture with its colour, so the
+    shares stay true; a group whose texture was dropped counts as plain)."""
+    albedo = faces @ scene.albedo
+    if tint is not None and scene.textured:
+        textured = scene.albedo * textured_faces(scene)[:, None]
+        albedo = np.minimum(albedo + np.stack([tint[c] @ textured[:, c] for c in range(3)], axis=1), 0.999)
+    return albedo
 
 
 def voxelize_with_faces(scene: Scene, resolution: int = 32, normal_mode: str = "area") -> Voxelization:
     """`voxelize`, keeping the pieces and the face shares (see Voxelization)."""
     from scipy import sparse
 
-    grid, inverse, piece_face, piece_area, keys = _voxelize(scene, resolution, normal_mode)
+    grid, inverse, piece_face, piece_area, keys, piece_tint = _voxelize(scene, resolution, normal_mode)
     share = piece_area / np.maximum(grid.area[inverse], 1e-300)
-    faces = sparse.csr_matrix((share, (inverse, piece_face)), shape=(grid.count, len(scene.faces)))
-    return Voxelization(grid, faces, keys)
+    shape = (grid.count, len(scene.faces))
+    faces = sparse.csr_matrix((share, (inverse, piece_face)), shape=shape)
+    tint = None if piece_tint is None else tuple(
+        sparse.csr_matrix((share * (piece_tint[:, c] - 1.0), (inverse, piece_face)), shape=shape) for c in range(3))
+    return Voxelization(grid, faces, keys, tint)
 
 
 def face_facing(normals: np.ndarray) -> np.ndarray:
@@ -244,7 +262,12 @@ def _voxelize(scene: Scene, resolution: int, normal_mode: str):
     area = np.bincount(inverse, piece_area, minlength=len(keys))
     safe = np.maximum(area, 1e-30)[:, None]
     position = total(centroid, per_face=False) / safe
-    albedo = total(scene.albedo) / safe
+    # a textured face's pieces take its texture where they lie (viewer.scene.textures)
+    piece_tint = relative_at(scene, piece_face, centroid) if scene.textured else None
+    if piece_tint is None:
+        albedo = total(scene.albedo) / safe
+    else:
+        albedo = np.minimum(total(scene.albedo[piece_face] * piece_tint, per_face=False) / safe, 0.999)
     emission = total(scene.emission) / safe
     if normal_mode == "area":
         n = total(face_normal)
@@ -260,7 +283,7 @@ def _voxelize(scene: Scene, resolution: int, normal_mode: str):
     grid = VoxelGrid(lo=lo, voxel_size=h, resolution=resolution, coords=vox_coords, position=position,
                      normal=n, area=area, albedo=albedo, emission=emission,
                      lights=light_samples(scene, face_ids, lo, h, resolution, keys))
-    return grid, inverse, piece_face, piece_area, keys
+    return grid, inverse, piece_face, piece_area, keys, piece_tint
 
 
 def light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSamples:

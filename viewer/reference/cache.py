@@ -38,6 +38,12 @@ def key(tag: str, scene: Scene, arrays: list[np.ndarray], params: dict) -> str:
         digest.update(a.tobytes())
     if scene.sun is not None:
         digest.update(np.concatenate([scene.sun.direction, scene.sun.irradiance]).tobytes())
+    if scene.textured:   # the textures and the coordinates that read them
+        digest.update(np.ascontiguousarray(scene.uv).tobytes())
+        for texture in scene.textures:
+            if texture is not None:
+                digest.update(f"{texture.pixels.shape}{texture.srgb}{texture.wrap}".encode())
+                digest.update(texture.pixels.tobytes())
     digest.update(repr(sorted(params.items())).encode())
     return digest.hexdigest()[:32]
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from viewer.reference.runtime import aligned, loaded, variant
 from viewer.scene import Scene
+from viewer.scene.textures import textured_faces
 
 
 def to_mitsuba(scene: Scene, max_depth: int = -1) -> dict:
@@ -22,6 +23,10 @@ def to_mitsuba(scene: Scene, max_depth: int = -1) -> dict:
       area emitters emit on that side only, as ours do.
     - The BSDF is a two-sided diffuse: our surfaces reflect on both sides (Mitsuba's `diffuse` alone is
       black from behind); emission stays one-sided.
+    - A textured group's faces that emit nothing form a mesh of their own, with per-corner texture
+      coordinates and a `bitmap` reflectance: the texture (linear) times the group's albedo over the
+      texture's mean, its wrap modes, bilinear (the renderer's finest mip level). Mitsuba reads texture
+      coordinates as glTF does, (0, 0) at the image's top-left.
     - The sun is a `directional` emitter; Mitsuba's `direction` is where the light travels, -sun.direction.
     - Emitters are sampled in proportion to their power (`sampling_weight`); the sun's power is what
       reaches into the scene's bounds (`_sun_lit_fraction`), not all that crosses its bounding disc.
@@ -31,8 +36,12 @@ def to_mitsuba(scene: Scene, max_depth: int = -1) -> dict:
     radius = 0.5 * float(np.linalg.norm(hi - lo))
     out: dict = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)}}
     emitting = np.any(scene.emission > 0, axis=1)
-    if np.any(~emitting):
-        out["surfaces"] = _mesh(mi, scene, np.flatnonzero(~emitting), "surfaces", emitter=None)
+    textured = textured_faces(scene) & ~emitting
+    if np.any(~emitting & ~textured):
+        out["surfaces"] = _mesh(mi, scene, np.flatnonzero(~emitting & ~textured), "surfaces", emitter=None)
+    for group in np.unique(scene.face_group[textured]):
+        faces = np.flatnonzero(textured & (scene.face_group == group))
+        out[f"textured_{group:04d}"] = _textured_mesh(mi, scene, faces, f"textured_{group:04d}")
     if np.any(emitting):
         values, which = np.unique(scene.emission[emitting], axis=0, return_inverse=True)
         faces = np.flatnonzero(emitting)
@@ -85,6 +94,29 @@ def _mesh(mi, scene: Scene, face_ids: np.ndarray, name: str, emitter: dict | Non
     params["faces"] = type(indices)(local.reshape(-1).astype(np.uint32))
     params.update()
     mesh.add_attribute("face_albedo", 3, scene.albedo[face_ids].astype(np.float32).ravel())
+    return mesh
+
+
+def _textured_mesh(mi, scene: Scene, face_ids: np.ndarray, name: str):
+    """One Mitsuba mesh of a textured group's faces, three vertices each (a corner's texture coordinate is
+    the face's own), its reflectance the group's texture scaled to the faces' albedo. Faces of one group
+    share one albedo unless COLOR_0 varied it: then the area-weighted mean scales the texture."""
+    texture = scene.textures[int(scene.face_group[face_ids[0]])]
+    albedo = np.average(scene.albedo[face_ids], axis=0, weights=scene.face_areas[face_ids] + 1e-30)
+    scale = np.where(texture.mean > 0, albedo / np.where(texture.mean > 0, texture.mean, 1.0), 0.0)
+    image = np.minimum(texture.linear() * scale.astype(np.float32), 0.999).astype(np.float32)
+    wrap = texture.wrap[0] if texture.wrap[0] == texture.wrap[1] else "repeat"   # Mitsuba: one mode for both
+    bitmap = {"type": "bitmap", "data": mi.TensorXf(image), "raw": True, "wrap_mode": wrap,
+              "filter_type": "nearest" if texture.nearest else "bilinear"}
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict({"type": "twosided", "material": {"type": "diffuse", "reflectance": bitmap}})
+    mesh = mi.Mesh(name, 3 * len(face_ids), len(face_ids), props=props, has_vertex_texcoords=True)
+    params = mi.traverse(mesh)
+    positions, indices, texcoords = params["vertex_positions"], params["faces"], params["vertex_texcoords"]
+    params["vertex_positions"] = type(positions)(scene.triangles[face_ids].astype(np.float32).ravel())
+    params["faces"] = type(indices)(np.arange(3 * len(face_ids), dtype=np.uint32))
+    params["vertex_texcoords"] = type(texcoords)(scene.uv[face_ids].astype(np.float32).ravel())
+    params.update()
     return mesh
 
 

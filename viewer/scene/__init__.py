@@ -6,6 +6,8 @@
     gltf.py      glTF, GLB -> Scene: the node tree, primitives, materials, cameras, lights
     gltf_data.py a glTF's JSON and binary data: buffers (confined to its folder), accessors, images
     gltf_lights.py  KHR_lights_punctual: the sun, point and spot lights as small emitting spheres
+    gltf_textures.py a glTF base-colour texture: its image, sampler wrap modes, texture coordinates
+    textures.py  Texture (an image, sRGB or linear, wrap modes) and the albedo at a point of a textured face
     loaders.py   PLY (through trimesh) -> Scene
     meshes.py    built-in meshes (boxes, spheres, ...) for procedural scenes
     camera.py    the camera a scene opens with (its file's own, or one framing it)

@@ -7,7 +7,10 @@ specification and the Khronos sample models define it.
   no surface and are skipped with one line; sparse accessors; the default morph target weights (the
   node's `weights`, else the mesh's) applied to POSITION.
 - Materials: albedo = baseColorFactor x the mean linear colour of the base-colour texture x COLOR_0
-  (linear, averaged per face); a primitive without a material gets glTF's default material, white.
+  (linear, averaged per face); a primitive without a material gets glTF's default material, white. The
+  base-colour texture itself (sRGB, its sampler's wrap modes) and the texture coordinates it names
+  (TEXCOORD_n, moved by KHR_texture_transform) go into the Scene for the renderer, the voxels and Mitsuba
+  (viewer.scene.textures).
   Emission = emissiveFactor x KHR_materials_emissive_strength (a file whose emitters all stay at or
   under 1 without it gets a hint: such a lamp barely lights a room).
 - Lights (KHR_lights_punctual, viewer.scene.gltf_lights): the first directional light is the sun; a
@@ -20,7 +23,6 @@ Every failure is a one-line `SceneError`.
 
 from __future__ import annotations
 
-import io
 import math
 import sys
 from pathlib import Path
@@ -29,14 +31,15 @@ import numpy as np
 
 from viewer.scene.gltf_data import MALFORMED, GltfData, integer, one_line, rgb
 from viewer.scene.gltf_lights import punctual_lights
-from viewer.scene.types import Camera, Scene, SceneError, note, srgb_to_linear
+from viewer.scene.gltf_textures import face_uv, read_texture
+from viewer.scene.types import Camera, Scene, SceneError, note
 
 DRACO = "KHR_draco_mesh_compression"
 SUPPORTED_EXTENSIONS = {
     "KHR_lights_punctual": "lights",
     "KHR_materials_emissive_strength": "emission above 1",
     "KHR_mesh_quantization": "integer positions: every component type is read, normalized or not",
-    "KHR_texture_transform": "texture coordinates move: the albedo takes the whole texture's mean colour",
+    "KHR_texture_transform": "the base-colour texture's coordinates move, rotate and scale",
 }
 """The extensions a file may require, and what the viewer makes of each."""
 TRIANGLE_MODES = {4: "TRIANGLES", 5: "TRIANGLE_STRIP", 6: "TRIANGLE_FAN"}
@@ -83,8 +86,11 @@ class _Builder:
     def __init__(self, path: Path, data: GltfData):
         self.path, self.data = path, data
         self.vertices, self.faces, self.albedo, self.emission, self.group = [], [], [], [], []
+        self.uv: list[np.ndarray] = []
         self.groups: list[str] = []
+        self.textures: dict[str, object] = {}
         self.materials: dict[int, tuple] = {}
+        self.decoded: dict[int, object] = {}   # glTF texture index -> Texture or None
         self.cameras, self.lights, self.wires, self.offset = [], [], [], 0
 
     def scene(self) -> tuple[Scene, bool]:
@@ -109,11 +115,13 @@ class _Builder:
         sun, lamps = punctual_lights(self.path, self.data.document, self.lights, size or 1.0)
         for lamp in lamps:
             self._add(lamp.vertices, lamp.faces, np.zeros((len(lamp.faces), 3)), lamp.radiance, lamp.name)
+        textures = tuple(self.textures.get(g) for g in self.groups)
         cameras = tuple(c for c in (self._camera(i, world, 0.5 * (lo + hi)) for i, world in self.cameras)
                         if c is not None)
         scene = Scene(self.path.stem, np.concatenate(self.vertices), np.concatenate(self.faces),
                       np.concatenate(self.albedo), np.concatenate(self.emission), np.concatenate(self.group),
-                      tuple(self.groups), sun=sun, **({"camera": cameras[0], "cameras": cameras} if cameras else {}))
+                      tuple(self.groups), sun=sun, uv=np.concatenate(self.uv), textures=textures,
+                      **({"camera": cameras[0], "cameras": cameras} if cameras else {}))
         glow = max((float(m[1].max()) for m in self.materials.values()), default=0.0)
         return scene, 0.0 < glow <= 1.0 and not any(m[3] for m in self.materials.values())
 
@@ -197,16 +205,26 @@ class _Builder:
             vertices = positions @ world[:3, :3].T + world[:3, 3]
         if np.linalg.det(world[:3, :3]) < 0:  # a mirroring node turns the front face (glTF 2.0, 3.7.4)
             faces = faces[:, ::-1]
-        albedo, emission, group = self._material(primitive.get("material"), name)
+        albedo, emission, group, texture = self._material(primitive.get("material"), name)
         colours = self._vertex_colours(attributes, len(positions))
         face_albedo = np.tile(albedo, (len(faces), 1))
         if colours is not None:   # glTF multiplies the base colour by COLOR_0 (linear): per face, the mean
             face_albedo = face_albedo * colours[faces].mean(axis=1)
-        self._add(vertices, faces, face_albedo, emission, group)
+        uv = None
+        if texture is not None:   # without the coordinates it names, the texture shows its mean colour
+            uv = face_uv(self.data, attributes, texture[0], faces, len(positions))
+        self._add(vertices, faces, face_albedo, emission, group, uv, texture[1] if uv is not None else None)
 
     def _add(self, vertices: np.ndarray, faces: np.ndarray, albedo: np.ndarray, emission: np.ndarray,
-             group: str) -> None:
-        """Triangles into the scene: per-face albedo (F, 3), one emitted radiance (3,) for all, a group."""
+             group: str, uv: np.ndarray | None = None, texture=None) -> None:
+        """Triangles into the scene: per-face albedo (F, 3), one emitted radiance (3,) for all, a group, and
+        the texture they show with their coordinates (F, 3, 2), or None. A group shows one texture (or
+        none): faces of a same-named group that show another go to a group "NAME (2)", "NAME (3)", ..."""
+        name, copy = group, 2
+        while group in self.textures and self.textures[group] is not texture:
+            group, copy = f"{name} ({copy})", copy + 1
+        self.textures[group] = texture
+        self.uv.append(uv if uv is not None else np.zeros((len(faces), 3, 2)))
         if group not in self.groups:
             self.groups.append(group)
         self.vertices.append(vertices)
@@ -229,15 +247,16 @@ class _Builder:
         return np.clip(rgb, 0.0, None)
 
     # ---- materials ----------------------------------------------------------------------------------------
-    def _material(self, index, mesh_name: str) -> tuple[np.ndarray, np.ndarray, str]:
-        """(albedo, emission, group) of material `index`; glTF's default material for None, grouped under
-        the mesh's name."""
+    def _material(self, index, mesh_name: str) -> tuple[np.ndarray, np.ndarray, str, tuple | None]:
+        """(albedo, emission, group, (textureInfo, Texture) or None) of material `index`; glTF's default
+        material for None, grouped under the mesh's name."""
         if index is None:
-            return np.asarray(DEFAULT_ALBEDO), np.zeros(3), mesh_name
+            return np.asarray(DEFAULT_ALBEDO), np.zeros(3), mesh_name, None
         index = integer(index, f"{self.path}: material index")
         if index not in self.materials:
             self.materials[index] = self._read_material(index)
-        return self.materials[index][:3]
+        material = self.materials[index]
+        return material[0], material[1], material[2], material[4]
 
     def _read_material(self, index: int) -> tuple:
         spec = self.data.item("materials", index)
@@ -249,31 +268,23 @@ class _Builder:
             emission = rgb(spec.get("emissiveFactor", (0.0, 0.0, 0.0))) * strength
         except MALFORMED as exc:   # rgb's ValueError: no SceneError is raised in this block
             raise SceneError(f"{self.path}: malformed glTF material {index} ({one_line(exc)})") from None
-        texture = pbr.get("baseColorTexture")
-        if texture is not None:
-            mean = self._texture_mean(texture, index)
-            if mean is not None:
-                albedo = albedo * mean
-        return albedo, emission, str(spec.get("name") or f"material-{index}"), extension is not None
+        info, texture = pbr.get("baseColorTexture"), None
+        if info is not None:
+            texture = self._texture(info, index)
+            if texture is not None:
+                albedo = albedo * texture.mean
+        name = str(spec.get("name") or f"material-{index}")
+        return albedo, emission, name, extension is not None, (info, texture) if texture is not None else None
 
-    def _texture_mean(self, info: dict, material: int) -> np.ndarray | None:
-        """The mean linear colour of a base-colour texture (sRGB-encoded, glTF 2.0, 3.9.2); None when the
-        texture has no image the viewer may read."""
-        texture = self.data.item("textures", info["index"])
-        if texture.get("source") is None:
-            return None
-        encoded = self.data.image(texture["source"])
-        if encoded is None:
-            return None
-        try:
-            from PIL import Image
-
-            with Image.open(io.BytesIO(encoded)) as image:
-                pixels = np.asarray(image.convert("RGB"), np.float64).reshape(-1, 3) / 255.0
-        except Exception as exc:  # PIL raises OSError, SyntaxError, zlib.error, ... on bad image data
-            raise SceneError(f"{self.path}: unreadable base-colour texture in glTF material {material} "
-                             f"({one_line(exc)})") from None
-        return srgb_to_linear(pixels).mean(axis=0)
+    def _texture(self, info: dict, material: int):
+        """The base-colour texture `info` names (decoded once per glTF texture), or None when it has no image
+        the viewer may read."""
+        if not isinstance(info, dict):
+            raise SceneError(f"{self.path}: glTF material {material}'s baseColorTexture is not an object")
+        index = integer(info.get("index"), f"{self.path}: glTF material {material}'s texture index")
+        if index not in self.decoded:
+            self.decoded[index] = read_texture(self.path, self.data, index, material)
+        return self.decoded[index]
 
     # ---- cameras and lights -------------------------------------------------------------------------------
     def _camera(self, index, world: np.ndarray, centre: np.ndarray) -> Camera | None:

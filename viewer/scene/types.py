@@ -99,6 +99,12 @@ class Scene:
     cameras: tuple[Camera, ...] = ()
     """The file's own cameras (a glTF's perspective cameras, in its node tree's order); the first is the
     opening view, `camera`, unless a sidecar gives one. Empty: the file has none."""
+    uv: np.ndarray | None = None
+    """(F, 3, 2) float64 texture coordinates of each face's corners (glTF's: (0, 0) is the image's top-left),
+    with the material's texture transform applied; None: no face is textured."""
+    textures: tuple = ()
+    """Per group, its base-colour texture (viewer.scene.textures.Texture) or None; empty: none. A textured
+    face's albedo at a point is `albedo` x texture(uv) / texture.mean: `albedo` stays the face's mean."""
 
     def __post_init__(self):
         v = np.ascontiguousarray(self.vertices, np.float64)
@@ -134,6 +140,24 @@ class Scene:
             value.setflags(write=False)
             object.__setattr__(self, name, value)
         object.__setattr__(self, "groups", tuple(self.groups) or ("default",))
+        self._check_textures(len(f))
+
+    def _check_textures(self, face_count: int) -> None:
+        textures = tuple(self.textures)
+        if textures and len(textures) != len(self.groups):
+            raise SceneError(f"{self.name}: {len(textures)} textures for {len(self.groups)} groups")
+        if any(t is not None and not hasattr(t, "pixels") for t in textures):
+            raise SceneError(f"{self.name}: a group's texture is not a Texture")
+        uv = self.uv
+        if uv is not None:
+            uv = np.array(uv, np.float64).reshape(face_count, 3, 2)
+            if not np.all(np.isfinite(uv)):
+                raise SceneError(f"{self.name}: texture coordinates contain NaN or infinity")
+            uv.setflags(write=False)
+        if uv is None or not any(t is not None for t in textures):
+            uv, textures = None, ()
+        object.__setattr__(self, "uv", uv)
+        object.__setattr__(self, "textures", textures)
 
     # ---- derived geometry -------------------------------------------------------------------------
     @property
@@ -184,10 +208,28 @@ class Scene:
         except ValueError:
             raise SceneError(f"{self.name}: no group named {group!r} (have {', '.join(self.groups)})") from None
 
+    @property
+    def textured(self) -> bool:
+        """Whether some group shows a texture."""
+        return bool(self.textures)
+
+    def texture_of(self, group: int):
+        """Group `group`'s texture (by index), or None."""
+        return self.textures[group] if self.textures else None
+
     def with_albedo(self, group: str, rgb) -> "Scene":
-        mask = self.face_group == self.group_index(group)
+        """The group in a new colour. A textured group keeps its pattern around the new colour (the
+        texture multiplied by the new colour over the old), unless the texture is black throughout in a
+        channel the new colour has: then the texture is dropped and the group shows the plain colour."""
+        index = self.group_index(group)
+        mask = self.face_group == index
         albedo = self.albedo.copy()
         albedo[mask] = np.asarray(rgb, np.float64)
+        texture = self.texture_of(index)
+        if texture is not None and np.any((texture.mean <= 0) & (albedo[mask] > 0)):
+            textures = list(self.textures)
+            textures[index] = None
+            return replace(self, albedo=albedo, textures=tuple(textures))
         return replace(self, albedo=albedo)
 
     def with_emission(self, group: str, rgb) -> "Scene":
@@ -220,7 +262,9 @@ class Scene:
     @staticmethod
     def concatenate(name: str, parts: list["Scene"], sun: DirectionalLight | None = None,
                     camera: Camera | None = None) -> "Scene":
-        verts, faces, alb, emi, grp, names = [], [], [], [], [], []
+        """The parts as one scene; groups of the same name merge, unless they show different textures (or
+        one shows a texture and the other none): then the later one is named "NAME (2)", "NAME (3)", ..."""
+        verts, faces, alb, emi, grp, uvs, names, textures = [], [], [], [], [], [], [], []
         offset = 0
         for p in parts:
             verts.append(p.vertices)
@@ -228,12 +272,17 @@ class Scene:
             offset += len(p.vertices)
             alb.append(p.albedo)
             emi.append(p.emission)
+            uvs.append(p.uv if p.uv is not None else np.zeros((len(p.faces), 3, 2)))
             lookup = []
-            for g in p.groups:
-                if g not in names:
-                    names.append(g)
-                lookup.append(names.index(g))
+            for index, g in enumerate(p.groups):
+                texture, name, copy = p.texture_of(index), g, 2
+                while name in names and textures[names.index(name)] is not texture:
+                    name, copy = f"{g} ({copy})", copy + 1
+                if name not in names:
+                    names.append(name)
+                    textures.append(texture)
+                lookup.append(names.index(name))
             grp.append(np.asarray(lookup)[p.face_group])
         return Scene(name, np.concatenate(verts), np.concatenate(faces), np.concatenate(alb),
                      np.concatenate(emi), np.concatenate(grp), tuple(names), sun=sun,
-                     camera=camera or parts[0].camera)
+                     camera=camera or parts[0].camera, uv=np.concatenate(uvs), textures=tuple(textures))

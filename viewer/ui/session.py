@@ -62,6 +62,8 @@ class Session:
         self.scene = scene
         self.scene_version += 1
         self.renderer.set_scene(scene)
+        if scene.textured:   # the surface shader's textured variants, compiled now, not in the first frames
+            self.renderer.warm_up()
         self.renderer.set_voxels(None)
         self._voxels_key = None
         lo, hi = scene.bounds
