@@ -15,7 +15,7 @@ from viewer.physical import gi
 from viewer.reference import mitsuba as reference
 from viewer import scene as scenes
 from viewer.evaluation.points import free_space_points
-from viewer.evaluation.error import PUBLIC_BOX, relative_rmse
+from viewer.evaluation.error import benchmark_scenes, relative_rmse
 from viewer.evaluation.report import replace_block
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -38,7 +38,7 @@ def main(argv=None):
                         help="only these configurations, e.g. physical:32:24 (repeatable)")
     add_out(parser, str(ROOT / "docs" / "ACCURACY.md"), type=str)
     args = parser.parse_args(argv)
-    sources = ["cornell", "paper-test"] + ([str(PUBLIC_BOX)] if PUBLIC_BOX.exists() else [])
+    sources = benchmark_scenes()
     configs = [("physical", 32, 24)] if args.quick else [
         ("physical", 16, 16), ("physical", 32, 16), ("physical", 32, 24), ("paper", 32, 24)]
     if args.config:

@@ -82,13 +82,13 @@ class Paths:
 
 def scene_sources(names: list[str], quick: bool) -> list[str]:
     """Scene arguments -> sources for viewer.scene.load (a folder gives its scene files, sorted)."""
-    from viewer.bench.accuracy import PUBLIC_BOX
+    from viewer.evaluation.error import benchmark_scenes
     from viewer.scene import SUPPORTED_SUFFIXES, builtin_names
 
     if not names:
         if quick:
             return list(QUICK_SCENES)
-        first = ["cornell", "paper-test"] + ([str(PUBLIC_BOX)] if PUBLIC_BOX.exists() else [])
+        first = benchmark_scenes()
         return first + [n for n in builtin_names() if n not in first]
     sources = []
     for name in names:
