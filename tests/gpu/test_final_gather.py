@@ -80,16 +80,21 @@ def test_rays_out_of_an_open_side_bring_nothing_and_the_rest_is_the_form_factor(
     assert light.mean() == pytest.approx(1.0 - 4 * corner, abs=0.006)
 
 
+def texel_samples(scene: Scene, count: int, seed: int):
+    """Points and normals of `count` lightmap texels picked at random over the scene's surfaces."""
+    origin, n, size = lightmap_layout(scene, TEXEL)
+    texels, normals, _ = lightmap_texels(scene, origin, n, size)
+    covered = texels[..., 3] > 0
+    pick = np.random.default_rng(seed).choice(int(covered.sum()), count, replace=False)
+    return texels[covered][pick, :3].astype(np.float64), normals[covered][pick, :3].astype(np.float64)
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_ray_lands_on_the_texel_of_the_surface_it_hits(backend):
     """Texel-accurate hits in the Cornell box: each texel a sample's ray lands on lies in front of the
     sample, and the segment to it is clear, but for a few grazing rays that land a texel off a corner."""
     scene = load("cornell")
-    origin, n, size = lightmap_layout(scene, TEXEL)
-    texels, normals, _ = lightmap_texels(scene, origin, n, size)
-    covered = texels[..., 3] > 0
-    pick = np.random.default_rng(1).choice(int(covered.sum()), 300, replace=False)
-    points, normals = texels[covered][pick, :3].astype(np.float64), normals[covered][pick, :3].astype(np.float64)
+    points, normals = texel_samples(scene, 300, seed=1)
     rays, position = gather(scene, points, normals, rays=32, backend=backend)
     sample, ray = np.nonzero(rays.hits >= 0)
     landed = position.reshape(-1, 3)[rays.hits[sample, ray]]
@@ -107,11 +112,7 @@ def test_embree_and_the_dda_land_the_rays_on_the_same_texels():
     either caster, but for the few that pass within float32's precision of an edge or a texel's border,
     or meet the bottom of a box where it lies on the floor (two faces at the same distance)."""
     scene = load("cornell")
-    origin, n, size = lightmap_layout(scene, TEXEL)
-    texels, normals, _ = lightmap_texels(scene, origin, n, size)
-    covered = texels[..., 3] > 0
-    pick = np.random.default_rng(2).choice(int(covered.sum()), 500, replace=False)
-    points, normals = texels[covered][pick, :3].astype(np.float64), normals[covered][pick, :3].astype(np.float64)
+    points, normals = texel_samples(scene, 500, seed=2)
     embree = gather(scene, points, normals, backend="embree")[0].hits
     marched = gather(scene, points, normals, backend="dda")[0].hits
     assert (embree == marched).mean() > 0.997
