@@ -102,6 +102,7 @@ def run_scene(ctx, name: str, size: int, spp: int, images: Path, sources=SOURCES
     from viewer import scene as scenes
 
     scene = scenes.load(name)
+    name = scene.name   # a file's stem (`textured-point-room`), not its path: it names the images
     start = time.perf_counter()
     truth = reference.render(scene, scene.camera, size, size, spp)
     mitsuba_seconds = time.perf_counter() - start
