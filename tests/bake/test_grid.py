@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from baked_files import rewritten
+
 from viewer.bake import grid as baked
 from viewer.bake import dds
 from viewer.probes.grid import ProbeGrid
@@ -128,19 +130,6 @@ def test_a_baked_scene_file_moved_with_its_grid_is_found_beside_it(tmp_path):
 
 
 # ---- bad input ---------------------------------------------------------------------------------------------
-
-def rewritten(source: Path, target: Path, **changes) -> Path:
-    """A copy of a baked file with some keys replaced (None: removed)."""
-    with np.load(source, allow_pickle=False) as data:
-        values = {k: data[k] for k in data.files}
-    for key, value in changes.items():
-        if value is None:
-            values.pop(key)
-        else:
-            values[key] = value
-    np.savez(target, **values)
-    return target
-
 
 def text_file(path: Path, text: str) -> Path:
     path.write_text(text)

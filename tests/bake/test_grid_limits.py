@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from baked_files import rewritten
+
 from viewer.bake import grid as baked
 from viewer.physical.work import MAX_PROBES
 from viewer.probes.grid import ProbeGrid
@@ -27,12 +29,7 @@ def small_grid(scene: str = "cornell", m: int = 2) -> baked.BakedGrid:
 
 def written(path: Path, scene: str = "cornell", **changes) -> Path:
     baked.write_npz(small_grid(scene), path)
-    if changes:
-        with np.load(path, allow_pickle=False) as data:
-            values = {k: data[k] for k in data.files}
-        values.update(changes)
-        np.savez(path, **values)
-    return path
+    return rewritten(path, path, **changes) if changes else path
 
 
 def refused(path: Path, match: str) -> str:
