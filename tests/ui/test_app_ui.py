@@ -12,7 +12,6 @@ import pytest
 from scenes import box
 from viewer.physical.gi import GISettings
 from viewer.scene import Camera, DirectionalLight, load
-from viewer.scene.camera import framing_camera
 from viewer.ui.camera_controller import OrbitCamera
 from viewer.ui.scene_edits import SceneEdits, emitter_group
 
@@ -169,24 +168,6 @@ def test_fly_look_turns_around_the_eye_and_moves_forward():
     controller.fly(1, 0, 0, seconds=0.5)
     expected = controller.settings.fly_speed * 2.0 * 0.5
     assert controller.eye - eye == pytest.approx(expected * forward)
-
-
-@pytest.mark.parametrize("aspect", [16 / 9, 1.0, 0.5, 2.4])
-@pytest.mark.parametrize("box", [([-3.0, 0.0, -1.0], [5.0, 2.0, 1.0]), ([-1.0, 0.0, -1.0], [1.0, 2.0, 1.0]),
-                                 ([0.0, 0.0, 0.0], [0.2, 3.0, 0.2])])
-def test_framing_camera_fills_the_picture_with_the_whole_box(aspect, box):
-    """Every corner of the box is inside the picture, and the box reaches the margin on the side that binds
-    (its width or its height): a wide picture does not leave a room at a third of its width."""
-    from viewer.gpu.camera import view_projection
-    from viewer.scene.camera import FRAMING_MARGIN
-
-    lo, hi = np.array(box[0]), np.array(box[1])
-    camera = framing_camera(lo, hi, aspect=aspect)
-    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    clip = corners @ view_projection(camera, aspect, lo, hi).T
-    assert np.all(clip[:, 3] > 0)
-    ndc = clip[:, :2] / clip[:, 3:]
-    assert np.abs(ndc).max() == pytest.approx(1.0 / FRAMING_MARGIN, rel=1e-6)
 
 
 # ---- scene edits --------------------------------------------------------------------------------------
