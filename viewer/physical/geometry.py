@@ -10,9 +10,10 @@ ray-traced form factors in a precompute, a linear solve at run time with albedo 
   per unit radiance, visibility included: one per lamp position.
 - `SunPaths`: which voxels and probes see the sun: one per sun direction.
 
-Every ray is traced with the cell-exact DDA of viewer.rays.dda, so the hemisphere of every receiver is
-counted exactly: a gather ray hits a surface or leaves the scene, and the rows of the transport matrix
-sum to the share of rays that hit (1 in a closed room).
+Every ray is cast against the scene's triangles and lands on the voxel that carries the surface it meets
+(viewer.rays.voxel_rays: Embree where it is installed, else the cell-exact DDA of viewer.rays.dda), so
+the hemisphere of every receiver is counted exactly: a gather ray hits a surface or leaves the scene,
+and the rows of the transport matrix sum to the share of rays that hit (1 in a closed room).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from viewer.rays import dda
 from viewer.probes import sh
 from viewer.probes.grid import ProbeGrid, fill_waves
 from viewer.scene import DirectionalLight, Scene
+from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import VoxelGrid, Voxelization, voxelize_with_faces
 
 SURFACE_OFFSET = 0.1
@@ -119,6 +121,9 @@ class Geometry:
     settings: GeometrySettings
     voxels: VoxelGrid
     cells: dda.Cells
+    """Each cell's triangles, and the voxel each one's surface belongs to there."""
+    rays: VoxelRays
+    """The triangles and `cells`, ready for rays that land on voxels."""
     faces: sparse.csr_matrix
     """(K, F) share of each voxel's area per scene face (colours per voxel from colours per face)."""
     lamp: np.ndarray
@@ -156,22 +161,25 @@ class Geometry:
         return self.valid.shape[0]
 
 
-def build(scene: Scene, settings: GeometrySettings = GeometrySettings()) -> Geometry:
-    """Voxelize and trace: see the module docstring."""
+def build(scene: Scene, settings: GeometrySettings = GeometrySettings(), backend: str | None = None) -> Geometry:
+    """Voxelize and trace: see the module docstring. `backend`: the rays' (VoxelRays), None for the
+    fastest installed."""
     voxelization = voxelize_with_faces(scene, settings.voxels, settings.normal_mode)
-    return trace(scene, voxelization, settings)
+    return trace(scene, voxelization, settings, backend)
 
 
-def trace(scene: Scene, voxelization: Voxelization, settings: GeometrySettings) -> Geometry:
+def trace(scene: Scene, voxelization: Voxelization, settings: GeometrySettings,
+          backend: str | None = None) -> Geometry:
     grid, faces = voxelization.grid, voxelization.faces
     cells = dda.Cells.of(voxelization, scene)
+    rays = VoxelRays(scene, cells, backend)
     k, h = grid.count, grid.voxel_size
     # voxel -> voxel: cosine-weighted gather rays, one matrix entry per (receiver, voxel hit)
     origins = grid.position + SURFACE_OFFSET * h * grid.normal
-    hits = dda.bundle_hits(cells, origins, gather_directions(grid.normal, settings.gather_rays))
+    hits = rays.bundle_hits(origins, gather_directions(grid.normal, settings.gather_rays))
     lo, hi = scene.bounds
-    probe_part = _probe_rays(cells, k, np.asarray(lo, np.float64), np.asarray(hi, np.float64), settings)
-    return Geometry(scene_key(scene, settings), settings, grid, cells, faces, lamp_faces(scene),
+    probe_part = _probe_rays(rays, k, np.asarray(lo, np.float64), np.asarray(hi, np.float64), settings)
+    return Geometry(scene_key(scene, settings), settings, grid, cells, rays, faces, lamp_faces(scene),
                     transport_matrix(hits), *probe_part, voxel_keys=np.asarray(voxelization.keys, np.int64),
                     gather_hits=hits, tint=voxelization.tint)
 
@@ -194,7 +202,7 @@ def with_probes(geometry: Geometry, probes: int) -> Geometry:
     again (the training targets at two probe resolutions share the voxels' transport)."""
     settings = replace(geometry.settings, probes=probes)
     key = hashlib.blake2b((geometry.key + repr(settings)).encode(), digest_size=16).hexdigest()
-    _, _, *fields = _probe_rays(geometry.cells, geometry.voxels.count, geometry.probe_lo, geometry.probe_hi,
+    _, _, *fields = _probe_rays(geometry.rays, geometry.voxels.count, geometry.probe_lo, geometry.probe_hi,
                                 settings)
     return replace(geometry, key=key, settings=settings, **dict(zip(_PROBE_FIELDS, fields)))
 
@@ -203,13 +211,13 @@ _PROBE_FIELDS = ("probe_points", "probe_hits", "probe_basis", "probe_basis_t", "
                  "probe_backface")
 
 
-def _probe_rays(cells: dda.Cells, k: int, lo: np.ndarray, hi: np.ndarray, settings: GeometrySettings) -> tuple:
+def _probe_rays(rays: VoxelRays, k: int, lo: np.ndarray, hi: np.ndarray, settings: GeometrySettings) -> tuple:
     """probe -> voxel: the same directions from every probe. Returns (lo, hi, then the _PROBE_FIELDS)."""
     m = settings.probes
     points = ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3)
     directions, weights = sh.sphere_directions(settings.directions)
     basis = (weights[:, None] * sh.basis(directions)).astype(np.float32)
-    hits, valid, waves, backface = probe_fields(dda.bundle_hits(cells, points, directions), k, m,
+    hits, valid, waves, backface = probe_fields(rays.bundle_hits(points, directions), k, m,
                                                 settings.invalid_backface_fraction)
     return lo, hi, points, hits, basis, np.ascontiguousarray(basis.T), valid, waves, backface
 
@@ -243,5 +251,5 @@ def sun_paths(geometry: Geometry, sun: DirectionalLight | None) -> SunPaths:
     lit = np.nonzero(cos > 0)[0]
     start = grid.position[lit] + SURFACE_OFFSET * grid.voxel_size * grid.normal[lit]
     cosine = np.zeros(grid.count, np.float32)
-    cosine[lit] = cos[lit] * dda.escapes(geometry.cells, start, sun.direction)
-    return SunPaths(np.array(sun.direction), cosine, dda.escapes(geometry.cells, geometry.probe_points, sun.direction))
+    cosine[lit] = cos[lit] * geometry.rays.escapes(start, sun.direction)
+    return SunPaths(np.array(sun.direction), cosine, geometry.rays.escapes(geometry.probe_points, sun.direction))

@@ -296,23 +296,25 @@ def _project(hits, basis_t, radiance):
 def _fill(values, waves, m):
     """Each probe of wave w > 0 takes the mean of its 6-neighbours of waves 0..w-1, wave after wave
     (the same as viewer.probes.grid.fill_invalid; probe p = (x M + y) M + z). A probe of wave w has a
-    neighbour of wave w - 1 by construction; numpy's error model drops Python's ZeroDivisionError path,
-    whose message formatting took numba 8 s of a first run to compile."""
+    neighbour of wave w - 1 by construction. Scalar loops and numpy's error model (no ZeroDivisionError
+    path): array expressions and the error's message formatting took numba 7-15 s of a first run to
+    compile."""
     last = waves.max()
     for wave in range(1, last + 1):
         for p in range(m * m * m):
             if waves[p] != wave:
                 continue
             x, y, z = p // (m * m), (p // m) % m, p % m
-            total = np.zeros(values.shape[1])
-            count = 0
-            for dx, dy, dz in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)):
-                qx, qy, qz = x + dx, y + dy, z + dz
-                if qx < 0 or qy < 0 or qz < 0 or qx >= m or qy >= m or qz >= m:
-                    continue
-                q = (qx * m + qy) * m + qz
-                if 0 <= waves[q] < wave:
-                    total += values[q]
-                    count += 1
-            values[p] = total / count
+            for c in range(values.shape[1]):
+                total = 0.0
+                count = 0
+                for dx, dy, dz in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)):
+                    qx, qy, qz = x + dx, y + dy, z + dz
+                    if qx < 0 or qy < 0 or qz < 0 or qx >= m or qy >= m or qz >= m:
+                        continue
+                    q = (qx * m + qy) * m + qz
+                    if 0 <= waves[q] < wave:
+                        total += values[q, c]
+                        count += 1
+                values[p, c] = total / count
     return values

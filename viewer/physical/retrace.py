@@ -27,6 +27,7 @@ from viewer.probes import sh
 from viewer.physical.geometry import (SURFACE_OFFSET, Geometry, gather_directions, lamp_faces, probe_fields, scene_key,
                              transport_matrix)
 from viewer.scene import Scene
+from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import Voxelization
 
 CHANGED_SHARE = 0.25
@@ -44,6 +45,7 @@ def after_moving(before: Geometry, scene: Scene, voxelization: Voxelization,
             or not np.array_equal(grid.lo, old.lo) or len(scene.faces) != before.faces.shape[1]):
         return None
     cells = dda.Cells.of(voxelization, scene)
+    rays = VoxelRays(scene, cells, before.rays.backend)
     keys = np.asarray(voxelization.keys, np.int64)
     changed = changed_cells(before.cells, before.voxel_keys, cells, keys)
     occupied = np.count_nonzero(np.diff(cells.first))
@@ -66,18 +68,18 @@ def after_moving(before: Geometry, scene: Scene, voxelization: Voxelization,
     if len(rows):
         gather[rows], redo[rows] = _kept_hits(before.gather_hits[rows], None, origins[rows], directions,
                                               old.position, new_index, slack, boxes)
-    _trace_again(cells, gather, redo, origins, lambda r, c: _gather_directions(grid.normal, settings.gather_rays, r, c))
+    _trace_again(rays, gather, redo, origins, lambda r, c: _gather_directions(grid.normal, settings.gather_rays, r, c))
 
     # probe rays: the same directions from every probe
     probe_directions, _ = sh.sphere_directions(settings.directions)
     probes, probe_redo = _kept_hits(before.probe_hits, before.probe_backface, before.probe_points,
                                     probe_directions[None], old.position, new_index, slack, boxes)
-    _trace_again(cells, probes, probe_redo, before.probe_points, lambda r, c: probe_directions[c])
+    _trace_again(rays, probes, probe_redo, before.probe_points, lambda r, c: probe_directions[c])
     hits, valid, waves, backface = probe_fields(probes, k, settings.probes, settings.invalid_backface_fraction)
     if stats is not None:
         stats.update(gather_rays=int(redo.sum()), gather_total=redo.size, probe_rays=int(probe_redo.sum()),
                      probe_total=probe_redo.size, changed_cells=int(changed.sum()), boxes=len(boxes))
-    return replace(before, key=scene_key(scene, settings), voxels=grid, cells=cells, faces=voxelization.faces,
+    return replace(before, key=scene_key(scene, settings), voxels=grid, cells=cells, rays=rays, faces=voxelization.faces,
                    tint=voxelization.tint, lamp=lamp_faces(scene), transport=transport_matrix(gather), probe_hits=hits, valid=valid,
                    fill_waves=waves, probe_backface=backface, voxel_keys=keys, gather_hits=gather)
 
@@ -138,11 +140,11 @@ def _kept_hits(hits: np.ndarray, backface: np.ndarray | None, origins: np.ndarra
                  np.ascontiguousarray(old_positions, np.float64), new_index, slack, boxes)
 
 
-def _trace_again(cells: dda.Cells, hits: np.ndarray, redo: np.ndarray, origins: np.ndarray, directions) -> None:
+def _trace_again(rays: VoxelRays, hits: np.ndarray, redo: np.ndarray, origins: np.ndarray, directions) -> None:
     """Trace the rays marked in `redo` (A, B) into `hits`; `directions(rows, columns)` gives theirs."""
     rows, columns = np.nonzero(redo)
     if len(rows):
-        hits[rows, columns] = dda.first_hits(cells, origins[rows], directions(rows, columns))
+        hits[rows, columns] = rays.first_hits(origins[rows], directions(rows, columns))
 
 
 def _gather_directions(normals: np.ndarray, count: int, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:

@@ -1,0 +1,146 @@
+"""Rays that land on voxels: the physical solver's gather rays, probe rays, and lamp and sun visibility,
+cast on the ray layer of viewer.rays.cast.
+
+The solver needs more than the face a ray meets first: it needs the voxel of the grid that carries that
+piece of surface, the one the DDA of viewer.rays.dda names when it marches the same ray, since each
+cell of its listing pairs a triangle with its voxel there. With Embree the ray is cast against the
+triangles, and the voxel is then read from the same listing: the entry of the hit's face in the cell
+where the hit lies. So both backends name the same voxel, or BACKFACE for a face met from behind, for
+every ray whose hit is not on a face's edge or a cell's boundary (tests/rays/test_voxel_rays.py),
+while Embree's cost grows with log(faces) where the DDA's grows with the triangles listed per cell.
+
+Embree is also why the first run is short: the DDA's march compiles into every kernel that traces (a
+minute of CPU on an empty cache), where the lookup below compiles in about a second.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from viewer.rays import dda
+from viewer.rays.cast import NO_FACE, TriangleCaster, embree_available
+
+FAR = 1e37
+"""The length of a ray that goes on until it meets something (Embree's own default)."""
+RAYS_PER_CALL = 1 << 18
+"""Rays cast at a time: their hits take about 10 MB, however many rays a scene's bundle holds."""
+STEP_BACK = 1e-4
+"""The hit point is read this many voxels back along the ray before its cell is looked up, so that a
+hit on a cell's boundary is the first cell's (the one the ray crossed first, as the DDA reads it), and
+single precision (about 1e-6 voxels at the grid's far side) cannot move it across."""
+
+
+class VoxelRays:
+    """A scene's triangles and the voxel listing of its grid, ready for rays that land on voxels."""
+
+    def __init__(self, scene, cells: dda.Cells, backend: str | None = None):
+        """`backend`: "embree", "dda", or None for Embree where it is installed."""
+        self.cells = cells
+        self.backend = backend or ("embree" if embree_available() else "dda")
+        self.caster = TriangleCaster(scene, cells, self.backend) if self.backend == "embree" else None
+
+    def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """(R,) int64: the voxel each ray o + t d (t > 0, unit d) meets first, dda.MISS or dda.BACKFACE."""
+        o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
+        d = np.ascontiguousarray(directions, np.float64).reshape(-1, 3)
+        if self.caster is None:
+            return dda.first_hits(self.cells, o, d)
+        out = np.empty(len(o), np.int64)
+        for start in range(0, len(o), RAYS_PER_CALL):
+            part = slice(start, start + RAYS_PER_CALL)
+            hits = self.caster.closest_hits(o[part], d[part])
+            out[part] = _landing(o[part], d[part], hits.face, hits.t, hits.front, *_listing(self.cells))
+        return out
+
+    def bundle_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """(P, D) int32 first hits of D rays from each of P origins: `directions` is (D, 3) shared by all
+        origins or (P, D, 3) one set each."""
+        o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
+        d = np.asarray(directions, np.float64)
+        if self.caster is None:
+            return dda.bundle_hits(self.cells, o, d)
+        count = d.shape[-2]
+        d = np.broadcast_to(d[None] if d.ndim == 2 else d, (len(o), count, 3))
+        out = np.empty((len(o), count), np.int32)
+        rows = max(1, RAYS_PER_CALL // max(count, 1))
+        for start in range(0, len(o), rows):
+            part = slice(start, start + rows)
+            starts = np.repeat(o[part], count, axis=0)
+            out[part] = self.first_hits(starts, d[part].reshape(-1, 3)).reshape(-1, count)
+        return out
+
+    def escapes(self, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        """(R,) bool: a ray from each origin along one direction meets no surface (it leaves the scene)."""
+        o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
+        if self.caster is None:
+            return dda.escapes(self.cells, o, direction)
+        d = np.broadcast_to(np.asarray(direction, np.float64) / np.linalg.norm(direction), o.shape)
+        out = np.empty(len(o), bool)
+        for start in range(0, len(o), RAYS_PER_CALL):
+            part = slice(start, start + RAYS_PER_CALL)
+            out[part] = ~self.caster.blocked(o[part], d[part], FAR)
+        return out
+
+    def segments_clear(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(R,) bool: the segment a -> b crosses no surface, from either side."""
+        a = np.ascontiguousarray(a, np.float64).reshape(-1, 3)
+        if self.caster is None:
+            return dda.segments_clear(self.cells, a, b)
+        d = np.asarray(b, np.float64).reshape(-1, 3) - a
+        length = np.linalg.norm(d, axis=1)
+        d /= np.maximum(length, 1e-300)[:, None]
+        out = np.empty(len(a), bool)
+        for start in range(0, len(a), RAYS_PER_CALL):
+            part = slice(start, start + RAYS_PER_CALL)
+            out[part] = ~self.caster.blocked(a[part], d[part], length[part])
+        return out | (length <= 0)
+
+
+def _listing(cells: dda.Cells) -> tuple:
+    return cells.lo, cells.h, cells.n, cells.first, cells.triangle, cells.voxel
+
+
+@numba.njit(cache=True, nogil=True)
+def _landing(o, d, face, t, front, lo, h, n, first, triangle, voxel):
+    """The voxel of each hit: the listing's entry for the hit's face in the cell a hair before the hit
+    point, else in the cell of the point itself or a neighbour (a hit on the listing's edge); a face met
+    from behind is BACKFACE, and one the listing lacks near the hit too (it cannot be lit)."""
+    out = np.empty(face.shape[0], np.int64)
+    back = STEP_BACK * h
+    for r in range(face.shape[0]):   # one thread: a few lookups a ray, beside Embree's traversal
+        f = face[r]
+        if f == NO_FACE:
+            out[r] = dda.MISS
+            continue
+        if not front[r]:
+            out[r] = dda.BACKFACE
+            continue
+        found = dda.BACKFACE
+        for attempt in range(2):
+            s = t[r] - back if attempt == 0 else t[r]
+            cx = min(max(int(np.floor((o[r, 0] + s * d[r, 0] - lo[0]) / h)), 0), n - 1)
+            cy = min(max(int(np.floor((o[r, 1] + s * d[r, 1] - lo[1]) / h)), 0), n - 1)
+            cz = min(max(int(np.floor((o[r, 2] + s * d[r, 2] - lo[2]) / h)), 0), n - 1)
+            found = _entry(cx, cy, cz, f, n, first, triangle, voxel)
+            if found != dda.MISS:
+                break
+        if found == dda.MISS:
+            for k in range(27):
+                x, y, z = cx + k % 3 - 1, cy + (k // 3) % 3 - 1, cz + k // 9 - 1
+                if 0 <= x < n and 0 <= y < n and 0 <= z < n:
+                    found = _entry(x, y, z, f, n, first, triangle, voxel)
+                    if found != dda.MISS:
+                        break
+        out[r] = dda.BACKFACE if found == dda.MISS else found
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _entry(x, y, z, f, n, first, triangle, voxel):
+    """The voxel that the listing of cell (x, y, z) gives face f, dda.MISS where it does not list f."""
+    flat = x + n * (y + n * z)
+    for e in range(first[flat], first[flat + 1]):
+        if triangle[e] == f:
+            return voxel[e]
+    return dda.MISS
