@@ -91,7 +91,7 @@ def render_headless(options) -> int:
     # the viewer's flags that a capture has too (scene, size, view, the GI settings) carry over; the
     # rest of the picture is the capture's defaults
     capture = capture_request(SimpleNamespace(scene=options.scene, size=options.size, view=options.view,
-                                              **vars(gi_settings(options))), out=out, gi=gi)
+                                              msaa=options.msaa, **vars(gi_settings(options))), out=out, gi=gi)
     status = run_capture(capture)
     if status == 0:
         log(f"wrote {os.path.abspath(out)}")
@@ -122,8 +122,6 @@ class ViewerApp(mglw.WindowConfig):
     """Resolution while the camera or a slider moves, as a fraction of the still image's."""
     interaction_linger = 0.25
     """Seconds after the last camera input during which frames stay at preview resolution."""
-    msaa = 0
-    """Multisampling of the scene image (edge anti-aliasing; 4 doubles the cost on llvmpipe)."""
     active_fps = 60.0
     idle_fps = 4.0
     """Frame rate when nothing moves and nothing is computed (input wakes the loop at once)."""
@@ -175,7 +173,7 @@ class ViewerApp(mglw.WindowConfig):
         self.renderer = Renderer(self.ctx, settings, options.shader_dir or SHADERS)
         self.renderer.background_bake = True   # a new scene's probe weights never stall a frame
         self.renderer.warm_up()
-        self.viewport = Viewport(self.ctx, self.renderer, self.render_scale, self.preview_scale, samples=self.msaa)
+        self.viewport = Viewport(self.ctx, self.renderer, self.render_scale, self.preview_scale, samples=options.msaa)
         self.times = FrameTimes(self.ctx)
         gi = GIController(self.ctx, "baked" if baked else options.gi,
                           gi_settings(options),

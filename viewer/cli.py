@@ -15,7 +15,7 @@ import numpy as np
 from viewer import sources
 from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
 from viewer import capture as captures  # no GL import until a capture runs
-from viewer.cli_parsing import (NEGATIVE_VALUE_FLAGS, add_dataclass_flags, add_gi_flags, gi_settings,
+from viewer.cli_parsing import (NEGATIVE_VALUE_FLAGS, msaa_count, add_dataclass_flags, add_gi_flags, gi_settings,
                                 joined_negative_values)
 from viewer.errors import ArgumentParser, InputError, exit_status
 from viewer.gpu.render_settings import RenderSettings
@@ -80,7 +80,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
                          help="where the indirect light comes from, as in the window (compute: the "
                               "compute-shader solver)")
     capture.add_argument("--view", choices=VIEWS, default="final", help="what the picture shows")
-    capture.add_argument("--msaa", type=int, default=4, metavar="N", help="multisample count (default: %(default)s)")
+    capture.add_argument("--msaa", type=msaa_count, default=4, metavar="N",
+                         help="multisample count: edge anti-aliasing (0: off; default: %(default)s)")
     capture.add_argument("--turntable", type=int, default=0, metavar="N",
                          help="N frames of a turn around the scene's centre, as an animated .gif --out")
     capture.add_argument("--camera", metavar="ox,oy,oz,tx,ty,tz",

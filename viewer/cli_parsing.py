@@ -51,6 +51,23 @@ def parse_size(text, low: int = WINDOW_SIZES[0], high: int = WINDOW_SIZES[1],
     return width, height
 
 
+MSAA_COUNTS = (0, 1, 2, 4, 8, 16)
+"""The multisample counts OpenGL drivers offer (0: none); a count above the driver's own maximum is
+lowered to it."""
+
+
+def msaa_count(text) -> int:
+    """`--msaa N` (an argparse type): one of MSAA_COUNTS."""
+    try:
+        count = int(text)
+    except ValueError:
+        count = -1
+    if count not in MSAA_COUNTS:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a multisample count: one of "
+                                         f"{', '.join(map(str, MSAA_COUNTS))}")
+    return count
+
+
 def parse_camera(text: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """`--camera ox,oy,oz,tx,ty,tz` -> (origin, target): six finite numbers, two different points
     (viewer.gpu.camera.look_at turns them into a Camera); anything else is bad input (InputError)."""

@@ -262,6 +262,33 @@ def test_viewport_redraws_on_change_only_and_previews_while_interacting(ctx, cor
         renderer.release()
 
 
+def test_the_still_image_is_anti_aliased_and_the_preview_is_not(ctx, cornell):
+    """With multisampling the full-quality image is the capture's with the same samples (the box's edges
+    blended), while the preview drawn during interaction is not multisampled (it keeps its frame rate)."""
+    from viewer.gpu.offscreen import capture
+    from viewer.gpu.renderer import RenderSettings, Renderer
+    from viewer.ui.viewport import Viewport
+
+    renderer = Renderer(ctx, RenderSettings(light_samples=4))
+    renderer.set_scene(cornell)
+    samples = []
+    draw = renderer.draw
+    renderer.draw = lambda target, camera, view: (samples.append(target.samples), draw(target, camera, view))
+    screen = ctx.simple_framebuffer((80, 60), components=4)
+    viewport = Viewport(ctx, renderer, preview_scale=0.5, samples=4)
+    try:
+        assert viewport.frame(cornell.camera, "final", (1,), screen, preview=True) and samples[-1] == 0
+        assert viewport.frame(cornell.camera, "final", (1,), screen) and samples[-1] == min(4, ctx.max_samples)
+        still = viewport.read(screen)
+        np.testing.assert_array_equal(still, capture(cornell, None, size=(80, 60), samples=4,
+                                                     settings=renderer.settings, ctx=ctx))
+        hard = capture(cornell, None, size=(80, 60), samples=0, settings=renderer.settings, ctx=ctx)
+        assert np.abs(still.astype(int) - hard).max() > 40          # the edges differ
+    finally:
+        viewport.release()
+        renderer.release()
+
+
 def test_the_viewport_is_not_settled_while_the_lightmap_weights_are_made(ctx, cornell):
     """The viewer makes a new scene's texel weights and gather rays on a worker and shows the probes per
     fragment meanwhile: that picture is not the settled one (captures and benchmarks wait for the baked

@@ -146,11 +146,12 @@ def closest_hits(scene, origins: np.ndarray, directions: np.ndarray, t_max: floa
     return TriangleCaster(scene, backend=backend).closest_hits(origins, directions, t_max)
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@numba.njit(cache=True, nogil=True)
 def _front(d, face, e1, e2):
-    """Whether each ray met its face from the front: d . (e1 x e2) < 0, the DDA's test."""
+    """Whether each ray met its face from the front: d . (e1 x e2) < 0, the DDA's test. One thread: a
+    few nanoseconds a ray, and a parallel loop would add seconds to a first run's compile."""
     out = np.zeros(face.shape[0], np.bool_)
-    for r in numba.prange(face.shape[0]):
+    for r in range(face.shape[0]):
         f = face[r]
         if f < 0:
             continue

@@ -31,6 +31,9 @@ class Viewport:
         self.preview_scale = preview_scale
         """Resolution while things move, as a fraction of the full-quality one."""
         self.samples = samples
+        """Multisampling of the full-quality image (edge anti-aliasing). Previews, drawn while the camera
+        or a slider moves, are not multisampled: what moves keeps its frame rate, and the still image,
+        drawn once, has clean edges."""
         self._targets: dict[str, DisplayTarget] = {}
         self._key = None              # what the view should show now
         self._drawn: tuple | None = None   # (key, quality) of the image in `_shown`
@@ -45,13 +48,14 @@ class Viewport:
     def _target(self, quality: str, window_size: tuple[int, int]) -> DisplayTarget:
         scale = self.render_scale * (self.preview_scale if quality == "preview" else 1.0)
         size = (max(1, round(window_size[0] * scale)), max(1, round(window_size[1] * scale)))
+        samples = min(self.samples, self.ctx.max_samples) if quality == "full" else 0
         target = self._targets.get(quality)
-        if target is None or target.size != size or target.samples != min(self.samples, self.ctx.max_samples):
+        if target is None or target.size != size or target.samples != samples:
             if target is not None:
                 if target is self._shown:
                     self._shown, self._drawn = None, None
                 target.release()
-            target = DisplayTarget(self.ctx, size, samples=min(self.samples, self.ctx.max_samples))
+            target = DisplayTarget(self.ctx, size, samples=samples)
             self._targets[quality] = target
         return target
 
