@@ -353,7 +353,7 @@ def test_a_capture_without_a_camera_shows_what_the_viewer_opens_with(tmp_path):
     capture's."""
     from dataclasses import replace
 
-    from viewer.training.dataset import write_obj
+    from viewer.scene.obj import write as write_obj
 
     box = load("cornell")
     path = tmp_path / "moved.obj"

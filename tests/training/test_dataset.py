@@ -261,10 +261,11 @@ def test_the_stored_scene_is_what_the_truth_saw():
 
 def test_write_obj_loads_back_to_the_same_scene(tmp_path):
     from viewer.scene import load
+    from viewer.scene.obj import write as write_obj
 
     for index in range(3):
         scene, _ = dataset.make_scene("train", index, 1)
-        dataset.write_obj(scene, tmp_path / f"{scene.name}.obj")
+        write_obj(scene, tmp_path / f"{scene.name}.obj")
         again = load(tmp_path / f"{scene.name}.obj")
         assert again.groups == scene.groups and again.camera == scene.camera
         for name in ("vertices", "faces", "albedo", "emission", "face_group"):

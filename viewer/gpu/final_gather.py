@@ -34,6 +34,12 @@ RAYS = 72
 """Gather rays per sample (RenderSettings.final_gather's default): 2 r^2, a grid of r x 2r strata in (u1, u2)."""
 ESCAPED = -1
 """GatherRays.hits of a ray that leaves the scene (or lands on a face without a tile)."""
+SCOUTS = 8
+"""Rays of each sample cast first, spread over its strata: a sample all of whose scouts meet the backs of
+faces is taken to lie inside a closed solid (the back side of a scanned mesh's surface, where nothing
+is lit), and its other rays are not cast: they repeat the scouts' hits. On a closed mesh that is the
+back half of its samples, so the gather casts about half the rays; a sample with a share b of its
+hemisphere on backs is taken for enclosed with chance b^8 (4% at two thirds)."""
 
 
 @dataclass(frozen=True)
@@ -54,8 +60,8 @@ class GatherRays:
         `width` texels a side; lift: how far off the surface the rays start."""
         frame = _Frame.of(points, normals, rays, seed)
         hits = np.empty((frame.count, rays), np.int32)
-        for todo in _every_ray(frame.count, rays):
-            _cast(frame, lift, todo, caster, face_tile, tile_origin, tile_n, width, hits)
+        layout = (caster, face_tile, tile_origin, tile_n, width)
+        _cast_samples(frame, lift, np.arange(frame.count), rays, layout, hits)
         return GatherRays(hits)
 
     def after_moving(self, sample_moved: np.ndarray, pixel_moved: np.ndarray, pixel_points: np.ndarray,
@@ -79,9 +85,18 @@ class GatherRays:
                          np.ascontiguousarray(pixel_moved, np.bool_), np.ascontiguousarray(pixel_points, np.float64),
                          *edges, float(slack), _bounding_sphere(*edges))
         hits = self.hits.copy()
+        layout = (caster, face_tile, tile_origin, tile_n, width)
+        # a sample taken for enclosed is gathered again whole, scouts first, as `of` gathers it
+        scouts = scout_rays(rays)
+        enclosed = _all_backs(self.hits[:, scouts], int(width))
+        again = np.flatnonzero(enclosed & todo.any(axis=1))
+        todo[enclosed] = False
         rows = np.argwhere(todo).astype(np.int64)
         hits[todo] = ESCAPED
-        _cast(frame, lift, rows, caster, face_tile, tile_origin, tile_n, width, hits)
+        _cast(frame, lift, rows, *layout, hits)
+        _cast_samples(frame, lift, again, rays, layout, hits)
+        closed = np.flatnonzero(_all_backs(hits[:, scouts], int(width)) & ~enclosed)   # enclosed by the move
+        hits[closed] = hits[closed][:, scouts][:, np.arange(rays) % len(scouts)]
         return GatherRays(hits)
 
     def inside(self, width: int) -> np.ndarray:
@@ -163,12 +178,39 @@ def _cast(frame: "_Frame", lift: float, todo: np.ndarray, caster: TriangleCaster
                                                tile_n, int(width))
 
 
-def _every_ray(samples: int, rays: int):
-    """(sample, ray) of every ray, CHUNK at a time."""
-    per = max(CHUNK // rays, 1)
-    for first in range(0, samples, per):
-        s = np.arange(first, min(first + per, samples))
-        yield np.column_stack([np.repeat(s, rays), np.tile(np.arange(rays), len(s))])
+def scout_rays(rays: int) -> np.ndarray:
+    """The SCOUTS rays cast first (indices into a sample's rays): spread evenly over the strata's rows
+    (angle from the normal) and columns (azimuth)."""
+    return np.unique(np.linspace(0, rays - 1, min(SCOUTS, rays)).round().astype(np.int64))
+
+
+def _cast_samples(frame: "_Frame", lift: float, samples: np.ndarray, rays: int, layout: tuple,
+                  hits: np.ndarray) -> None:
+    """Gather `samples` whole into hits: their scouts, then the other rays of those not enclosed (the
+    enclosed ones repeat their scouts' hits)."""
+    scouts = scout_rays(rays)
+    for todo in _rays_of(samples, scouts):
+        _cast(frame, lift, todo, *layout, hits)
+    enclosed = _all_backs(hits[samples][:, scouts], int(layout[-1]))
+    others = np.setdiff1d(np.arange(rays), scouts)
+    for todo in _rays_of(samples[~enclosed], others):
+        _cast(frame, lift, todo, *layout, hits)
+    inside = samples[enclosed]
+    hits[inside] = hits[inside][:, scouts][:, np.arange(rays) % len(scouts)]
+
+
+def _rays_of(samples: np.ndarray, rays: np.ndarray):
+    """(sample, ray) of the given rays of the given samples, about CHUNK at a time."""
+    per = max(CHUNK // max(len(rays), 1), 1)
+    for first in range(0, len(samples), per):
+        s = samples[first:first + per]
+        yield np.column_stack([np.repeat(s, len(rays)), np.tile(rays, len(s))])
+
+
+def _all_backs(hits: np.ndarray, width: int) -> np.ndarray:
+    """(S,) bool: every one of the hits (S, k) landed on the back side of a face (the back image's
+    pixels are the columns from `width` to 2 `width` of each row)."""
+    return np.all((hits >= 0) & (hits % (2 * width) >= width), axis=1)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

@@ -1,4 +1,5 @@
-"""Wavefront OBJ + MTL reader (positions, faces, groups and Lambertian materials).
+"""Wavefront OBJ + MTL reader (positions, faces, groups and Lambertian materials), and the writer of a
+Scene as OBJ + MTL + sidecar.
 
 Our own, because trimesh 5.2 resolves relative (negative) face indices against the end of the whole file
 instead of the vertices read so far, which scrambles files like the public-domain CornellBox-Original.obj.
@@ -7,6 +8,8 @@ Polygons are fan-triangulated in their vertex order, so the counter-clockwise fr
 
 from __future__ import annotations
 
+import io
+import json
 from pathlib import Path
 
 import numpy as np
@@ -131,3 +134,33 @@ def _index(word: str, count: int, path, number) -> int:
     if i == 0 or not 0 <= resolved < count:
         raise SceneError(f"{path}:{number}: face index {i} out of range (1..{count} vertices so far)")
     return resolved
+
+
+def write(scene: Scene, path: Path) -> None:
+    """OBJ + MTL + sidecar JSON (camera, sun) that `viewer.scene.load` reads back to the same scene, each
+    coordinate to the last bit (one material per group: the albedo and emission of the group's first
+    face)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    obj, mtl = io.StringIO(), []
+    obj.write(f"mtllib {path.stem}.mtl\n")
+    first = 1  # OBJ indices count from 1 over the whole file
+    for g, group in enumerate(scene.groups):
+        faces = scene.faces[scene.face_group == g]
+        if not len(faces):
+            continue
+        used, local = np.unique(faces, return_inverse=True)
+        obj.write(f"g {group}\nusemtl {group}\n")
+        np.savetxt(obj, scene.vertices[used], fmt="v %.17g %.17g %.17g")
+        np.savetxt(obj, local.reshape(-1, 3) + first, fmt="f %d %d %d")
+        first += len(used)
+        albedo, emission = scene.albedo[scene.face_group == g][0], scene.emission[scene.face_group == g][0]
+        mtl.append(f"newmtl {group}\nKd {' '.join(map(repr, albedo.tolist()))}\n"
+                   f"Ke {' '.join(map(repr, emission.tolist()))}\n")
+    path.write_text(obj.getvalue())
+    path.with_suffix(".mtl").write_text("".join(mtl))
+    c = scene.camera
+    side = {"camera": {"origin": list(c.origin), "target": list(c.target), "up": list(c.up), "fov": c.fov}}
+    if scene.sun is not None:
+        side["sun"] = {"direction": scene.sun.direction.tolist(), "irradiance": scene.sun.irradiance.tolist()}
+    path.with_suffix(".json").write_text(json.dumps(side, indent=2) + "\n")

@@ -232,35 +232,6 @@ def room_name(split: str, index: int) -> str:
     return PAPER_SCENES[index] if split == "paper" else f"{split}-{index:05d}"
 
 
-# ---- exporting a scene for a look ----------------------------------------------------------------------
-
-def write_obj(scene: Scene, path: Path) -> None:
-    """OBJ + MTL + sidecar JSON (camera, sun) that `viewer.scene.load` reads back to the same scene (one
-    material per group: every group of a generated scene has one albedo and one emission)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    obj, mtl = [f"mtllib {path.stem}.mtl\n"], []
-    first = 1  # OBJ indices count from 1 over the whole file
-    for g, group in enumerate(scene.groups):
-        faces = scene.faces[scene.face_group == g]
-        if not len(faces):
-            continue
-        used, local = np.unique(faces, return_inverse=True)
-        obj.append(f"g {group}\nusemtl {group}\n")
-        obj += [f"v {x!r} {y!r} {z!r}\n" for x, y, z in scene.vertices[used].tolist()]
-        obj += [f"f {a + first} {b + first} {c + first}\n" for a, b, c in local.reshape(-1, 3).tolist()]
-        first += len(used)
-        albedo, emission = scene.albedo[scene.face_group == g][0], scene.emission[scene.face_group == g][0]
-        mtl.append(f"newmtl {group}\nKd {' '.join(map(repr, albedo.tolist()))}\n"
-                   f"Ke {' '.join(map(repr, emission.tolist()))}\n")
-    path.write_text("".join(obj))
-    path.with_suffix(".mtl").write_text("".join(mtl))
-    c = scene.camera
-    side = {"camera": {"origin": list(c.origin), "target": list(c.target), "up": list(c.up), "fov": c.fov}}
-    if scene.sun is not None:
-        side["sun"] = {"direction": scene.sun.direction.tolist(), "irradiance": scene.sun.irradiance.tolist()}
-    path.with_suffix(".json").write_text(json.dumps(side, indent=2) + "\n")
-
-
 # ---- command line --------------------------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:

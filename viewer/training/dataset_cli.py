@@ -12,7 +12,8 @@ from viewer.errors import one_line
 from viewer.reference.mitsuba import ReferenceUnavailable
 from viewer.scene import SceneError
 from viewer.training import generate, shards
-from viewer.training.dataset import PAPER_SCENES, SPLITS, build_parser, make_scene, write_obj
+from viewer.scene.obj import write as write_obj
+from viewer.training.dataset import PAPER_SCENES, SPLITS, build_parser, make_scene
 
 
 def _int_list(text: str, flag: str, low: int, high: int) -> list[int]:
