@@ -2,6 +2,7 @@
 
     python -m viewer.training.bounce_floor --data data/gi-v2 --rooms 20 [--model models/probenet.onnx]
                                            [--full] [--out docs/data/bounce_floor.json]
+    python -m viewer.training.bounce_floor --data DATA --rooms 20 --ladder [--out docs/data/bounce_ladder.json]
 
 For validation rooms of a dataset, the reflected light at the probes (the solver's, the network's
 target) against three gathers of surface light the way `encoding.Bounce` gathers the one-bounce input
@@ -13,6 +14,15 @@ If even the converged surface light gathered this way is far off, the error is i
 surfaces' transport to the probes), not in the surfaces' light: what the network cannot learn from
 a lattice of densities. `--full` gathers 1-cell patches on the probes' own lattice; `--model` adds the
 network's own reflected light (as it answers, no gain) beside.
+
+`--ladder` gathers the same converged surface light with more and more visibility instead
+(viewer/training/ladder.py: no visibility, voxel cone tracing with 6 and 16 cones, exact rays at 8 to 64
+a probe), each raw and after a 3x3x3 box filter, with the milliseconds each gather takes. The validation
+rooms need no full dataset; the first 20 of `data/gi-v2`'s are made alone (about 20 minutes on two cores)
+by
+
+    python -m viewer.training.dataset --out /tmp/ladder-data --train 0 --val 20 --seed 14 --ranges v2 \
+        --probes 24 --truth physical --splits val
 """
 
 from __future__ import annotations
@@ -26,6 +36,7 @@ import numpy as np
 from viewer.neural import encoding
 from viewer.physical.gi import GISettings, PhysicalGI
 from viewer.rays.voxels import voxelize
+from viewer.training import ladder
 
 GATHERS = ("bounce input", "exact one bounce", "converged surface light")
 NETWORK = "network (as it is)"
@@ -56,16 +67,21 @@ def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, vox
         bounce_input = enc.inputs[:, encoding.BOUNCE].astype(np.float64) * scale
     estimates = (bounce_input, lattice(bounce.gathered(grid.albedo * solver.lighting.direct / np.pi)),
                  lattice(bounce.gathered(solver.lighting.reflected.astype(np.float64))))
-    out = {}
+    out = {name: ladder.best_gain_error(estimate, target, valid) for name, estimate in zip(GATHERS, estimates)}
     t = target[..., valid]
-    for name, estimate in zip(GATHERS, estimates):
-        e = estimate[..., valid]
-        gain = float((e * t).sum() / max(float((e * e).sum()), 1e-30))
-        out[name] = float(np.sqrt(((gain * e - t) ** 2).sum() / max(float((t ** 2).sum()), 1e-30)))
     if field is not None:
         reflected = field.run(enc.inputs.astype(np.float32))[:, 9:18] * scale
         out[NETWORK] = float(np.sqrt(((reflected[..., valid] - t) ** 2).sum() / max(float((t ** 2).sum()), 1e-30)))
     return out
+
+
+def room_ladder(example, target: np.ndarray, valid: np.ndarray, probes: int, voxels: int) -> dict:
+    """viewer.training.ladder's rungs for one room, from the solver's converged light on `voxels`^3."""
+    scene = example.scene
+    solver = PhysicalGI(GISettings(voxels=voxels, probes=probes))
+    solver.update(scene)
+    bounce = encoding.Bounce(solver.geometry.voxels, example.lo, example.hi, probes)
+    return ladder.room_ladder(scene, example.lo, example.hi, target, valid, probes, solver, bounce)
 
 
 def main(argv=None) -> int:
@@ -78,6 +94,8 @@ def main(argv=None) -> int:
     parser.add_argument("--rooms", type=int, default=20)
     parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--full", action="store_true", help="1-cell patches on the probes' own lattice")
+    parser.add_argument("--ladder", action="store_true",
+                        help="the visibility ladder: cone traced and ray-cast gathers (viewer/training/ladder.py)")
     parser.add_argument("--model", type=Path, help="also the network's reflected light (an .onnx with its card)")
     add_out(parser, help="JSON file for the per-room errors")
     args = parser.parse_args(argv)
@@ -92,19 +110,31 @@ def main(argv=None) -> int:
     for i in range(min(args.rooms, len(split))):
         example = load_example(refs[i])
         target = split.targets[i].astype(np.float64)[:, 9:18] * split.scale[i][:, None, None, None, None]
-        errors = room_errors(example, target, np.asarray(split.valid[i], bool), args.probes, ENCODING_VOXELS,
+        valid = np.asarray(split.valid[i], bool)
+        if args.ladder:
+            rows.append({"room": split.names[i], "ladder": room_ladder(example, target, valid, args.probes,
+                                                                       ENCODING_VOXELS)})
+            print(split.names[i] + "  " + "  ".join(f"{k}: {100 * v['raw']:.1f}% / {100 * v['filtered']:.1f}%"
+                                                     for k, v in rows[-1]["ladder"].items()), file=sys.stderr)
+            continue
+        errors = room_errors(example, target, valid, args.probes, ENCODING_VOXELS,
                              args.full, field)
         rows.append({"room": split.names[i], **errors})
         print(f"{split.names[i]}  " + "  ".join(f"{k} {100 * v:.1f}%" for k, v in errors.items()), file=sys.stderr)
+    command = " ".join(["python -m viewer.training.bounce_floor", *(sys.argv[1:] if argv is None else argv)])
+    if args.ladder:
+        text, summary = ladder.table(rows)
+        print(text)
+        if args.out:
+            args.out.write_text(json.dumps({"command": command, "rooms": rows, "summary": summary}, indent=1) + "\n")
+        return 0
     names = GATHERS + ((NETWORK,) if field is not None else ())
     medians = {k: float(np.median([r[k] for r in rows])) for k in names}
     print("| gather of the surface light (best gain a room) | median rel. RMSE | worst |\n|---|---|---|")
     for k in names:
         print(f"| {k} | {100 * medians[k]:.1f}% | {100 * max(r[k] for r in rows):.1f}% |")
     if args.out:
-        args.out.write_text(json.dumps({"command": " ".join(["python -m viewer.training.bounce_floor",
-                                                             *(sys.argv[1:] if argv is None else argv)]),
-                                        "rooms": rows, "median": medians}, indent=1) + "\n")
+        args.out.write_text(json.dumps({"command": command, "rooms": rows, "median": medians}, indent=1) + "\n")
     return 0
 
 
