@@ -2,7 +2,8 @@
 
     python -m viewer.training.bounce_floor --data data/gi-v2 --rooms 20 [--model models/probenet.onnx]
                                            [--full] [--out docs/data/bounce_floor.json]
-    python -m viewer.training.bounce_floor --data DATA --rooms 20 --ladder [--out docs/data/bounce_ladder.json]
+    python -m viewer.training.bounce_floor --data DATA --rooms 20 --ladder [--split paper]
+                                           [--out docs/data/bounce_ladder.json]
 
 For validation rooms of a dataset, the reflected light at the probes (the solver's, the network's
 target) against three gathers of surface light the way `encoding.Bounce` gathers the one-bounce input
@@ -17,12 +18,13 @@ network's own reflected light (as it answers, no gain) beside.
 
 `--ladder` gathers the same converged surface light with more and more visibility instead
 (viewer/training/ladder.py: no visibility, voxel cone tracing with 6 and 16 cones, exact rays at 8 to 64
-a probe), each raw and after a 3x3x3 box filter, with the milliseconds each gather takes. The validation
-rooms need no full dataset; the first 20 of `data/gi-v2`'s are made alone (about 20 minutes on two cores)
+a probe), each raw and after a 3x3x3 box filter, with the milliseconds each gather takes. It needs no
+full dataset: the first 20 validation rooms of `data/gi-v2` and the paper's fixed scenes are made alone,
+the same rooms (without the Mitsuba probes, which no gather here reads), in about 3 minutes on two cores
 by
 
     python -m viewer.training.dataset --out /tmp/ladder-data --train 0 --val 20 --seed 14 --ranges v2 \
-        --probes 24 --truth physical --splits val
+        --probes 24 --truth physical --splits paper,val
 """
 
 from __future__ import annotations
@@ -92,6 +94,8 @@ def main(argv=None) -> int:
     parser = tool_parser(__doc__, prog="python -m viewer.training.bounce_floor")
     add_data(parser)
     parser.add_argument("--rooms", type=int, default=20)
+    parser.add_argument("--split", choices=("val", "paper"), default="val",
+                        help="the dataset's validation rooms (default) or its fixed paper scenes")
     parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--full", action="store_true", help="1-cell patches on the probes' own lattice")
     parser.add_argument("--ladder", action="store_true",
@@ -104,8 +108,8 @@ def main(argv=None) -> int:
         from viewer.neural.field import NeuralField
 
         field = NeuralField(args.model)
-    split = load_split(args.data, "val", args.probes)
-    refs = room_refs(args.data, "val")
+    split = load_split(args.data, args.split, args.probes)
+    refs = room_refs(args.data, args.split)
     rows = []
     for i in range(min(args.rooms, len(split))):
         example = load_example(refs[i])
@@ -126,7 +130,10 @@ def main(argv=None) -> int:
         text, summary = ladder.table(rows)
         print(text)
         if args.out:
-            args.out.write_text(json.dumps({"command": command, "rooms": rows, "summary": summary}, indent=1) + "\n")
+            manifest = args.data / "manifest.json"   # how the rooms were made
+            made = json.loads(manifest.read_text()).get("commands") if manifest.exists() else None
+            args.out.write_text(json.dumps({"command": command, "dataset": made, "rooms": rows, "summary": summary},
+                                           indent=1) + "\n")
         return 0
     names = GATHERS + ((NETWORK,) if field is not None else ())
     medians = {k: float(np.median([r[k] for r in rows])) for k in names}
