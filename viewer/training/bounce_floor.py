@@ -2,7 +2,7 @@
 
     python -m viewer.training.bounce_floor --data data/gi-v2 --rooms 20 [--model models/probenet.onnx]
                                            [--full] [--out docs/data/bounce_floor.json]
-    python -m viewer.training.bounce_floor --data DATA --rooms 20 --ladder [--split paper]
+    python -m viewer.training.bounce_floor --data DATA --rooms 20 --ladder [--split paper | --scenes SCENE ...]
                                            [--out docs/data/bounce_ladder.json]
 
 For validation rooms of a dataset, the reflected light at the probes (the solver's, the network's
@@ -86,10 +86,37 @@ def room_ladder(example, target: np.ndarray, valid: np.ndarray, probes: int, vox
     return ladder.room_ladder(scene, example.lo, example.hi, target, valid, probes, solver, bounce)
 
 
+def dataset_rooms(data: Path, split_name: str, rooms: int, probes: int):
+    """(name, example, target (3, 9, M, M, M) reflected light, valid (M, M, M)) of a dataset split's rooms."""
+    from viewer.training.dataset import load_example, room_refs
+    from viewer.training.samples import load_split
+
+    split = load_split(data, split_name, probes)
+    refs = room_refs(data, split_name)
+    for i in range(min(rooms, len(split))):
+        target = split.targets[i].astype(np.float64)[:, 9:18] * split.scale[i][:, None, None, None, None]
+        yield split.names[i], load_example(refs[i]), target, np.asarray(split.valid[i], bool)
+
+
+def scene_rooms(sources: list[str], probes: int):
+    """The same for scenes outside a dataset (a built-in name or a file): their target made as the dataset
+    makes it (viewer.training.truth's physical solver on 32^3 voxels, 256 directions a probe)."""
+    from types import SimpleNamespace
+
+    from viewer.scene import load
+    from viewer.training.truth import physical_sh
+
+    for source in sources:
+        scene = load(source)
+        lo, hi = scene.bounds
+        total, direct, valid, _ = physical_sh(scene, [probes])[probes]
+        target = (np.asarray(total, np.float64) - direct).transpose(4, 3, 0, 1, 2)
+        yield scene.name, SimpleNamespace(scene=scene, lo=lo, hi=hi, path=source), target, np.asarray(valid, bool)
+
+
 def main(argv=None) -> int:
     from viewer.cli_parsing import add_data, add_out, tool_parser
-    from viewer.training.dataset import load_example, room_refs
-    from viewer.training.samples import ENCODING_VOXELS, load_split
+    from viewer.training.samples import ENCODING_VOXELS
 
     parser = tool_parser(__doc__, prog="python -m viewer.training.bounce_floor")
     add_data(parser)
@@ -100,6 +127,9 @@ def main(argv=None) -> int:
     parser.add_argument("--full", action="store_true", help="1-cell patches on the probes' own lattice")
     parser.add_argument("--ladder", action="store_true",
                         help="the visibility ladder: cone traced and ray-cast gathers (viewer/training/ladder.py)")
+    parser.add_argument("--scenes", nargs="+", metavar="SCENE",
+                        help="instead of the dataset: these scenes (built-in names or files), their targets made "
+                             "as the dataset's")
     parser.add_argument("--model", type=Path, help="also the network's reflected light (an .onnx with its card)")
     add_out(parser, help="JSON file for the per-room errors")
     args = parser.parse_args(argv)
@@ -108,30 +138,25 @@ def main(argv=None) -> int:
         from viewer.neural.field import NeuralField
 
         field = NeuralField(args.model)
-    split = load_split(args.data, args.split, args.probes)
-    refs = room_refs(args.data, args.split)
     rows = []
-    for i in range(min(args.rooms, len(split))):
-        example = load_example(refs[i])
-        target = split.targets[i].astype(np.float64)[:, 9:18] * split.scale[i][:, None, None, None, None]
-        valid = np.asarray(split.valid[i], bool)
+    for name, example, target, valid in (scene_rooms(args.scenes, args.probes) if args.scenes else
+                                         dataset_rooms(args.data, args.split, args.rooms, args.probes)):
         if args.ladder:
-            rows.append({"room": split.names[i], "ladder": room_ladder(example, target, valid, args.probes,
-                                                                       ENCODING_VOXELS)})
-            print(split.names[i] + "  " + "  ".join(f"{k}: {100 * v['raw']:.1f}% / {100 * v['filtered']:.1f}%"
-                                                     for k, v in rows[-1]["ladder"].items()), file=sys.stderr)
+            rows.append({"room": name, "ladder": room_ladder(example, target, valid, args.probes, ENCODING_VOXELS)})
+            print(name + "  " + "  ".join(f"{k}: {100 * v['raw']:.1f}% / {100 * v['filtered']:.1f}%"
+                                          for k, v in rows[-1]["ladder"].items()), file=sys.stderr)
             continue
-        errors = room_errors(example, target, valid, args.probes, ENCODING_VOXELS,
-                             args.full, field)
-        rows.append({"room": split.names[i], **errors})
-        print(f"{split.names[i]}  " + "  ".join(f"{k} {100 * v:.1f}%" for k, v in errors.items()), file=sys.stderr)
+        errors = room_errors(example, target, valid, args.probes, ENCODING_VOXELS, args.full, field)
+        rows.append({"room": name, **errors})
+        print(f"{name}  " + "  ".join(f"{k} {100 * v:.1f}%" for k, v in errors.items()), file=sys.stderr)
     command = " ".join(["python -m viewer.training.bounce_floor", *(sys.argv[1:] if argv is None else argv)])
     if args.ladder:
         text, summary = ladder.table(rows)
         print(text)
         if args.out:
             manifest = args.data / "manifest.json"   # how the rooms were made
-            made = json.loads(manifest.read_text()).get("commands") if manifest.exists() else None
+            made = (json.loads(manifest.read_text()).get("commands") if manifest.exists() and not args.scenes
+                    else None)
             args.out.write_text(json.dumps({"command": command, "dataset": made, "rooms": rows, "summary": summary},
                                            indent=1) + "\n")
         return 0

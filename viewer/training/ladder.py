@@ -29,6 +29,7 @@ from viewer.probes import sh
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.cast import TriangleCaster
 from viewer.rays.voxels import face_facing
+from viewer.training.cones import ConeTracer
 
 CONES = (6, 16)
 RAYS = (8, 16, 32, 64)
@@ -104,19 +105,21 @@ def hit_voxels(scene, voxels, voxel_keys: np.ndarray, origins, directions, hits)
         return out
     point = origins[front] + hits.t[front, None] * directions[front]
     cell = np.clip(np.floor((point - voxels.lo) / h).astype(np.int64), 0, n - 1)
-    facing = face_facing(scene.face_normals[hits.face[front]])
+    facing = face_facing(scene.face_normals)[hits.face[front]]
     lookup = np.full(n ** 3 * 6, -1, np.int64)
     lookup[voxel_keys] = np.arange(k)
-    best, best_distance = np.full(len(front), k, np.int64), np.full(len(front), np.inf)
+    best = lookup[(cell[:, 0] + n * (cell[:, 1] + n * cell[:, 2])) * 6 + facing]
+    stray = np.nonzero(best < 0)[0]
+    best[stray] = k
+    distance = np.full(len(stray), np.inf)
     for offset in np.stack(np.meshgrid(*([np.arange(-1, 2)] * 3), indexing="ij"), -1).reshape(-1, 3):
-        c = cell + offset
+        c = cell[stray] + offset
         inside = np.all((c >= 0) & (c < n), axis=1)
-        key = np.where(inside, c[:, 0] + n * (c[:, 1] + n * c[:, 2]), 0) * 6 + facing
-        voxel = np.where(inside, lookup[key], -1)
-        distance = np.where(voxel >= 0, np.linalg.norm(voxels.position[voxel] - point, axis=1), np.inf)
-        distance = np.where(np.all(offset == 0), np.where(voxel >= 0, -1.0, np.inf), distance)  # own cell first
-        better = distance < best_distance
-        best[better], best_distance[better] = voxel[better], distance[better]
+        voxel = np.where(inside, lookup[np.where(inside, c[:, 0] + n * (c[:, 1] + n * c[:, 2]), 0) * 6
+                                        + facing[stray]], -1)
+        near = np.where(voxel >= 0, np.linalg.norm(voxels.position[voxel] - point[stray], axis=1), np.inf)
+        better = near < distance
+        best[stray[better]], distance[better] = voxel[better], near[better]
     out[front] = best
     return out
 
@@ -136,8 +139,6 @@ def rungs(scene, lo, hi, probes: int, solver, bounce) -> list[tuple[str, np.ndar
     """(name, estimate (P, 9, 3), gather ms, once-per-geometry ms) of every rung for one room, from the
     solver's converged light (`solver`, a PhysicalGI brought up to date) and the encoding's bounce
     gather (`bounce`, a viewer.neural.bounce.Bounce on the same voxels)."""
-    from viewer.training.cones import ConeTracer
-
     reflected = solver.lighting.reflected.astype(np.float64)
     voxels, keys = solver.geometry.voxels, solver.geometry.voxel_keys
     points = ProbeGrid.positions_for(np.asarray(lo, np.float64), np.asarray(hi, np.float64), probes).reshape(-1, 3)
