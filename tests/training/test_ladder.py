@@ -4,7 +4,7 @@ see of the surfaces' light where the answer is known."""
 import numpy as np
 import pytest
 
-from tests.scenes import box, quads_to_triangles
+from scenes import box, quads_to_triangles
 from viewer.neural.bounce import Bounce
 from viewer.rays.cast import embree_available
 from viewer.rays.voxels import voxelize_with_faces
