@@ -1,0 +1,201 @@
+"""The visibility ladder: the solver's converged surface light gathered into the probes with more and
+more visibility, each gather scored against the solver's reflected light at the probes.
+
+`viewer.training.bounce_floor --ladder` runs it. The rungs, each raw and after a 3x3x3 box filter over
+the valid probes:
+
+- no visibility: the encoding's bounce gather (patches as points, no shadows; viewer.neural.bounce);
+- voxel cone tracing with 6 and 16 cones a probe (viewer.training.cones);
+- exact rays, 8 to 64 a probe, cast on the scene's triangles (viewer.rays.cast: Embree), each taking the
+  light of the voxel whose surface it hits (as the solver's own probe rays do, a back face or nothing:
+  no light); every probe's directions are a Fibonacci lattice turned by a random rotation of its own,
+  so the error is noise a filter can average rather than the same aliasing at every probe;
+- the solver's own probe rays on the same voxels (256 a probe): what any gather of this light reaches,
+  the rest being the target's finer voxels (the dataset's solver runs on 32^3, the ladder on the
+  encoder's 24^3).
+
+Every gather is timed on what changes with the light (the rays are cast once per geometry, and a
+relight is a product with the hits), and its one-off geometry cost beside.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from viewer.physical import relight
+from viewer.probes import sh
+from viewer.probes.grid import ProbeGrid
+from viewer.rays.cast import TriangleCaster
+from viewer.rays.voxels import face_facing
+from viewer.training.cones import ConeTracer
+
+CONES = (6, 16)
+RAYS = (8, 16, 32, 64)
+TIMING_RUNS = 3
+
+
+def best_gain_error(estimate: np.ndarray, target: np.ndarray, valid: np.ndarray) -> float:
+    """Relative RMSE of `estimate` (3, 9, M, M, M) against `target` over the `valid` (M, M, M) probes,
+    after the one gain that fits it best (a network learns a gain for free)."""
+    e, t = estimate[..., valid], target[..., valid]
+    gain = float((e * t).sum() / max(float((e * e).sum()), 1e-30))
+    return float(np.sqrt(((gain * e - t) ** 2).sum() / max(float((t ** 2).sum()), 1e-30)))
+
+
+def box_filtered(estimate: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """The mean of each probe's 3x3x3 neighbourhood (itself included) over its valid probes: the plainest
+    denoiser. `estimate` (..., M, M, M), `valid` (M, M, M)."""
+    m = valid.shape[0]
+    pad = ((0, 0),) * (estimate.ndim - 3) + ((1, 1),) * 3
+    values = np.pad(np.where(valid, estimate, 0.0), pad)
+    weights = np.pad(valid.astype(np.float64), 1)
+    total, count = np.zeros_like(estimate, np.float64), np.zeros(valid.shape)
+    for dx in range(3):
+        for dy in range(3):
+            for dz in range(3):
+                total += values[..., dx:dx + m, dy:dy + m, dz:dz + m]
+                count += weights[dx:dx + m, dy:dy + m, dz:dz + m]
+    return total / np.maximum(count, 1.0)
+
+
+class ProbeRays:
+    """`rays` directions from every probe, cast once on the scene's triangles: the voxel each one sees."""
+
+    def __init__(self, scene, voxels, voxel_keys: np.ndarray, points: np.ndarray, rays: int, seed: int = 0,
+                 caster: TriangleCaster | None = None):
+        caster = caster or TriangleCaster(scene)
+        self.count, self.rays = len(points), rays
+        self.directions = turned_lattices(len(points), rays, seed)                    # (P, R, 3)
+        origins = np.repeat(points, rays, axis=0)
+        hits = caster.closest_hits(origins, self.directions.reshape(-1, 3))
+        self.voxel = hit_voxels(scene, voxels, voxel_keys, origins, self.directions.reshape(-1, 3), hits)
+        # Monte Carlo weight of a uniform direction on the sphere: 4 pi / rays
+        self.basis = sh.basis(self.directions) * (4.0 * np.pi / rays)                  # (P, R, 9)
+
+    def gathered(self, radiance: np.ndarray) -> np.ndarray:
+        """(P, 9, 3) the light of the voxels leaving with `radiance` (K, 3), as the rays see it."""
+        seen = np.vstack([radiance, np.zeros((1, 3))])[self.voxel].reshape(self.count, self.rays, 3)
+        return np.matmul(self.basis.transpose(0, 2, 1), seen)
+
+
+def turned_lattices(count: int, rays: int, seed: int) -> np.ndarray:
+    """(count, rays, 3): a spherical Fibonacci lattice of `rays` directions turned by a uniformly random
+    rotation per probe (a unit quaternion from a 4D Gaussian), the same for the same seed."""
+    lattice, _ = sh.sphere_directions(rays)
+    q = np.random.default_rng(seed).normal(size=(count, 4))
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    rotation = np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)  # (P, 3, 3)
+    return np.einsum("pij,rj->pri", rotation, lattice)
+
+
+def hit_voxels(scene, voxels, voxel_keys: np.ndarray, origins, directions, hits) -> np.ndarray:
+    """(R,) the voxel each ray's hit lies in (its cell and its face's facing: viewer.rays.voxels' key),
+    K where the ray meets nothing or the back of a face, as the solver's probe rays count them. A hit
+    whose key no voxel has (a face's piece binned into the next cell) takes the nearest voxel of the
+    same facing among the 27 cells around it."""
+    k, n, h = voxels.count, voxels.resolution, voxels.voxel_size
+    out = np.full(len(origins), k, np.int64)
+    front = np.nonzero(hits.front & (hits.face >= 0))[0]
+    if not len(front):
+        return out
+    point = origins[front] + hits.t[front, None] * directions[front]
+    cell = np.clip(np.floor((point - voxels.lo) / h).astype(np.int64), 0, n - 1)
+    facing = face_facing(scene.face_normals)[hits.face[front]]
+    lookup = np.full(n ** 3 * 6, -1, np.int64)
+    lookup[voxel_keys] = np.arange(k)
+    best = lookup[(cell[:, 0] + n * (cell[:, 1] + n * cell[:, 2])) * 6 + facing]
+    stray = np.nonzero(best < 0)[0]
+    best[stray] = k
+    distance = np.full(len(stray), np.inf)
+    for offset in np.stack(np.meshgrid(*([np.arange(-1, 2)] * 3), indexing="ij"), -1).reshape(-1, 3):
+        c = cell[stray] + offset
+        inside = np.all((c >= 0) & (c < n), axis=1)
+        voxel = np.where(inside, lookup[np.where(inside, c[:, 0] + n * (c[:, 1] + n * c[:, 2]), 0) * 6
+                                        + facing[stray]], -1)
+        near = np.where(voxel >= 0, np.linalg.norm(voxels.position[voxel] - point[stray], axis=1), np.inf)
+        better = near < distance
+        best[stray[better]], distance[better] = voxel[better], near[better]
+    out[front] = best
+    return out
+
+
+def timed(run, runs: int = TIMING_RUNS) -> tuple[object, float]:
+    """(the result of run(), the median milliseconds of `runs` calls after a first one that compiles)."""
+    result = run()
+    times = []
+    for _ in range(runs):
+        clock = time.perf_counter()
+        run()
+        times.append(1000.0 * (time.perf_counter() - clock))
+    return result, float(np.median(times))
+
+
+def rungs(scene, lo, hi, probes: int, solver, bounce) -> list[tuple[str, np.ndarray, float, float]]:
+    """(name, estimate (P, 9, 3), gather ms, once-per-geometry ms) of every rung for one room, from the
+    solver's converged light (`solver`, a PhysicalGI brought up to date) and the encoding's bounce
+    gather (`bounce`, a viewer.neural.bounce.Bounce on the same voxels)."""
+    reflected = solver.lighting.reflected.astype(np.float64)
+    voxels, keys = solver.geometry.voxels, solver.geometry.voxel_keys
+    points = ProbeGrid.positions_for(np.asarray(lo, np.float64), np.asarray(hi, np.float64), probes).reshape(-1, 3)
+    found, ms = timed(lambda: bounce.gathered(reflected))
+    out = [("no visibility (patches as points)", found, ms, 0.0)]
+    for cones in CONES:
+        clock = time.perf_counter()
+        tracer = ConeTracer(voxels, cones)
+        setup = 1000.0 * (time.perf_counter() - clock)
+        found, ms = timed(lambda: tracer.gathered(reflected, points))
+        out.append((f"cone traced, {cones} cones", found, ms, setup))
+    caster = TriangleCaster(scene)
+    for rays in RAYS:
+        clock = time.perf_counter()
+        cast = ProbeRays(scene, voxels, keys, points, rays, seed=rays, caster=caster)
+        setup = 1000.0 * (time.perf_counter() - clock)
+        found, ms = timed(lambda: cast.gathered(reflected))
+        out.append((f"exact rays, {rays} a probe", found, ms, setup))
+    # the ceiling of these voxels' light: the solver's own probe rays (256 directions, the same lattice at
+    # every probe, traced on the voxels with its geometry)
+    g = solver.geometry
+    found, ms = timed(lambda: relight.probe_coefficients(g, solver.lights, solver.sun, solver.materials,
+                                                         solver.lighting, include_emitted=False))
+    out.append((f"the solver's own probe rays ({g.settings.directions} a probe, DDA)", found.astype(np.float64),
+                ms, 0.0))
+    return out
+
+
+def lattice(sh_values: np.ndarray, probes: int) -> np.ndarray:
+    """(P, 9, 3) -> (3, 9, M, M, M), the split's layout."""
+    return sh_values.reshape(probes, probes, probes, 9, 3).transpose(4, 3, 0, 1, 2)
+
+
+def room_ladder(scene, lo, hi, target: np.ndarray, valid: np.ndarray, probes: int, solver, bounce) -> dict:
+    """{rung: {raw, filtered, ms, setup_ms}} for one room: best-gain relative RMSE against `target`
+    (3, 9, M, M, M) on the `valid` probes, raw and box filtered."""
+    out = {}
+    for name, found, ms, setup in rungs(scene, lo, hi, probes, solver, bounce):
+        estimate = lattice(found, probes)
+        out[name] = {"raw": best_gain_error(estimate, target, valid),
+                     "filtered": best_gain_error(box_filtered(estimate, valid), target, valid),
+                     "ms": ms, "setup_ms": setup}
+    return out
+
+
+def table(rows: list[dict]) -> tuple[str, dict]:
+    """The markdown table of the rooms' ladders and its numbers: medians and worst per rung."""
+    names = list(rows[0]["ladder"])
+    summary = {}
+    lines = ["| gather of the converged surface light | median | worst | 3x3x3 filtered: median | worst "
+             "| ms a gather (2 cores) | ms once a geometry |", "|---|---|---|---|---|---|---|"]
+    for name in names:
+        of = [r["ladder"][name] for r in rows]
+        s = {k: float(np.median([o[k] for o in of])) for k in ("raw", "filtered", "ms", "setup_ms")}
+        s.update(raw_worst=float(max(o["raw"] for o in of)), filtered_worst=float(max(o["filtered"] for o in of)))
+        summary[name] = s
+        lines.append(f"| {name} | {100 * s['raw']:.1f}% | {100 * s['raw_worst']:.1f}% | {100 * s['filtered']:.1f}% "
+                     f"| {100 * s['filtered_worst']:.1f}% | {s['ms']:.0f} | {s['setup_ms']:.0f} |")
+    return "\n".join(lines), summary
+
