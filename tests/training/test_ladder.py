@@ -6,7 +6,8 @@ import pytest
 
 from scenes import box, quads_to_triangles
 from viewer.neural.bounce import Bounce
-from viewer.rays.cast import embree_available
+from viewer.rays import dda
+from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import voxelize_with_faces
 from viewer.scene import Scene
 from viewer.training.cones import ConeTracer
@@ -37,17 +38,15 @@ def near_points(count: int = 5) -> np.ndarray:
 def room():
     scene = partitioned_room()
     voxelization = voxelize_with_faces(scene, VOXELS)
-    return scene, voxelization.grid, voxelization.keys
+    return scene, voxelization.grid, VoxelRays(scene, dda.Cells.of(voxelization, scene))
 
 
 def test_a_room_of_uniform_light_is_seen_whole_by_rays_and_cones(room):
     """Every surface leaving radiance 1: a point anywhere inside sees 1 in every direction (band 0 only)."""
-    scene, voxels, keys = room
-    if not embree_available():
-        pytest.skip("the ray rung casts on Embree")
+    scene, voxels, rays_of_scene = room
     points = near_points(3)
     ones = np.ones((voxels.count, 3))
-    rays = ProbeRays(scene, voxels, keys, points, 64).gathered(ones)
+    rays = ProbeRays(rays_of_scene, voxels.count, points, 64).gathered(ones)
     np.testing.assert_allclose(rays[:, 0], DC_OF_ONE, rtol=1e-6)
     assert np.abs(rays[:, 1:]).max() < 0.01 * DC_OF_ONE   # the 64-point lattice integrates the rest nearly to 0
     cones = ConeTracer(voxels, 16).gathered(ones, points)
@@ -57,9 +56,7 @@ def test_a_room_of_uniform_light_is_seen_whole_by_rays_and_cones(room):
 def test_a_thin_wall_hides_the_light_behind_it_from_rays_not_from_the_unshadowed_gather(room):
     """Light only beyond the wall: the points before it see none of it; the gather without visibility
     sees it all, the cones leak a little through the mip levels, the rays see exactly none."""
-    scene, voxels, keys = room
-    if not embree_available():
-        pytest.skip("the ray rung casts on Embree")
+    scene, voxels, rays_of_scene = room
     beyond = (voxels.position[:, 0] > 0.3 + voxels.voxel_size)[:, None] * np.ones(3)   # whole cells past it
     points = near_points()
     lo, hi = scene.bounds
@@ -67,7 +64,7 @@ def test_a_thin_wall_hides_the_light_behind_it_from_rays_not_from_the_unshadowed
     lattice = np.linspace(lo[0], hi[0], 9)[1::2]
     near = np.stack(np.meshgrid(lattice, lattice, lattice, indexing="ij"), -1).reshape(-1, 3)[:, 0] < 0.2
     assert unshadowed[near, 0, 0].min() > 0.1 * DC_OF_ONE
-    rays = ProbeRays(scene, voxels, keys, points, 64).gathered(beyond)
+    rays = ProbeRays(rays_of_scene, voxels.count, points, 64).gathered(beyond)
     assert np.abs(rays).max() == 0.0
     cones = ConeTracer(voxels, 16).gathered(beyond, points)
     # trilinear reads mix the lit cells past the wall into the samples at it: 17% of the unshadowed light

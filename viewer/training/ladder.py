@@ -27,8 +27,7 @@ import numpy as np
 from viewer.physical import relight
 from viewer.probes import sh
 from viewer.probes.grid import ProbeGrid
-from viewer.rays.cast import TriangleCaster
-from viewer.rays.voxels import face_facing
+from viewer.rays.voxel_rays import VoxelRays
 from viewer.training.cones import ConeTracer
 
 CONES = (6, 16)
@@ -61,16 +60,14 @@ def box_filtered(estimate: np.ndarray, valid: np.ndarray) -> np.ndarray:
 
 
 class ProbeRays:
-    """`rays` directions from every probe, cast once on the scene's triangles: the voxel each one sees."""
+    """`rays` directions from every probe, cast once on the scene's triangles: the voxel each one lands on,
+    as the solver's probe rays find it (viewer.rays.voxel_rays: a back face or nothing is K)."""
 
-    def __init__(self, scene, voxels, voxel_keys: np.ndarray, points: np.ndarray, rays: int, seed: int = 0,
-                 caster: TriangleCaster | None = None):
-        caster = caster or TriangleCaster(scene)
+    def __init__(self, rays_of_scene: VoxelRays, count: int, points: np.ndarray, rays: int, seed: int = 0):
         self.count, self.rays = len(points), rays
         self.directions = turned_lattices(len(points), rays, seed)                    # (P, R, 3)
-        origins = np.repeat(points, rays, axis=0)
-        hits = caster.closest_hits(origins, self.directions.reshape(-1, 3))
-        self.voxel = hit_voxels(scene, voxels, voxel_keys, origins, self.directions.reshape(-1, 3), hits)
+        hits = rays_of_scene.bundle_hits(points, self.directions).reshape(-1)
+        self.voxel = np.where(hits < 0, count, hits)
         # Monte Carlo weight of a uniform direction on the sphere: 4 pi / rays
         self.basis = sh.basis(self.directions) * (4.0 * np.pi / rays)                  # (P, R, 9)
 
@@ -93,37 +90,6 @@ def turned_lattices(count: int, rays: int, seed: int) -> np.ndarray:
     return np.einsum("pij,rj->pri", rotation, lattice)
 
 
-def hit_voxels(scene, voxels, voxel_keys: np.ndarray, origins, directions, hits) -> np.ndarray:
-    """(R,) the voxel each ray's hit lies in (its cell and its face's facing: viewer.rays.voxels' key),
-    K where the ray meets nothing or the back of a face, as the solver's probe rays count them. A hit
-    whose key no voxel has (a face's piece binned into the next cell) takes the nearest voxel of the
-    same facing among the 27 cells around it."""
-    k, n, h = voxels.count, voxels.resolution, voxels.voxel_size
-    out = np.full(len(origins), k, np.int64)
-    front = np.nonzero(hits.front & (hits.face >= 0))[0]
-    if not len(front):
-        return out
-    point = origins[front] + hits.t[front, None] * directions[front]
-    cell = np.clip(np.floor((point - voxels.lo) / h).astype(np.int64), 0, n - 1)
-    facing = face_facing(scene.face_normals)[hits.face[front]]
-    lookup = np.full(n ** 3 * 6, -1, np.int64)
-    lookup[voxel_keys] = np.arange(k)
-    best = lookup[(cell[:, 0] + n * (cell[:, 1] + n * cell[:, 2])) * 6 + facing]
-    stray = np.nonzero(best < 0)[0]
-    best[stray] = k
-    distance = np.full(len(stray), np.inf)
-    for offset in np.stack(np.meshgrid(*([np.arange(-1, 2)] * 3), indexing="ij"), -1).reshape(-1, 3):
-        c = cell[stray] + offset
-        inside = np.all((c >= 0) & (c < n), axis=1)
-        voxel = np.where(inside, lookup[np.where(inside, c[:, 0] + n * (c[:, 1] + n * c[:, 2]), 0) * 6
-                                        + facing[stray]], -1)
-        near = np.where(voxel >= 0, np.linalg.norm(voxels.position[voxel] - point[stray], axis=1), np.inf)
-        better = near < distance
-        best[stray[better]], distance[better] = voxel[better], near[better]
-    out[front] = best
-    return out
-
-
 def timed(run, runs: int = TIMING_RUNS) -> tuple[object, float]:
     """(the result of run(), the median milliseconds of `runs` calls after a first one that compiles)."""
     result = run()
@@ -140,7 +106,7 @@ def rungs(scene, lo, hi, probes: int, solver, bounce) -> list[tuple[str, np.ndar
     solver's converged light (`solver`, a PhysicalGI brought up to date) and the encoding's bounce
     gather (`bounce`, a viewer.neural.bounce.Bounce on the same voxels)."""
     reflected = solver.lighting.reflected.astype(np.float64)
-    voxels, keys = solver.geometry.voxels, solver.geometry.voxel_keys
+    voxels = solver.geometry.voxels
     points = ProbeGrid.positions_for(np.asarray(lo, np.float64), np.asarray(hi, np.float64), probes).reshape(-1, 3)
     found, ms = timed(lambda: bounce.gathered(reflected))
     out = [("no visibility (patches as points)", found, ms, 0.0)]
@@ -150,10 +116,9 @@ def rungs(scene, lo, hi, probes: int, solver, bounce) -> list[tuple[str, np.ndar
         setup = 1000.0 * (time.perf_counter() - clock)
         found, ms = timed(lambda: tracer.gathered(reflected, points))
         out.append((f"cone traced, {cones} cones", found, ms, setup))
-    caster = TriangleCaster(scene)
     for rays in RAYS:
         clock = time.perf_counter()
-        cast = ProbeRays(scene, voxels, keys, points, rays, seed=rays, caster=caster)
+        cast = ProbeRays(solver.geometry.rays, voxels.count, points, rays, seed=rays)
         setup = 1000.0 * (time.perf_counter() - clock)
         found, ms = timed(lambda: cast.gathered(reflected))
         out.append((f"exact rays, {rays} a probe", found, ms, setup))
@@ -162,7 +127,7 @@ def rungs(scene, lo, hi, probes: int, solver, bounce) -> list[tuple[str, np.ndar
     g = solver.geometry
     found, ms = timed(lambda: relight.probe_coefficients(g, solver.lights, solver.sun, solver.materials,
                                                          solver.lighting, include_emitted=False))
-    out.append((f"the solver's own probe rays ({g.settings.directions} a probe, DDA)", found.astype(np.float64),
+    out.append((f"the solver's own probe rays ({g.settings.directions} a probe)", found.astype(np.float64),
                 ms, 0.0))
     return out
 
