@@ -10,7 +10,7 @@ import numba
 import numpy as np
 
 from viewer.probes import sh
-from viewer.rays import dda
+from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import VoxelGrid
 
 NEAR_FIELD = 1.0 / np.pi
@@ -68,17 +68,17 @@ def emitting_patches(cell: np.ndarray, voxels: VoxelGrid):
     return mean(voxels.position[lit]), normal, area, mean(voxels.emission[lit])
 
 
-def patch_visibility(blockers: dda.Cells, points: np.ndarray, position: np.ndarray, normal: np.ndarray,
+def patch_visibility(blockers: VoxelRays, points: np.ndarray, position: np.ndarray, normal: np.ndarray,
                      lo: np.ndarray, spacing: np.ndarray) -> np.ndarray:
     """(P, E) float32, 1 where probe p sees emitting patch e (at `position` facing `normal`), else 0: one
     ray per probe and cluster of patches (`shadow_targets`)."""
     if len(position) == 0:
         return np.ones((len(points), 0), np.float32)
     target, cluster = shadow_targets(blockers, position, normal, lo, spacing)
-    return dda.pairs_clear(blockers, points, target)[:, cluster]
+    return blockers.pairs_clear(points, target)[:, cluster]
 
 
-def shadow_targets(blockers: dda.Cells, position: np.ndarray, normal: np.ndarray, lo: np.ndarray,
+def shadow_targets(blockers: VoxelRays, position: np.ndarray, normal: np.ndarray, lo: np.ndarray,
                    spacing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Where the visibility rays of emitting patches end: (C, 3) one point per cluster, and (E,) each
     patch's cluster. Patches are clustered VISIBILITY_CELLS lattice cells a side per facing; a cluster's
@@ -95,7 +95,7 @@ def shadow_targets(blockers: dda.Cells, position: np.ndarray, normal: np.ndarray
     centre /= np.bincount(cluster, minlength=count)[:, None]
     lift = np.stack([np.bincount(cluster, normal[:, a], minlength=count) for a in range(3)], 1)
     lift /= np.maximum(np.linalg.norm(lift, axis=1, keepdims=True), 1e-12)
-    return centre + SHADOW_OFFSET * blockers.h * lift, cluster
+    return centre + SHADOW_OFFSET * blockers.cells.h * lift, cluster
 
 
 def emitter_sh(lights, points: np.ndarray, visible: np.ndarray | None = None) -> np.ndarray:
@@ -169,7 +169,7 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
                         row[i] += rc * w[i] * basis[i]
 
 
-def sun_sh(sun, blockers: dda.Cells | None, points: np.ndarray) -> np.ndarray:
+def sun_sh(sun, blockers: VoxelRays | None, points: np.ndarray) -> np.ndarray:
     """(P, 9, 3) the sun's delta at the probes where a ray towards it leaves the scene unblocked."""
     out = np.zeros((len(points), sh.SH_COUNT, 3))
     if sun is None or not np.any(np.asarray(sun.irradiance) > 0):
@@ -179,8 +179,8 @@ def sun_sh(sun, blockers: dda.Cells | None, points: np.ndarray) -> np.ndarray:
     return visible[:, None, None] * sh.project_delta(direction, sun.irradiance)[None]
 
 
-def sun_visibility(blockers: dda.Cells | None, points: np.ndarray, direction: np.ndarray) -> np.ndarray:
+def sun_visibility(blockers: VoxelRays | None, points: np.ndarray, direction: np.ndarray) -> np.ndarray:
     """(P,) float 1 where a ray from the probe towards the sun (`direction` points to it) escapes."""
     if blockers is None:
         return np.ones(len(points))
-    return dda.escapes(blockers, points, direction).astype(np.float64)
+    return blockers.escapes(points, direction).astype(np.float64)

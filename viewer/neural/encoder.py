@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from viewer.rays import dda
+from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
 from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, Encoding
@@ -101,7 +101,7 @@ class Encoder:
         return (int(resolution) == self.resolution and np.array_equal(np.asarray(lo, np.float64), self.lo)
                 and np.array_equal(np.asarray(hi, np.float64), self.hi))
 
-    def encode(self, voxels: VoxelGrid, sun, blockers: dda.Cells | None) -> Encoding:
+    def encode(self, voxels: VoxelGrid, sun, blockers: VoxelRays | None) -> Encoding:
         """The network's input for `voxels` and `sun`, shadowed by `blockers` (`encoding.occluders` of the
         scene; None: nothing casts a shadow): `encoding.encode`'s numbers (to float32 round-off). Pass
         the same occluders object while the scene's triangles stay the same: an equal new one is found

@@ -15,9 +15,9 @@ Four choices make a small network generalize beyond the layouts it was trained o
   multiplied by it, so a lamp twice as bright gives exactly twice the light, whatever was trained.
 - **Direct light as an input, shadowed.** The light arriving straight from the emitters is most of the
   field: one term per emitting lattice cell, times its visibility from the probe. The shadows are
-  traced against the scene's own triangles (`viewer.rays.dda`, cell-exact, on the encoder's coarse voxel
-  grid), one ray per probe and cluster of VISIBILITY_CELLS^2 emitting cells, and the sun's one ray per
-  probe. Version 2 left the shadows to the network, and it could not learn them: on the v2 rooms
+  traced against the scene's own triangles (on the ray layer, `viewer.rays.voxel_rays`: Embree, or the
+  cell-exact DDA on the encoder's coarse voxel grid), one ray per probe and cluster of VISIBILITY_CELLS^2
+  emitting cells, and the sun's one ray per probe. Version 2 left the shadows to the network, and it could not learn them: on the v2 rooms
   (partitions, objects, lamps on walls) the unshadowed input was 54% off the shadowed direct light in
   the median room, and after training all the light was 64% off, against 12% with traced shadows
   (docs/TRAINING.md).
@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from viewer.rays import dda
+from viewer.rays.voxel_rays import VoxelRays
 from viewer.probes import sh
 from viewer.rays.voxels import VoxelGrid
 
@@ -87,11 +88,11 @@ SHADOW_CELLS = 2
 """The occluders' grid is this many times finer than the voxels' (the cells a shadow ray marches)."""
 
 
-def occluders(scene, voxels: VoxelGrid) -> dda.Cells:
-    """What casts the encoding's shadows: every triangle of `scene`, listed on the cells of `voxels`
-    divided SHADOW_CELLS times per axis."""
+def occluders(scene, voxels: VoxelGrid) -> VoxelRays:
+    """What casts the encoding's shadows: every triangle of `scene`, on the ray layer (Embree where it is
+    installed, else the DDA on the cells of `voxels` divided SHADOW_CELLS times per axis)."""
     k = SHADOW_CELLS
-    return dda.Cells.blocking(scene, voxels.lo, voxels.voxel_size / k, voxels.resolution * k)
+    return VoxelRays(scene, dda.Cells.blocking(scene, voxels.lo, voxels.voxel_size / k, voxels.resolution * k))
 
 
 def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None) -> Encoding:
@@ -105,7 +106,7 @@ def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None
     return encode(grid, scene.sun, lo, hi, resolution, occluders(scene, grid))
 
 
-def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: dda.Cells | None) -> Encoding:
+def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays | None) -> Encoding:
     """The network's input for the probe lattice of `resolution`^3 cells over the box [lo, hi], with the
     direct light shadowed by `blockers` (`occluders`; None: nothing casts a shadow)."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)

@@ -18,7 +18,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from viewer.rays import dda
+from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.neural.domain import Domain, Shape, measure, outside
 from viewer.neural.encoder import Encoder
@@ -156,7 +156,7 @@ class NeuralField:
     def resolution(self) -> int:
         return self.card.probes
 
-    def predict(self, voxels: VoxelGrid, sun, lo, hi, blockers: dda.Cells | None, include_emitted: bool = True,
+    def predict(self, voxels: VoxelGrid, sun, lo, hi, blockers: VoxelRays | None, include_emitted: bool = True,
                 timings: dict | None = None, resolution: int | None = None, reuse: bool = True) -> ProbeGrid:
         """Probes over [lo, hi]: all the incident light (`include_emitted`, as `sample` and Mitsuba see
         it) or the light reflected by surfaces alone (what the renderer samples). `blockers` cast the

@@ -9,7 +9,7 @@ from scipy import sparse
 
 from viewer.neural import encoding
 from viewer.neural.encoding import CHANNELS
-from viewer.rays import dda
+from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import VoxelGrid
 
 
@@ -59,11 +59,11 @@ class LatticeShadows:
     shadow) on one lattice: the visibility rays of emitting patches, and the sun's visibility for the
     last direction asked."""
 
-    def __init__(self, blockers: dda.Cells | None, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray):
+    def __init__(self, blockers: VoxelRays | None, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray):
         self.blockers, self.points, self.lo, self.spacing = blockers, points, lo, spacing
         self._sun: tuple[bytes, np.ndarray] | None = None
 
-    def fits(self, blockers: dda.Cells | None) -> bool:
+    def fits(self, blockers: VoxelRays | None) -> bool:
         """Whether `blockers` are these occluders: the same object, or equal arrays (a new listing of the
         same triangles)."""
         a, b = self.blockers, blockers
@@ -71,7 +71,7 @@ class LatticeShadows:
             return True
         if a is None or b is None:
             return False
-        return all(np.array_equal(x, y) for x, y in zip(a.args(), b.args()))
+        return all(np.array_equal(x, y) for x, y in zip(a.cells.args(), b.cells.args()))
 
     def targets(self, position: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """`encoding.shadow_targets` of the emitting patches: (C, 3) where each cluster's ray ends, (E,)
@@ -82,11 +82,11 @@ class LatticeShadows:
 
     def visibility(self, target: np.ndarray) -> np.ndarray:
         """(C, P) float32: 1 where probe p sees the end of ray c, as `encoding.patch_visibility` traces
-        it (the same `dda.pairs_clear`, each pair on its own: any subset of the clusters gives their
+        it (the same `VoxelRays.pairs_clear`, each pair on its own: any subset of the clusters gives their
         columns of the whole)."""
         if self.blockers is None:
             return np.ones((len(target), len(self.points)), np.float32)
-        return np.ascontiguousarray(dda.pairs_clear(self.blockers, self.points, target).T)
+        return np.ascontiguousarray(self.blockers.pairs_clear(self.points, target).T)
 
     def sun_visibility(self, direction: np.ndarray) -> np.ndarray:
         """(P,) `encoding.sun_visibility` against these occluders, kept for the last direction asked."""

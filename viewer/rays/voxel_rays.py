@@ -96,6 +96,20 @@ class VoxelRays:
             out[part] = ~self.caster.blocked(a[part], d[part], length[part])
         return out | (length <= 0)
 
+    def pairs_clear(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(A, B) float32: 1 where the segment from a[i] to b[j] crosses no surface, from either side."""
+        a = np.ascontiguousarray(a, np.float64).reshape(-1, 3)
+        b = np.ascontiguousarray(b, np.float64).reshape(-1, 3)
+        if self.caster is None:
+            return dda.pairs_clear(self.cells, a, b)
+        out = np.empty((len(a), len(b)), np.float32)
+        rows = max(1, RAYS_PER_CALL // max(len(b), 1))
+        for start in range(0, len(a), rows):
+            part = a[start:start + rows]
+            out[start:start + rows] = self.segments_clear(np.repeat(part, len(b), axis=0),
+                                                          np.tile(b, (len(part), 1))).reshape(len(part), len(b))
+        return out
+
 
 def _listing(cells: dda.Cells) -> tuple:
     return cells.lo, cells.h, cells.n, cells.first, cells.triangle, cells.voxel
