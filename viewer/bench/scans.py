@@ -9,7 +9,7 @@ trimesh reads; the one the docs measure is the Stanford bunny (the Stanford 3D S
 https://graphics.stanford.edu/data/3Dscanrep/: `bunny/reconstruction/bun_zipper.ply`, 69,451
 triangles), which is not shipped here: the repository asks that its scans be taken from it.
 
-The scan is centred, scaled to 0.45 of the box's height, set on the box's floor in its free front-
+The scan is centred (its vertices' mean), scaled to 0.9 tall (the box is 2), set on the box's floor in its free front-
 left quarter, and its triangles are split until the room has the count asked for. Each pass splits the
 largest triangles along their longest edge, at its midpoint: the surface stays the same, point for
 point, and the triangles stay of like size, as a finer scan's would. A count below the scan's own keeps
@@ -55,13 +55,15 @@ def refine(vertices: np.ndarray, faces: np.ndarray, count: int) -> tuple[np.ndar
     return vertices, faces
 
 
-def scan_room(scan: Scene, triangles: int, height: float = 0.45, albedo: float = 0.7) -> Scene:
-    """The Cornell box with `scan` standing on its floor, `height` of the box's height tall and grey
+def scan_room(scan: Scene, triangles: int, height: float = 0.9, albedo: float = 0.7) -> Scene:
+    """The Cornell box with `scan` standing on its floor, `height` tall (the box is 2 high) and grey
     (`albedo`), `triangles` in all (or the box and the scan as they are, if that is more)."""
     room = load(ROOM)
     lo, hi = scan.bounds
-    vertices = (scan.vertices - 0.5 * (lo + hi)) * (height * float(np.ptp(room.vertices[:, 1])) / float((hi - lo)[1]))
-    vertices[:, 1] += float(room.vertices[:, 1].min()) - vertices[:, 1].min()     # on the floor
+    up = room.face_normals[:, 1] > 0.99
+    floor = float(room.triangles[up][..., 1].min())                      # the top of the floor: the lowest face up
+    vertices = (scan.vertices - scan.vertices.mean(axis=0)) * (height / float((hi - lo)[1]))
+    vertices[:, 1] += floor - vertices[:, 1].min()                        # standing on it
     vertices[:, [0, 2]] += PLACE
     vertices, faces = refine(vertices, scan.faces, triangles - len(room.faces))
     n = len(room.vertices)
