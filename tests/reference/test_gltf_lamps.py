@@ -48,13 +48,13 @@ def test_a_point_light_s_sphere_gives_the_irradiance_of_mitsuba_s_point_emitter(
 
 def test_mitsuba_sees_a_spot_s_cone_through_its_shade(tmp_path):
     """The same shaded sphere in Mitsuba: I cos / d^2 inside the inner cone, the falloff in between, nothing
-    beyond the outer cone (the direct light alone, max_depth=2, so the room's bounces do not count)."""
+    beyond the outer cone (the light straight from the emitters alone, max_depth=1: no bounce in the room)."""
     inner, outer, intensity = 0.3, 0.5, 20.0
     scene = load(spot_room(tmp_path / "spot.gltf", {"type": "spot", "intensity": intensity,
                                                     "spot": {"innerConeAngle": inner, "outerConeAngle": outer}}))
     theta = np.array([0.0, 0.15, 0.25, 0.4, 0.55, 0.7])
     points = np.stack([SPOT[1] * np.tan(theta), np.full_like(theta, 1e-3), np.zeros_like(theta)], axis=1)
-    ours = reference.irradiance(scene, points, np.tile(UP, (len(points), 1)), spp=1024, max_depth=2,
+    ours = reference.irradiance(scene, points, np.tile(UP, (len(points), 1)), spp=1024, max_depth=1,
                                 cache=False).mean(axis=1)
     ratio = ours / (intensity * np.cos(theta) ** 3 / SPOT[1] ** 2)
     np.testing.assert_allclose(ratio[theta < inner], 1.0, rtol=0.03)
