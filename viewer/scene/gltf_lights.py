@@ -23,7 +23,9 @@
   difference): full light inside the inner cone and none beyond the outer one, as the extension asks,
   with the sphere sliding behind the rim for the smooth falloff between. A sharp edge needs a large
   shade (D = r / sin(delta)), so the penumbra is at least 2 asin(1 / SHADE_REACH) = 11.5 degrees wide,
-  its outer edge kept at outerConeAngle; a cone narrower than that is penumbra throughout. The angles
+  its outer edge kept at outerConeAngle; a cone narrower than that is penumbra throughout, its shade
+  longer. Behind the sphere the shade reaches SHADE_WALL radii (1.5% of the scene's size): a
+  surface closer than that behind a spot cuts into the shade, and the part inside is lit. The angles
   default to 0 and pi/4 and are clamped to 0 <= inner < outer <= pi/2; a value that is not a finite
   number is refused.
 - `range` is ignored, as the extension allows.
