@@ -242,14 +242,6 @@ def test_a_point_light_is_a_small_closed_sphere_of_the_same_power(tmp_path):
     assert np.all(s.albedo[bulb] == 0)
 
 
-def test_a_spot_light_shines_everywhere_and_says_so(tmp_path, capsys):
-    s = load(lamp_gltf(tmp_path / "spot.gltf", {"type": "spot", "intensity": 5.0, "spot": {"outerConeAngle": 0.3}},
-                       [0.0, 1.0, 0.0]))
-    assert s.group_index("light-0") >= 0 and s.emission.max() > 0
-    err = capsys.readouterr().err.splitlines()
-    assert len(err) == 1 and "spot" in err[0] and "cone" in err[0], err
-
-
 def test_draco_primitives_without_their_own_data_are_refused_even_when_not_declared_required(tmp_path):
     """A file that lists KHR_draco_mesh_compression as used only, yet leaves its positions to Draco (an
     accessor without a buffer view): the positions would read as zeros, so it is refused by name."""

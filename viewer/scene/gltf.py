@@ -14,7 +14,8 @@ specification and the Khronos sample models define it.
   Emission = emissiveFactor x KHR_materials_emissive_strength (a file whose emitters all stay at or
   under 1 without it gets a hint: such a lamp barely lights a room).
 - Lights (KHR_lights_punctual, viewer.scene.gltf_lights): the first directional light is the sun; a
-  point or spot light is a small emitting sphere of the same radiant intensity (a spot's cone left out).
+  point or spot light is a small emitting sphere of the same radiant intensity, a spot's inside a black
+  shade whose opening gives it its cone.
 - Cameras: every perspective camera in the node tree, in the tree's order; the first is the scene's
   opening view (a sidecar camera overrides it).
 - `extensionsRequired`: an extension the viewer does not read is refused in one line naming it.
@@ -115,6 +116,9 @@ class _Builder:
         sun, lamps = punctual_lights(self.path, self.data.document, self.lights, size or 1.0)
         for lamp in lamps:
             self._add(lamp.vertices, lamp.faces, np.zeros((len(lamp.faces), 3)), lamp.radiance, lamp.name)
+            if lamp.shade is not None:   # black, and a group of its own: a lamp's colour edit leaves it dark
+                vertices, faces = lamp.shade
+                self._add(vertices, faces, np.zeros((len(faces), 3)), np.zeros(3), f"{lamp.name} shade")
         textures = tuple(self.textures.get(g) for g in self.groups)
         cameras = tuple(c for c in (self._camera(i, world, 0.5 * (lo + hi)) for i, world in self.cameras)
                         if c is not None)
