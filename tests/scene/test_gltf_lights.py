@@ -101,3 +101,23 @@ def test_a_malformed_cone_is_refused_in_one_line(tmp_path, spot):
     with pytest.raises(SceneError) as caught:
         load(path)
     assert str(path) in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_a_point_light_far_above_the_floor_gives_i_over_d_squared_on_a_fine_grid(tmp_path):
+    """At 32 voxels the lamp's sphere spans few patches and the floor lies beyond their far field: each
+    curved patch is still summed piece by piece, so the floor straight below gets I cos / d^2 (a patch's
+    area times the cosine of its mean normal gave 0.62-0.67 of it)."""
+    intensity = 20.0
+    scene = load(spot_room(tmp_path / "point.gltf", {"type": "point", "intensity": intensity}))
+    g = geometry.build(scene, geometry.GeometrySettings(voxels=32, probes=4))
+    lights = lightpaths.build(scene, g)
+    direct = relight.direct_irradiance(lights, geometry.sun_paths(g, None), relight.materials(scene, g, lights))
+    floor = (g.voxels.normal[:, 1] > 0.99) & (g.voxels.position[:, 1] < 1e-3)
+    to_lamp = LAMP - g.voxels.position[floor]
+    distance = np.linalg.norm(to_lamp, axis=1)
+    cosine = to_lamp[:, 1] / distance
+    ratio = direct[floor].mean(axis=1) / (intensity * cosine / distance ** 2)
+    below = cosine > 0.9
+    assert below.sum() > 10
+    np.testing.assert_allclose(ratio[below], 1.0, atol=0.02)
+    np.testing.assert_allclose(ratio, 1.0, atol=0.05)

@@ -32,8 +32,10 @@ scenes (mean relative RMSE, CPU seconds for the lamp paths): 1 voxel 4.13%, 0.61
 PAIRS_PER_CALL = 1 << 20
 """Visibility rays cast at a time (their origins, directions and lengths take about 60 MB)."""
 FAR_FIELD = 6.0
-"""Distance, in patch sizes, beyond which a patch reaches a receiver as one piece at its centre (the
+"""Distance, in patch sizes, beyond which a flat patch reaches a receiver as one piece at its centre (the
 pieces' directions differ by less than ~1/FAR_FIELD radians there, below what L2 SH resolves)."""
+FLAT = 0.999
+"""A patch is flat when every piece's normal is this close (cosine) to the patch's mean normal."""
 
 
 @dataclass(frozen=True)
@@ -122,9 +124,15 @@ def build(scene: Scene, geometry: Geometry) -> LightPaths:
     target = np.ascontiguousarray(centre + SURFACE_OFFSET * h * patch_normal)
     order = np.argsort(patch, kind="stable")                         # pieces grouped by patch
     first = np.concatenate([[0], np.cumsum(np.bincount(patch, minlength=u))]).astype(np.int64)
+    # a curved patch (the pieces of a small sphere: a glTF point light) is summed piece by piece at any
+    # distance: its area times the cosine of its mean normal is not its projected area (0.62-0.67 of a
+    # point light's I / d^2 straight below it, 1.00 piece by piece)
+    bent = np.zeros(u, bool)
+    np.logical_or.at(bent, patch, np.einsum("ij,ij->i", normal, patch_normal[patch]) < FLAT)
+    far = np.where(bent, np.inf, FAR_FIELD * size)
     patches = (np.ascontiguousarray(centre), np.ascontiguousarray(patch_normal), patch_area, first,
                np.ascontiguousarray(position[order]), np.ascontiguousarray(normal[order]),
-               np.ascontiguousarray(area[order]), target, FAR_FIELD * size)
+               np.ascontiguousarray(area[order]), target, far)
     voxel_irradiance = _surface_irradiance(np.ascontiguousarray(grid.position), np.ascontiguousarray(grid.normal),
                                            *patches)
     starts = grid.position + SURFACE_OFFSET * h * grid.normal           # in front of the voxel's own patch
@@ -181,14 +189,14 @@ def _surface_irradiance(points, normals, centre, patch_normal, patch_area, first
                         far):
     """(R, U) float32 irradiance per unit patch radiance at surface points, before visibility: sum over
     the patch's pieces of cos_i cos_s A_s / (r^2 + A_s / pi) (one term for the whole patch beyond
-    `far`)."""
+    `far[j]`)."""
     u = centre.shape[0]
     out = np.zeros((points.shape[0], u), np.float32)
     for i in numba.prange(points.shape[0]):
         p, m = points[i], normals[i]
         for j in range(u):
             total = 0.0
-            if _is_near(p, centre[j], far):
+            if _is_near(p, centre[j], far[j]):
                 for s in range(first[j], first[j + 1]):
                     omega, dx, dy, dz = _solid_angle(p, spos[s], snormal[s], sarea[s])
                     total += omega * max(dx * m[0] + dy * m[1] + dz * m[2], 0.0)
@@ -215,7 +223,7 @@ def _sh9(x, y, z, out, scale):
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _probe_sh(points, centre, patch_normal, patch_area, first, spos, snormal, sarea, target, far):
     """(P, 9, U) float32 SH of each patch's light at each probe per unit radiance, before visibility:
-    piece by piece for near patches, one direction and solid angle for the whole patch beyond `far`."""
+    piece by piece for near patches, one direction and solid angle for the whole patch beyond `far[j]`."""
     u = centre.shape[0]
     out = np.zeros((points.shape[0], 9, u), np.float32)
     for i in numba.prange(points.shape[0]):
@@ -223,7 +231,7 @@ def _probe_sh(points, centre, patch_normal, patch_area, first, spos, snormal, sa
         acc = np.zeros(9)
         for j in range(u):
             acc[:] = 0.0
-            if _is_near(p, centre[j], far):
+            if _is_near(p, centre[j], far[j]):
                 for s in range(first[j], first[j + 1]):
                     omega, dx, dy, dz = _solid_angle(p, spos[s], snormal[s], sarea[s])
                     if omega > 0:
