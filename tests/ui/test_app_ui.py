@@ -200,6 +200,24 @@ def test_light_edits_move_scale_and_recolour_only_the_emitter(cornell):
     assert "light" not in edits.material_groups
 
 
+def test_moving_a_spot_light_moves_its_shade_with_it(tmp_path):
+    """A glTF spot is its sphere (the emitter group) inside a black shade: dragging the light moves both,
+    and the shade is not offered as a material to recolour."""
+    from viewer.scene import load
+    from scene.test_gltf_lights import spot_room   # the glTF room of the spot-light tests
+    from viewer.scene.gltf_lights import shade_group
+
+    scene = load(spot_room(tmp_path / "spot.gltf", {"type": "spot", "intensity": 20.0, "name": "lamp",
+                                                     "spot": {"innerConeAngle": 0.3, "outerConeAngle": 0.5}}))
+    edits = SceneEdits(scene)
+    lamp = edits.light.group
+    assert shade_group(lamp) in scene.groups and shade_group(lamp) not in edits.material_groups
+    edits.set_light(offset=(0.5, -0.25, 0.0))
+    edited = edits.apply()
+    for group in (lamp, shade_group(lamp)):
+        np.testing.assert_allclose(_group_vertices(edited, group), _group_vertices(scene, group) + [0.5, -0.25, 0.0])
+
+
 def test_material_edits_and_reset(cornell):
     edits = SceneEdits(cornell)
     edits.set_albedo("red-wall", (0.1, 0.2, 0.7))

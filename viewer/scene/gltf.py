@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from viewer.scene.gltf_data import MALFORMED, GltfData, integer, one_line, rgb
-from viewer.scene.gltf_lights import punctual_lights
+from viewer.scene.gltf_lights import punctual_lights, shade_group
 from viewer.scene.gltf_textures import face_uv, read_texture
 from viewer.scene.types import Camera, Scene, SceneError, note
 
@@ -118,7 +118,7 @@ class _Builder:
             self._add(lamp.vertices, lamp.faces, np.zeros((len(lamp.faces), 3)), lamp.radiance, lamp.name)
             if lamp.shade is not None:   # black, and a group of its own: a lamp's colour edit leaves it dark
                 vertices, faces = lamp.shade
-                self._add(vertices, faces, np.zeros((len(faces), 3)), np.zeros(3), f"{lamp.name} shade")
+                self._add(vertices, faces, np.zeros((len(faces), 3)), np.zeros(3), shade_group(lamp.name))
         textures = tuple(self.textures.get(g) for g in self.groups)
         cameras = tuple(c for c in (self._camera(i, world, 0.5 * (lo + hi)) for i, world in self.cameras)
                         if c is not None)

@@ -59,6 +59,11 @@ SHADE_SEGMENTS = 24
 """Sides of the shade's round opening and wall, as the sphere's."""
 
 
+
+def shade_group(lamp: str) -> str:
+    """The group name of the shade around the spot light whose sphere is group `lamp`."""
+    return f"{lamp} shade"
+
 @dataclass(frozen=True)
 class Lamp:
     """A point or spot light as an emitting closed mesh."""

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from viewer.scene import DirectionalLight, Scene
+from viewer.scene.gltf_lights import shade_group
 
 
 def emitter_group(scene: Scene) -> str | None:
@@ -74,7 +75,7 @@ class SceneEdits:
     @property
     def material_groups(self) -> list[str]:
         """Groups whose colour can be edited (all but the light)."""
-        return [g for g in self.base.groups if g != self.light.group]
+        return [g for g in self.base.groups if g not in (self.light.group, shade_group(str(self.light.group)))]
 
     def albedo_of(self, group: str) -> np.ndarray:
         return self.albedo.get(group, self.base.group_albedo(group))
@@ -116,6 +117,8 @@ class SceneEdits:
                 matrix[:3, :3] *= light.size
                 matrix[:3, 3] = c + light.offset - light.size * c   # scale about the centre, then move
                 scene = scene.transformed_group(light.group, matrix)
+                if shade_group(light.group) in scene.groups:   # a spot's shade moves with its sphere
+                    scene = scene.transformed_group(shade_group(light.group), matrix)
             scene = scene.with_emission(light.group, light.colour * light.intensity)
         elif light.direction is not None:
             scene = scene.with_sun(DirectionalLight(light.direction, light.colour * light.intensity))
