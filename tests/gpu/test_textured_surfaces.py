@@ -136,3 +136,28 @@ def test_every_view_draws_a_textured_scene(offscreen, tmp_path):
     for view in VIEWS:
         image = offscreen.render(CAMERA, view=view)
         assert image[pixel(scene, (0.0, 0.0))][:3].max() > 0 or view in ("final", "direct", "indirect", "probes"), view
+
+
+def test_the_final_gather_reads_the_texture_where_its_rays_land(gl_context, tmp_path):
+    """What a lightmap texel reflects into the final gather is its face's albedo times the texture there
+    (over the texture's mean), not the face's mean colour: the checker's red quarter reflects red."""
+    from viewer.gpu.direct_bake import BakedDirectLight
+    from viewer.gpu.indirect_bake import BakedIndirectLight
+
+    scene = load(checker_quad(tmp_path / "quad.gltf"))
+    lightmap = BakedDirectLight(gl_context, scene, 0.05)
+    bake = BakedIndirectLight(gl_context, lightmap, scene)
+    try:
+        albedo, _ = bake._reflected()
+        pixels, _ = bake._covered
+        front = albedo[pixels[:len(lightmap.texel_points)]]
+        x, y = lightmap.texel_points[:, 0], lightmap.texel_points[:, 1]
+        inner = (np.abs(np.abs(x) - 0.5) < 0.1) & (np.abs(np.abs(y) - 0.5) < 0.1)   # the texels' centres
+        quarters = [inner & (x * sx > 0) & (y * sy > 0) for sx, sy in ((-1, 1), (1, 1), (-1, -1), (1, -1))]
+        red, green, blue, grey = (front[q].mean(axis=0) for q in quarters)
+        assert red[0] > 3 * red[1] and green[1] > 3 * green[0] and blue[2] > 3 * blue[0]   # (bilinear blends)
+        assert abs(grey[0] - grey[2]) < 0.1 * grey[0] and grey[0] > green[0]
+        np.testing.assert_allclose(front.mean(axis=0), scene.albedo[0], rtol=0.1)   # the texture's mean: the face's
+    finally:
+        bake.release()
+        lightmap.release()

@@ -227,12 +227,14 @@ def _rays(points, normals, tangents, bitangents, rows, columns, shift, lift, tod
     return origins, directions
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@numba.njit(cache=True, nogil=True)
 def _pixels(face, u, v, front, face_tile, tile_origin, tile_n, width):
     """The lightmap pixel of each hit (face, barycentrics u, v, side), ESCAPED for none or a face without
-    a tile: the front image's for a front hit, the back image's (`width` further along the row) else."""
+    a tile: the front image's for a front hit, the back image's (`width` further along the row) else.
+    One thread: a few nanoseconds a ray beside Embree's microsecond, and a parallel loop would add
+    seconds to a first run's compile."""
     out = np.empty(face.shape[0], np.int32)
-    for r in numba.prange(face.shape[0]):
+    for r in range(face.shape[0]):
         f = face[r]
         if f < 0 or face_tile[f] < 0:
             out[r] = ESCAPED
@@ -328,11 +330,11 @@ def _bounding_sphere(v0: np.ndarray, e1: np.ndarray, e2: np.ndarray) -> tuple[fl
     return float(centre[0]), float(centre[1]), float(centre[2]), 1.01 * radius + 1e-12
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@numba.njit(cache=True, nogil=True)
 def _inside(hits, width):
     count, rays = hits.shape
     out = np.zeros(count, np.bool_)
-    for s in numba.prange(count):
+    for s in range(count):   # once a geometry, a read a ray: one thread
         back = 0
         for k in range(rays):
             p = hits[s, k]

@@ -71,14 +71,14 @@ def gather_texels(values, rows, weights, pixels, image):
         image[p, 0], image[p, 1], image[p, 2] = r, g, b
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@numba.njit(cache=True, nogil=True)
 def coplanar_tent(points, normals, distance, near, radius):
     """(S, K) float32 tent weights 1 - distance / radius of the neighbours `near` (S, K) that share a
     sample's plane (normals within 0.999, off its plane by under 5% of the radius), 0 for the others;
     `near` is set to 0 where the query found none (numbered len(points))."""
     count = points.shape[0]
     tent = np.zeros(near.shape, np.float32)
-    for s in numba.prange(count):
+    for s in range(count):   # once a geometry, a few operations a neighbour: one thread
         for k in range(near.shape[1]):
             j = near[s, k]
             if j >= count:
