@@ -29,11 +29,10 @@ from viewer.rays import dda
 from viewer.rays.cast import TriangleCaster
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
-from viewer.gpu.texel_samples import SAMPLE_STRIDE, gather_texels, strided_samples, tent_neighbours
+from viewer.gpu.texel_samples import SAMPLE_STRIDE, gather_texels, strided_samples, tent_neighbours, texture_ratio
 from viewer.probes.weights import SurfaceBake, SurfaceWeights
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
-from viewer.scene.textures import relative_at
 from viewer.rays.voxels import grid_frame
 
 VISIBILITY_VOXELS = 32
@@ -92,8 +91,7 @@ class BakedIndirectLight:
         self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
         """(albedo, albedo x direct irradiance) of every pixel, once per bake or colour edit (`_reflected`)."""
         self._covered_pixels: tuple[np.ndarray, np.ndarray] | None = None
-        self._texture_ratio: tuple[tuple, np.ndarray | None] | None = None
-        """(the scene's textures, texture / its mean at every covered pixel: None without textures)."""
+        self._texture_ratio: tuple[tuple, np.ndarray | None] | None = None   # (textures, texture_ratio)
         self._scratch: np.ndarray | None = None
         """The update's albedo x (direct + indirect) of every pixel, what the gather's rays read."""
         self._bake: SurfaceBake | None = None
@@ -359,26 +357,14 @@ class BakedIndirectLight:
             pixels, faces = self._covered
             albedo = np.zeros_like(self._direct)
             albedo[pixels] = self.scene.albedo[self.scene.face_areas > 0][faces]
-            ratio = self._textured()
-            if ratio is not None:   # a textured face reflects its texture's colour where each ray lands
-                albedo[pixels] = np.minimum(albedo[pixels] * ratio, 0.999)
+            textures = tuple(map(id, self.scene.textures or ()))    # the same across colour edits
+            if self._texture_ratio is None or self._texture_ratio[0] != textures:
+                self._texture_ratio = (textures, texture_ratio(self.scene, self.lightmap, faces))
+            if self._texture_ratio[1] is not None:   # a textured face reflects its texture where a ray lands
+                albedo[pixels] = np.minimum(albedo[pixels] * self._texture_ratio[1], 0.999)
             self._reflectance = (albedo, albedo * self._direct)
             self._scratch = np.empty_like(albedo)
         return self._reflectance
-
-    def _textured(self) -> np.ndarray | None:
-        """(covered pixels, 3) texture(uv) / its mean at each covered pixel's point (1 on plain faces), or None
-        for a scene without textures; kept while the scene's textures stay the same."""
-        key = tuple(map(id, self.scene.textures or ()))
-        if self._texture_ratio is None or self._texture_ratio[0] != key:
-            ratio = None
-            if self.scene.textured:
-                _, faces = self._covered
-                kept = np.flatnonzero(self.scene.face_areas > 0)
-                points = np.concatenate([self.lightmap.texel_points] * 2)
-                ratio = relative_at(self.scene, kept[faces], points).astype(np.float32)
-            self._texture_ratio = (key, ratio)
-        return self._texture_ratio[1]
 
     @property
     def _covered(self) -> tuple[np.ndarray, np.ndarray]:

@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 
 from viewer.gpu.direct_bake import BakedDirectLight
 from viewer.gpu.final_gather import GatherRays
+from viewer.scene.textures import relative_at
 
 SAMPLE_STRIDE = 2   # the texels at odd local coordinates: strided_samples is written for 2
 """The probes' light is evaluated at every SAMPLE_STRIDE-th texel of a tile along each axis (4 cm at the
@@ -109,3 +110,14 @@ def tent_neighbours(lightmap: BakedDirectLight, samples: np.ndarray,
     tent[rays.inside(lightmap.covered.shape[1])[near] & ~own] = 0.0
     tent[tent.sum(axis=1) == 0.0, 0] = 1.0        # (a sample among more coincident ones than FILTER_MAX)
     return near, tent / tent.sum(axis=1, keepdims=True)
+
+
+def texture_ratio(scene, lightmap: BakedDirectLight, faces: np.ndarray) -> np.ndarray | None:
+    """(pixels, 3) float32 texture(uv) / its mean at the point of each covered pixel of the (front | back)
+    image (1 on plain faces), whose faces among the non-degenerate ones are `faces`: what a pixel's albedo
+    is its face's times. None for a scene without textures."""
+    if not scene.textured:
+        return None
+    kept = np.flatnonzero(scene.face_areas > 0)
+    points = np.concatenate([lightmap.texel_points] * 2)
+    return relative_at(scene, kept[faces], points).astype(np.float32)
