@@ -43,7 +43,7 @@ fi
 
 # Compile the ray kernels once now (numba caches them), so that the first `python -m viewer` starts in
 # seconds rather than minutes.
-echo "setup: compiling the ray kernels for this machine (numba caches them; a minute or two) ..." >&2
+echo "setup: compiling the ray kernels for this machine (numba caches them; about half a minute) ..." >&2
 warm=$(mktemp -d)
 .venv/bin/python -m viewer capture cornell --size 64x48 --out "$warm/warm.png" >/dev/null 2>&1 \
   || echo "setup: could not compile them now; the first run of the viewer will" >&2
