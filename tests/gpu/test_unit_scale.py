@@ -113,7 +113,9 @@ def test_the_atlas_fits_the_texture_size_and_the_budget(cornell):
     assert fitted_texel(cornell, 0.02, max_side=16384) == 0.02       # what fits stays as asked
 
 
-def test_too_many_faces_for_any_lightmap_are_refused_in_one_line(tmp_path, monkeypatch, capsys):
+def test_too_many_faces_for_any_lightmap_are_drawn_per_fragment_with_one_line(tmp_path, monkeypatch, capsys):
+    """A scene with more faces than a lightmap holds is not refused: capture draws it without lightmaps
+    (the direct light and the probes per fragment) and says so in one line."""
     grid = np.stack(np.meshgrid(np.arange(31.0), np.arange(31.0), indexing="ij"), -1).reshape(-1, 2)
     vertices = np.column_stack([grid, np.zeros(len(grid))])
     corner = (np.arange(30)[:, None] * 31 + np.arange(30)[None]).ravel()
@@ -129,22 +131,29 @@ def test_too_many_faces_for_any_lightmap_are_refused_in_one_line(tmp_path, monke
     from viewer.cli import main
 
     status = main(["capture", str(path), "--out", str(tmp_path / "floor.png"), "--size", "16x16", "--gi", "off",
-                   "--sun", "0,0,1,1,1,1"])   # lit, so that the refusal is the only line
+                   "--sun", "0,0,1,1,1,1"])   # lit: the per-fragment note is the only line
     error = capsys.readouterr().err.strip().splitlines()
-    assert status == 2 and len(error) == 1 and "1800 faces" in error[0], error
-    assert not (tmp_path / "floor.png").exists()
+    notes = [line for line in error if "1800 faces" in line]
+    assert status == 0 and len(notes) == 1 and "per fragment" in notes[0], error
+    assert (tmp_path / "floor.png").exists()
 
 
-def test_a_renderer_refuses_a_scene_it_cannot_draw_and_keeps_its_own(gl_context, cornell, monkeypatch):
-    many = Scene.concatenate("many", [scaled(cornell, 1.0)] * 30)    # 1080 faces
+def test_a_renderer_draws_a_scene_past_its_lightmap_per_fragment(gl_context, cornell, monkeypatch):
+    """The same picture as the exact path (baked=False) gives: the lightmaps are left out, nothing else."""
+    many = Scene.concatenate("many", [scaled(cornell, 1.0)] * 30)    # 1080 faces, all in the same place
     monkeypatch.setattr(direct_bake, "MAX_ATLAS_TEXELS", 9 * 1000)
     offscreen = OffscreenRenderer(SIZE, samples=0, ctx=gl_context)
+    exact = OffscreenRenderer(SIZE, dataclasses.replace(offscreen.renderer.settings, baked=False), samples=0,
+                              ctx=gl_context)
     try:
+        offscreen.renderer.set_scene(many)
+        assert not offscreen.renderer.lightmapped
+        exact.renderer.set_scene(many)
+        image, reference = offscreen.render(cornell.camera), exact.render(cornell.camera)
+        assert image.max() > 50
+        np.testing.assert_array_equal(image, reference)
         offscreen.renderer.set_scene(cornell)
-        with pytest.raises(SceneError, match="1080 faces"):
-            offscreen.renderer.check_scene(many)    # what the window asks before it opens a dropped file
-        with pytest.raises(SceneError, match="1080 faces"):
-            offscreen.renderer.set_scene(many)
-        assert offscreen.renderer.scene is cornell
+        assert offscreen.renderer.lightmapped
     finally:
         offscreen.release()
+        exact.release()

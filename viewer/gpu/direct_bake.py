@@ -47,6 +47,16 @@ def faces_fit(scene: Scene, max_side: int, max_texels: int | None = None) -> Non
                          f"{MIN_TILE}x{MIN_TILE} texels each at the least)")
 
 
+def lightmap_holds(scene: Scene, max_side: int) -> bool:
+    """Whether a lightmap holds the scene's faces (`faces_fit`); where it does not, the renderer draws the
+    scene without lightmaps, its direct and indirect light per fragment."""
+    try:
+        faces_fit(scene, max_side)
+    except SceneError:
+        return False
+    return True
+
+
 def fitted_texel(scene: Scene, texel: float, max_side: int, max_texels: int | None = None) -> float:
     """`texel`, or the smallest coarser spacing whose atlas fits: at most `max_texels` texels and a texture
     (twice the atlas's width, for the back sides) of at most `max_side` texels along each side (what the GL

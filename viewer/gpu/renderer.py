@@ -24,7 +24,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from viewer.gpu.direct_bake import BakedDirectLight, faces_fit
+from viewer.gpu.direct_bake import MIN_TILE, BakedDirectLight, lightmap_holds
 from viewer.gpu.indirect_bake import BakedIndirectLight
 from viewer.gpu.camera import gl_bytes, view_projection
 from viewer.gpu.debug_views import DebugViews
@@ -39,6 +39,7 @@ from viewer.gpu.surface_textures import SurfaceTextures
 from viewer.gpu.targets import DisplayTarget, HdrTarget, InterleaveBuffers
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Camera, Scene
+from viewer.scene.types import note
 from viewer.rays.voxels import VoxelGrid
 
 SURFACE_VIEWS = {"final": 0, "direct": 1, "indirect": 2, "albedo": 3, "normals": 4, "probes": 0}
@@ -63,6 +64,8 @@ class Renderer(LightmapUpkeep):
                  shader_dir: Path | str = SHADERS):
         self.ctx = ctx
         self.settings = settings or RenderSettings()
+        self.lightmapped = True
+        """The scene's faces fit a lightmap (else it is drawn per fragment: `set_scene`)."""
         self.programs = ProgramLibrary(ctx, shader_dir)
         for name in ("surface", "shadow_depth", "present", "voxel_cubes", "probe_spheres", "interleave_resolve",
                      "direct_bake"):
@@ -122,8 +125,13 @@ class Renderer(LightmapUpkeep):
         layout and the indirect light's probe weights and final-gather rays, the seconds of work that
         depend on the geometry alone: its lightmap is baked again and the indirect light gathered again.
         The same faces moved (a lamp dragged) keep the old rays, for the worker to trace again only those
-        the move can change (`_ensure_baked`)."""
-        self.check_scene(scene)
+        the move can change (`_ensure_baked`). A scene with more faces than a lightmap holds is drawn
+        without lightmaps (the exact path: direct light and probes per fragment), said in one line."""
+        self.lightmapped = lightmap_holds(scene, max_texture_side(self.ctx))
+        if not self.lightmapped:
+            note(f"{scene.name}: {len(scene.faces)} faces are more than a lightmap holds ({MIN_TILE}x{MIN_TILE} "
+                 f"texels each at the least): drawn with the direct light and the probes per fragment, "
+                 f"without the final gather")
         if self.mesh is not None:
             self.mesh.release()
         draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
@@ -144,11 +152,6 @@ class Renderer(LightmapUpkeep):
         self.mesh = SceneMesh(self.ctx, self._draw_scene)
         self._textures.set_scene(self._draw_scene)
         self._scene_version += 1
-
-    def check_scene(self, scene: Scene) -> None:
-        """Raise SceneError, changing nothing, for a scene this renderer cannot draw (more faces than its
-        lightmap holds): a window keeps its scene and says why."""
-        faces_fit(scene, max_texture_side(self.ctx))
 
     def set_probes(self, probes: ProbeGrid | None) -> None:
         """The indirect light (incident radiance without emitters and sun), or None for GI off."""
@@ -242,6 +245,8 @@ class Renderer(LightmapUpkeep):
 
     def _baked_applies(self, view: str) -> bool:
         s = self.settings
+        if not self.lightmapped:
+            return False
         if view == "indirect":   # without probes the per-fragment path draws it black
             return s.baked and s.indirect and self.probes is not None
         return s.baked and view in ("final", "direct")

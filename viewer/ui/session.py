@@ -14,7 +14,7 @@ import numpy as np
 
 from viewer.cli_parsing import camera_flags
 from viewer.gpu.renderer import Renderer
-from viewer.scene import SUPPORTED_SUFFIXES, Scene, SceneError, load
+from viewer.scene import SUPPORTED_SUFFIXES, Scene, load
 from viewer.scene.camera import home_camera
 from viewer.ui.background import BackgroundTask
 from viewer.ui.camera_controller import OrbitCamera
@@ -62,6 +62,9 @@ class Session:
         self.scene = scene
         self.scene_version += 1
         self.renderer.set_scene(scene)
+        if not self.renderer.lightmapped:
+            self.messages.append(Message(f"{len(scene.faces)} triangles are more than a lightmap holds: the light is "
+                                         f"drawn per fragment, without the final gather.", warning=True))
         if scene.textured:   # the surface shader's textured variants, compiled now, not in the first frames
             self.renderer.warm_up()
         self.renderer.set_voxels(None)
@@ -162,11 +165,6 @@ class Session:
             self._load_failed(self._loading_path, task.error)
             return
         scene = task.result
-        try:
-            self.renderer.check_scene(scene)   # one it cannot draw: say so and keep the current scene
-        except SceneError as exc:
-            self._load_failed(self._loading_path, str(exc))
-            return
         self._open(scene, self._loading_path)
         self.loads += 1
         self.log(f"loaded {self._loading_path} as {scene.name!r}: {len(scene.faces)} triangles, "
