@@ -175,7 +175,7 @@ def test_capture_views_match_the_renderer():
 @pytest.mark.parametrize("args", [["--size", "0x10"], ["--size", "big"], ["--camera", "1,2"], ["--fov", "500"],
                                   ["--view", "xray"], ["--exposure", "nan"], ["--exposure", "inf"],
                                   ["--camera=nan,0,3,0,0,0"], ["--camera=0,0,1,0,0,1"], ["--camera=1e30,0,0,0,0,0"],
-                                  ["--msaa", "3"], ["--msaa=-1"], ["--msaa", "many"]])
+                                  ["--msaa", "3"], ["--msaa=-1"], ["--msaa", "many"], ["--lightmap-faces=-1"]])
 def test_bad_capture_options_exit_2_with_one_line(tmp_path, args):
     result = run("capture", "cornell", "--out", tmp_path / "x.png", "--gi", "off", *args)
     assert result.returncode == 2, (args, result.stderr)

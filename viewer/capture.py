@@ -33,7 +33,7 @@ ProbeSource = Callable[["Scene", str, "moderngl.Context"], "ProbeGrid | None"]
 """(scene, gi mode, GL context) -> the indirect-light ProbeGrid for that mode (None: GI off). The
 context lets a GPU solver run on the same context the renderer uses."""
 
-RENDER_FIELDS = ("exposure", "tonemap", "light_samples", "voxel_color")
+RENDER_FIELDS = ("exposure", "tonemap", "light_samples", "voxel_color", "lightmap_faces")
 """The RenderSettings a capture has flags for (`--exposure`, `--tonemap`, `--light-samples`, `--voxel-color`)."""
 
 
@@ -158,6 +158,8 @@ def render(request: CaptureRequest, probe_source: ProbeSource | None = None) -> 
         if fov is not None:
             camera = replace(camera, fov=float(fov))
     settings = replace(request.render)   # the renderer may change its settings: not the request's
+    if settings.lightmap_faces < 0:
+        raise CaptureError(f"--lightmap-faces {settings.lightmap_faces}: expected 0 or more")
     if not 0 <= settings.light_samples <= MAX_LIGHT_SAMPLES:
         raise CaptureError(f"--light-samples {settings.light_samples}: expected 0..{MAX_LIGHT_SAMPLES}")
     suffix = Path(out).suffix.lower()
@@ -183,7 +185,8 @@ def render(request: CaptureRequest, probe_source: ProbeSource | None = None) -> 
                 probes = probe_source(scene, gi, ctx)
         solved = time.perf_counter()
         voxels, radiance = _debug_voxels(scene, view, settings, request.gi_settings.voxels)
-        gathers = probes is not None and view in ("final", "indirect") and settings.final_gather
+        gathers = (probes is not None and view in ("final", "indirect") and settings.final_gather and settings.baked
+                   and int((scene.face_areas > 0).sum()) <= settings.lightmap_faces)
         with step(f"capture: rendering {size[0]}x{size[1]}"
                   + (" (the lightmap's final gather traces its rays)" if gathers else "")):
             if request.turntable:

@@ -28,7 +28,7 @@ from viewer.output import replacing
 VIEWS = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
 """The renderer's view modes (viewer.gpu.renderer.VIEWS; listed here so parsing needs no GL)."""
 RENDER_CHOICES = {"tonemap": ("aces", "reinhard", "none"), "voxel_color": ("albedo", "radiance")}
-RENDER_METAVARS = {"exposure": "EV", "light_samples": "N"}
+RENDER_METAVARS = {"exposure": "EV", "light_samples": "N", "lightmap_faces": "N"}
 
 
 def _gi_arguments(p: argparse.ArgumentParser):

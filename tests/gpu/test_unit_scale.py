@@ -154,6 +154,10 @@ def test_a_renderer_draws_a_scene_past_its_lightmap_per_fragment(gl_context, cor
         np.testing.assert_array_equal(image, reference)
         offscreen.renderer.set_scene(cornell)
         assert offscreen.renderer.lightmapped
+        offscreen.renderer.settings.lightmap_faces = 30      # the box's 36 faces are past the budget
+        assert not offscreen.renderer.lightmapped
+        exact.renderer.set_scene(cornell)
+        np.testing.assert_array_equal(offscreen.render(cornell.camera), exact.render(cornell.camera))
     finally:
         offscreen.release()
         exact.release()

@@ -64,8 +64,7 @@ class Renderer(LightmapUpkeep):
                  shader_dir: Path | str = SHADERS):
         self.ctx = ctx
         self.settings = settings or RenderSettings()
-        self.lightmapped = True
-        """The scene's faces fit a lightmap (else it is drawn per fragment: `set_scene`)."""
+        self._faces, self._fits = 0, True   # the scene's faces, and whether a lightmap holds them
         self.programs = ProgramLibrary(ctx, shader_dir)
         for name in ("surface", "shadow_depth", "present", "voxel_cubes", "probe_spheres", "interleave_resolve",
                      "direct_bake"):
@@ -127,11 +126,12 @@ class Renderer(LightmapUpkeep):
         The same faces moved (a lamp dragged) keep the old rays, for the worker to trace again only those
         the move can change (`_ensure_baked`). A scene with more faces than a lightmap holds is drawn
         without lightmaps (the exact path: direct light and probes per fragment), said in one line."""
-        self.lightmapped = lightmap_holds(scene, max_texture_side(self.ctx))
-        if not self.lightmapped:
-            note(f"{scene.name}: {len(scene.faces)} faces are more than a lightmap holds ({MIN_TILE}x{MIN_TILE} "
-                 f"texels each at the least): drawn with the direct light and the probes per fragment, "
-                 f"without the final gather")
+        if self.scene is None or not np.array_equal(scene.faces, self.scene.faces):   # said once, not per edit
+            self._faces = int(np.count_nonzero(scene.face_areas > 0))
+            self._fits = lightmap_holds(scene, max_texture_side(self.ctx))
+            if self.settings.baked and not self.lightmapped:
+                most = f"--lightmap-faces {self.settings.lightmap_faces}" if self._fits else f"a lightmap's {MIN_TILE}x{MIN_TILE} tiles"
+                note(f"{scene.name}: {self._faces} faces are more than {most} take: drawn with the light per fragment")
         if self.mesh is not None:
             self.mesh.release()
         draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
@@ -242,6 +242,12 @@ class Renderer(LightmapUpkeep):
                 self._scratch.release()
             self._scratch = HdrTarget(self.ctx, size, samples=samples)
         return self._scratch
+
+    @property
+    def lightmapped(self) -> bool:
+        """The scene's light is read from lightmaps: it has at most `lightmap_faces` faces and a lightmap
+        holds them (else it is drawn on the per-fragment path: `set_scene`)."""
+        return self._fits and self._faces <= self.settings.lightmap_faces
 
     def _baked_applies(self, view: str) -> bool:
         s = self.settings

@@ -63,8 +63,9 @@ class Session:
         self.scene_version += 1
         self.renderer.set_scene(scene)
         if not self.renderer.lightmapped:
-            self.messages.append(Message(f"{len(scene.faces)} triangles are more than a lightmap holds: the light is "
-                                         f"drawn per fragment, without the final gather.", warning=True))
+            self.messages.append(Message(f"{len(scene.faces)} triangles: the light is drawn per fragment, without "
+                                         f"lightmaps and their final gather (faster and as close on dense meshes).",
+                                         warning=True))
         if scene.textured:   # the surface shader's textured variants, compiled now, not in the first frames
             self.renderer.warm_up()
         self.renderer.set_voxels(None)
