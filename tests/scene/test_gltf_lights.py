@@ -43,20 +43,25 @@ def spot_room(path: Path, light: dict, rotation=DOWN) -> Path:
     return path
 
 
+def floor_light(scene, voxels: int) -> tuple[np.ndarray, np.ndarray]:
+    """The solver's direct irradiance (mean of RGB) at the floor's voxels, and each one's vector to LAMP."""
+    g = geometry.build(scene, geometry.GeometrySettings(voxels=voxels, probes=4))
+    lights = lightpaths.build(scene, g)
+    direct = relight.direct_irradiance(lights, geometry.sun_paths(g, None), relight.materials(scene, g, lights))
+    floor = (g.voxels.normal[:, 1] > 0.99) & (g.voxels.position[:, 1] < 1e-3)
+    return direct[floor].mean(axis=1), LAMP - g.voxels.position[floor]
+
+
 def test_a_spot_lights_the_floor_inside_its_cone_as_a_point_light_and_nothing_beyond(tmp_path):
     """Floor voxels well inside the inner cone (0.3 rad) get I cos / d^2 within 2%; those beyond the outer
     cone (0.5 rad) get none of the lamp's direct light; the penumbra between falls off."""
     intensity, inner, outer = 20.0, 0.3, 0.5
     scene = load(spot_room(tmp_path / "spot.gltf", {"type": "spot", "intensity": intensity,
                                                     "spot": {"innerConeAngle": inner, "outerConeAngle": outer}}))
-    g = geometry.build(scene, geometry.GeometrySettings(voxels=16, probes=4))
-    lights = lightpaths.build(scene, g)
-    direct = relight.direct_irradiance(lights, geometry.sun_paths(g, None), relight.materials(scene, g, lights))
-    floor = (g.voxels.normal[:, 1] > 0.99) & (g.voxels.position[:, 1] < 1e-3)
-    to_lamp = LAMP - g.voxels.position[floor]
+    direct, to_lamp = floor_light(scene, 16)
     distance = np.linalg.norm(to_lamp, axis=1)
     theta = np.arccos(to_lamp[:, 1] / distance)
-    ratio = direct[floor].mean(axis=1) / (intensity * np.cos(theta) / distance ** 2)
+    ratio = direct / (intensity * np.cos(theta) / distance ** 2)
     lit, penumbra, dark = theta < inner - 0.05, (theta > inner + 0.05) & (theta < outer - 0.05), theta > outer + 0.05
     assert lit.sum() >= 4 and dark.sum() >= 100
     np.testing.assert_allclose(ratio[lit], 1.0, atol=0.02)
@@ -109,14 +114,10 @@ def test_a_point_light_far_above_the_floor_gives_i_over_d_squared_on_a_fine_grid
     area times the cosine of its mean normal gave 0.62-0.67 of it)."""
     intensity = 20.0
     scene = load(spot_room(tmp_path / "point.gltf", {"type": "point", "intensity": intensity}))
-    g = geometry.build(scene, geometry.GeometrySettings(voxels=32, probes=4))
-    lights = lightpaths.build(scene, g)
-    direct = relight.direct_irradiance(lights, geometry.sun_paths(g, None), relight.materials(scene, g, lights))
-    floor = (g.voxels.normal[:, 1] > 0.99) & (g.voxels.position[:, 1] < 1e-3)
-    to_lamp = LAMP - g.voxels.position[floor]
+    direct, to_lamp = floor_light(scene, 32)
     distance = np.linalg.norm(to_lamp, axis=1)
     cosine = to_lamp[:, 1] / distance
-    ratio = direct[floor].mean(axis=1) / (intensity * cosine / distance ** 2)
+    ratio = direct / (intensity * cosine / distance ** 2)
     below = cosine > 0.9
     assert below.sum() > 10
     np.testing.assert_allclose(ratio[below], 1.0, atol=0.02)

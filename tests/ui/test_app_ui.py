@@ -242,16 +242,23 @@ def test_a_sun_lit_scene_edits_the_sun():
 
 # ---- the viewport draws only when something changed ---------------------------------------------------
 
-def test_viewport_redraws_on_change_only_and_previews_while_interacting(ctx, cornell):
-    from viewer.gpu.offscreen import capture
+def recording_renderer(ctx, scene, record):
+    """A renderer on `scene` whose every draw calls `record(target)` first."""
     from viewer.gpu.renderer import RenderSettings, Renderer
-    from viewer.ui.viewport import Viewport
 
     renderer = Renderer(ctx, RenderSettings(light_samples=4))
-    renderer.set_scene(cornell)
-    drawn_sizes = []
+    renderer.set_scene(scene)
     draw = renderer.draw
-    renderer.draw = lambda target, camera, view: (drawn_sizes.append(target.size), draw(target, camera, view))
+    renderer.draw = lambda target, camera, view: (record(target), draw(target, camera, view))
+    return renderer
+
+
+def test_viewport_redraws_on_change_only_and_previews_while_interacting(ctx, cornell):
+    from viewer.gpu.offscreen import capture
+    from viewer.ui.viewport import Viewport
+
+    drawn_sizes = []
+    renderer = recording_renderer(ctx, cornell, lambda target: drawn_sizes.append(target.size))
     screen = ctx.simple_framebuffer((80, 60), components=4)
     viewport = Viewport(ctx, renderer, preview_scale=0.5)
     camera = cornell.camera
@@ -284,14 +291,10 @@ def test_the_still_image_is_anti_aliased_and_the_preview_is_not(ctx, cornell):
     """With multisampling the full-quality image is the capture's with the same samples (the box's edges
     blended), while the preview drawn during interaction is not multisampled (it keeps its frame rate)."""
     from viewer.gpu.offscreen import capture
-    from viewer.gpu.renderer import RenderSettings, Renderer
     from viewer.ui.viewport import Viewport
 
-    renderer = Renderer(ctx, RenderSettings(light_samples=4))
-    renderer.set_scene(cornell)
     samples = []
-    draw = renderer.draw
-    renderer.draw = lambda target, camera, view: (samples.append(target.samples), draw(target, camera, view))
+    renderer = recording_renderer(ctx, cornell, lambda target: samples.append(target.samples))
     screen = ctx.simple_framebuffer((80, 60), components=4)
     viewport = Viewport(ctx, renderer, preview_scale=0.5, samples=4)
     try:
