@@ -27,6 +27,7 @@ from viewer.cli_parsing import gi_settings, parse_size, tool_parser
 from viewer.errors import exit_status
 from viewer.progress import announce_compiles
 from viewer.ui.options import add_arguments, options_from
+from viewer.ui.pacing import Pacing
 
 
 def log(message: str) -> None:
@@ -122,11 +123,8 @@ class ViewerApp(mglw.WindowConfig):
     """Resolution while the camera or a slider moves, as a fraction of the still image's."""
     interaction_linger = 0.25
     """Seconds after the last camera input during which frames stay at preview resolution."""
-    active_fps = 60.0
-    idle_fps = 4.0
-    """Frame rate when nothing moves and nothing is computed (input wakes the loop at once)."""
-    idle_after = 1.0
-    """Seconds after the last input before the loop goes idle."""
+    pacing = Pacing()
+    """Frame rates while the user interacts, while work runs, and when all rests (viewer/ui/pacing.py)."""
     font_size = 15.0
 
     @classmethod
@@ -254,21 +252,18 @@ class ViewerApp(mglw.WindowConfig):
         return self.controls.moving or imgui.is_any_item_active() or gi.previewing
 
     def _throttle(self, drew: bool) -> None:
-        """Cap the frame rate: llvmpipe and the solvers share the same few cores. When nothing moves and
-        nothing is being computed, wait for input (or `1 / idle_fps` s) instead of drawing frames."""
+        """Rest between frames as `pacing` says (input ends an idle rest at once)."""
         import glfw
+        from imgui_bundle import imgui
 
         if self.view.redraw_always:
             return
         now = time.perf_counter()
-        busy = drew or self.session.busy
-        idle = not busy and now - self.controls.last_input >= self.idle_after
-        rest = 1.0 / (self.idle_fps if idle else self.active_fps) - (now - self._frame_started)
-        if rest <= 0:
-            return
-        if idle:
+        rest, idle = self.pacing.rest(now - self._frame_started, drew or self.session.busy,
+                                      self.controls.moving or imgui.is_any_item_active(), now - self.controls.last_input)
+        if rest > 0 and idle:
             glfw.wait_events_timeout(rest)   # returns at once on input or a drop
-        else:
+        elif rest > 0:
             time.sleep(rest)
 
     def _draw_ui(self, frame_time: float) -> None:
