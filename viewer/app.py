@@ -123,7 +123,7 @@ class ViewerApp(mglw.WindowConfig):
     """Resolution while the camera or a slider moves, as a fraction of the still image's."""
     interaction_linger = 0.25
     """Seconds after the last camera input during which frames stay at preview resolution."""
-    pacing = Pacing()
+    pacing = Pacing(linger=interaction_linger)
     """Frame rates while the user interacts, while work runs, and when all rests (viewer/ui/pacing.py)."""
     font_size = 15.0
 

@@ -96,7 +96,7 @@ class GatherRays:
         _cast(frame, lift, rows, *layout, hits)
         _cast_samples(frame, lift, again, rays, layout, hits)
         closed = np.flatnonzero(_all_backs(hits[:, scouts], int(width)) & ~enclosed)   # enclosed by the move
-        hits[closed] = hits[closed][:, scouts][:, np.arange(rays) % len(scouts)]
+        _repeat_scouts(hits, closed, scouts)
         return GatherRays(hits)
 
     def inside(self, width: int) -> np.ndarray:
@@ -191,12 +191,16 @@ def _cast_samples(frame: "_Frame", lift: float, samples: np.ndarray, rays: int, 
     scouts = scout_rays(rays)
     for todo in _rays_of(samples, scouts):
         _cast(frame, lift, todo, *layout, hits)
-    enclosed = _all_backs(hits[samples][:, scouts], int(layout[-1]))
+    enclosed = _all_backs(hits[samples[:, None], scouts], int(layout[-1]))
     others = np.setdiff1d(np.arange(rays), scouts)
     for todo in _rays_of(samples[~enclosed], others):
         _cast(frame, lift, todo, *layout, hits)
-    inside = samples[enclosed]
-    hits[inside] = hits[inside][:, scouts][:, np.arange(rays) % len(scouts)]
+    _repeat_scouts(hits, samples[enclosed], scouts)
+
+
+def _repeat_scouts(hits: np.ndarray, samples: np.ndarray, scouts: np.ndarray) -> None:
+    """Every ray of `samples` takes a scout's hit, the scouts in turn: what an enclosed sample keeps."""
+    hits[samples] = hits[samples[:, None], scouts[np.arange(hits.shape[1]) % len(scouts)]]
 
 
 def _rays_of(samples: np.ndarray, rays: np.ndarray):

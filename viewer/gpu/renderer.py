@@ -124,14 +124,7 @@ class Renderer(LightmapUpkeep):
         layout and the indirect light's probe weights and final-gather rays, the seconds of work that
         depend on the geometry alone: its lightmap is baked again and the indirect light gathered again.
         The same faces moved (a lamp dragged) keep the old rays, for the worker to trace again only those
-        the move can change (`_ensure_baked`). A scene with more faces than a lightmap holds is drawn
-        without lightmaps (the exact path: direct light and probes per fragment), said in one line."""
-        if self.scene is None or not np.array_equal(scene.faces, self.scene.faces):   # said once, not per edit
-            self._faces = int(np.count_nonzero(scene.face_areas > 0))
-            self._fits = lightmap_holds(scene, max_texture_side(self.ctx))
-            if self.settings.baked and not self.lightmapped:
-                most = f"--lightmap-faces {self.settings.lightmap_faces}" if self._fits else f"a lightmap's {MIN_TILE}x{MIN_TILE} tiles"
-                note(f"{scene.name}: {self._faces} faces are more than {most} take: drawn with the light per fragment")
+        the move can change (`_ensure_baked`). A scene past `lightmapped` is drawn per fragment, said once."""
         if self.mesh is not None:
             self.mesh.release()
         draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
@@ -139,6 +132,13 @@ class Renderer(LightmapUpkeep):
             self._geometry += 1
             if self.scene is None or not np.array_equal(draw_scene.faces, self._draw_scene.faces):
                 self._release_baked()
+                self._faces = int(np.count_nonzero(scene.face_areas > 0))   # said once, not per edit
+                self._fits = lightmap_holds(scene, max_texture_side(self.ctx))
+                if self.settings.baked and not self.lightmapped:
+                    most = (f"--lightmap-faces {self.settings.lightmap_faces}" if self._fits
+                            else f"a lightmap's {MIN_TILE}x{MIN_TILE} tiles")
+                    note(f"{scene.name}: {self._faces} faces are more than {most} take: drawn with the light "
+                         f"per fragment")
                 lo, hi = scene.bounds
                 self._scene_size = float(np.max(hi - lo))   # kept while the same faces move
         elif self._baked is not None:

@@ -81,7 +81,7 @@ class LightPaths:
         if "patch" not in self._probes:
             points, patches, rays, summed = self._probes["inputs"]
             probe_sh = _probe_sh(points, *patches)
-            probe_sh *= clear_paths(probe_sh[:, 0] > 0, points, patches[-2], rays)[:, None]
+            probe_sh *= _clear_paths(probe_sh[:, 0] > 0, points, patches[-2], rays)[:, None]
             probe_sh = probe_sh.reshape(len(points) * 9, self.count)
             self._probes.update(patch=probe_sh, lamp=probe_sh @ summed)
         return self._probes["lamp" if per_lamp else "patch"]
@@ -136,7 +136,7 @@ def build(scene: Scene, geometry: Geometry) -> LightPaths:
     voxel_irradiance = _surface_irradiance(np.ascontiguousarray(grid.position), np.ascontiguousarray(grid.normal),
                                            *patches)
     starts = grid.position + SURFACE_OFFSET * h * grid.normal           # in front of the voxel's own patch
-    voxel_irradiance *= clear_paths(voxel_irradiance > 0, starts, target, geometry.rays)
+    voxel_irradiance *= _clear_paths(voxel_irradiance > 0, starts, target, geometry.rays)
     share = sparse.diags(1.0 / patch_area) @ select
     group = scene.face_group[face]
     lowest = np.full(u, np.iinfo(np.int64).max)
@@ -152,7 +152,7 @@ def build(scene: Scene, geometry: Geometry) -> LightPaths:
                       voxel_irradiance @ summed, probes)
 
 
-def clear_paths(lit: np.ndarray, starts: np.ndarray, targets: np.ndarray, rays: VoxelRays) -> np.ndarray:
+def _clear_paths(lit: np.ndarray, starts: np.ndarray, targets: np.ndarray, rays: VoxelRays) -> np.ndarray:
     """(R, U) bool: where `lit`, whether the segment from starts[i] to targets[j] crosses no surface (the
     lamp's patch j is seen from point i); False elsewhere. One ray per lit pair, cast a block of rows at
     a time."""

@@ -164,14 +164,9 @@ class SurfaceBake:
     """(T, 8) int32 the pair of each point's corner."""
     weights: np.ndarray
     """(T, 8) float32 SurfaceWeights.weights."""
-    lobe: np.ndarray | None = None
-    """(Q, 9) float32 each pair's normal's cosine lobe in SH (made once here, not on every update: 55 ms
-    a GI update for a scanned mesh's million pairs)."""
-
-    def __post_init__(self):
-        if self.lobe is None:
-            lobe = (sh.basis(np.asarray(self.pair_normal, np.float64)) * sh.COSINE_LOBE).astype(np.float32)
-            object.__setattr__(self, "lobe", np.ascontiguousarray(lobe))
+    lobe: np.ndarray
+    """(Q, 9) float32 each pair's normal's cosine lobe in SH (made once with the pairs, not on every
+    update: 55 ms a GI update for a scanned mesh's million pairs)."""
 
     @staticmethod
     def of(weights: SurfaceWeights, normal_id: np.ndarray, normals: np.ndarray) -> "SurfaceBake":
@@ -187,7 +182,9 @@ class SurfaceBake:
             key = ((index[..., 0] * m + index[..., 1]) * m + index[..., 2]) * count + normal_id[:, None]
             pairs, inverse = np.unique(key, return_inverse=True)
             texel_pairs, pair_probe, pair_normal = inverse.reshape(key.shape).astype(np.int32), pairs // count, pairs % count
-        return SurfaceBake(pair_probe, np.asarray(normals, np.float64)[pair_normal], texel_pairs, weights.weights)
+        pair_normals = np.asarray(normals, np.float64)[pair_normal]
+        lobe = np.ascontiguousarray((sh.basis(pair_normals) * sh.COSINE_LOBE).astype(np.float32))
+        return SurfaceBake(pair_probe, pair_normals, texel_pairs, weights.weights, lobe)
 
     def irradiance(self, coefficients: np.ndarray, out: np.ndarray | None = None,
                    rows: np.ndarray | None = None) -> np.ndarray:

@@ -50,7 +50,9 @@ class VoxelRays:
         for start in range(0, len(o), RAYS_PER_CALL):
             part = slice(start, start + RAYS_PER_CALL)
             hits = self.caster.closest_hits(o[part], d[part])
-            out[part] = _landing(o[part], d[part], hits.face, hits.t, hits.front, *_listing(self.cells))
+            c = self.cells
+            out[part] = _landing(o[part], d[part], hits.face, hits.t, hits.front, c.lo, c.h, c.n, c.first, c.triangle,
+                                 c.voxel)
         return out
 
     def bundle_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -76,11 +78,7 @@ class VoxelRays:
         if self.caster is None:
             return dda.escapes(self.cells, o, direction)
         d = np.broadcast_to(np.asarray(direction, np.float64) / np.linalg.norm(direction), o.shape)
-        out = np.empty(len(o), bool)
-        for start in range(0, len(o), RAYS_PER_CALL):
-            part = slice(start, start + RAYS_PER_CALL)
-            out[part] = ~self.caster.blocked(o[part], d[part], FAR)
-        return out
+        return ~self.caster.blocked(o, d, FAR)
 
     def segments_clear(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(R,) bool: the segment a -> b crosses no surface, from either side."""
@@ -90,11 +88,7 @@ class VoxelRays:
         d = np.asarray(b, np.float64).reshape(-1, 3) - a
         length = np.linalg.norm(d, axis=1)
         d /= np.maximum(length, 1e-300)[:, None]
-        out = np.empty(len(a), bool)
-        for start in range(0, len(a), RAYS_PER_CALL):
-            part = slice(start, start + RAYS_PER_CALL)
-            out[part] = ~self.caster.blocked(a[part], d[part], length[part])
-        return out | (length <= 0)
+        return ~self.caster.blocked(a, d, length) | (length <= 0)
 
     def pairs_clear(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(A, B) float32: 1 where the segment from a[i] to b[j] crosses no surface, from either side."""
@@ -109,10 +103,6 @@ class VoxelRays:
             out[start:start + rows] = self.segments_clear(np.repeat(part, len(b), axis=0),
                                                           np.tile(b, (len(part), 1))).reshape(len(part), len(b))
         return out
-
-
-def _listing(cells: dda.Cells) -> tuple:
-    return cells.lo, cells.h, cells.n, cells.first, cells.triangle, cells.voxel
 
 
 @numba.njit(cache=True, nogil=True)
