@@ -171,3 +171,56 @@ def test_the_moved_faces_sphere_skips_only_rays_that_cannot_meet_them(where):
     assert 0 < culled.sum() < culled.size
     np.testing.assert_array_equal(culled, everything)
     assert culled[sample_moved].all() and culled[np.isin(hits, np.flatnonzero(pixel_moved))].all()
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_samples_that_look_out_of_the_room_are_not_cast_and_land_as_if_they_were(backend, monkeypatch):
+    """The backs of a room's walls look out of the scene: their rays are not cast (`nothing_ahead`), and
+    the hits are those that casting every ray gives, on the Cornell box's walls, floor and boxes alike."""
+    from viewer.gpu import final_gather
+
+    scene = load("cornell")
+    rng = np.random.default_rng(4)
+    faces = rng.integers(0, len(scene.faces), 400)
+    u, v = rng.random((2, 400))
+    flip = u + v > 1
+    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+    corners = scene.triangles[faces]
+    points = corners[:, 0] + u[:, None] * (corners[:, 1] - corners[:, 0]) + v[:, None] * (corners[:, 2] - corners[:, 0])
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    points, normals = np.concatenate([points, points]), np.concatenate([normals, -normals])   # both sides
+    cells = dda.Cells.of(voxelize_with_faces(scene, 16), scene)
+    caster = TriangleCaster(scene, cells, backend)
+    outward = caster.nothing_ahead(points, normals, 1e-6)
+    lo, hi = scene.bounds
+    on_bounds = (np.abs(points - lo) < 1e-6) | (np.abs(points - hi) < 1e-6)
+    assert 0.1 < outward.mean() < 0.5                 # the walls' backs, none of their fronts or the boxes'
+    assert on_bounds[outward].any(axis=1).all()
+    sent = []
+    counting = caster.closest_hits
+    monkeypatch.setattr(caster, "closest_hits", lambda o, d, t=np.inf: sent.append(len(o)) or counting(o, d, t))
+    skipped, _ = gather_with(caster, scene, points, normals)
+    cast_all = sum(sent)
+    monkeypatch.setattr(caster, "nothing_ahead", lambda p, n, m: np.zeros(len(p), bool))
+    sent.clear()
+    every, _ = gather_with(caster, scene, points, normals)
+    np.testing.assert_array_equal(skipped.hits, every.hits)
+    assert (skipped.hits[outward] == final_gather.ESCAPED).all()
+    assert cast_all < sum(sent) - 0.9 * outward.sum() * 72
+
+
+def test_a_point_sees_nothing_ahead_only_where_no_face_reaches_past_its_plane():
+    scene = box(inward=True, albedo=0.5)          # the cube of half size 1
+    caster = TriangleCaster.marching(dda.Cells.of(voxelize_with_faces(scene, 8), scene))
+    points = np.array([[0.0, -1.0, 0.0], [0.0, -1.0, 0.0], [0.0, -0.99, 0.0], [0.5, -1.0, 0.5], [0.0, 1.0, 0.0]])
+    normals = np.array([[0.0, -1.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.1, -0.995, 0.0], [0.0, 1.0, 0.0]])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    np.testing.assert_array_equal(caster.nothing_ahead(points, normals, 1e-9), [True, False, False, False, True])
+
+
+def gather_with(caster: TriangleCaster, scene: Scene, points, normals, rays: int = 72):
+    origin, n, size = lightmap_layout(scene, TEXEL)
+    keep = scene.face_areas > 0
+    face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
+    return GatherRays.of(points, normals, caster, face_tile, origin, n, size[0], 1e-5, rays), size

@@ -186,8 +186,12 @@ def scout_rays(rays: int) -> np.ndarray:
 
 def _cast_samples(frame: "_Frame", lift: float, samples: np.ndarray, rays: int, layout: tuple,
                   hits: np.ndarray) -> None:
-    """Gather `samples` whole into hits: their scouts, then the other rays of those not enclosed (the
-    enclosed ones repeat their scouts' hits)."""
+    """Gather `samples` whole into hits: none for those that look out of the scene (`nothing_ahead`: the
+    backs of a room's walls, a third of the Cornell box's samples), their scouts for the others, then the
+    other rays of those not enclosed (the enclosed ones repeat their scouts' hits)."""
+    outward = layout[0].nothing_ahead(frame.points[samples], frame.normals[samples], 0.5 * lift)
+    hits[samples[outward]] = ESCAPED
+    samples = samples[~outward]
     scouts = scout_rays(rays)
     for todo in _rays_of(samples, scouts):
         _cast(frame, lift, todo, *layout, hits)

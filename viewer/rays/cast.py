@@ -90,6 +90,38 @@ class TriangleCaster:
         self._embree = rtcore_scene.EmbreeScene()
         TriangleMesh(self._embree, np.ascontiguousarray(triangles[self._faces], np.float32))
 
+    def nothing_ahead(self, points: np.ndarray, normals: np.ndarray, margin: float) -> np.ndarray:
+        """(P,) bool: no face reaches more than `margin` in front of the plane through each point with its
+        normal, so that every ray from the point into that half-space, started more than `margin` off
+        the plane, meets nothing: the back of a room's wall, which looks out of the scene. Exact, from
+        the support of the faces' convex hull along each distinct normal (a few dozen corners for a
+        room, whatever stands in it), where casting the rays would cost microseconds each."""
+        p = np.asarray(points, np.float64).reshape(-1, 3)
+        if len(p) == 0:
+            return np.zeros(0, bool)
+        normal, which = np.unique(np.asarray(normals, np.float64).reshape(-1, 3), axis=0, return_inverse=True)
+        support = np.empty(len(normal))
+        corners = self._hull_corners()
+        for start in range(0, len(normal), 4096):   # (normals x corners) a block at a time
+            support[start:start + 4096] = (normal[start:start + 4096] @ corners.T).max(axis=1)
+        offset = np.einsum("ij,ij->i", p, normal[which.ravel()])
+        return support[which.ravel()] - offset <= margin
+
+    def _hull_corners(self) -> np.ndarray:
+        """The corners of the convex hull of the faces rays can meet (all their corners where the hull is
+        flat)."""
+        if getattr(self, "_hull", None) is None:
+            from scipy.spatial import ConvexHull, QhullError
+            faces = getattr(self, "_faces", None)
+            v0, e1, e2 = (self.v0, self.e1, self.e2) if faces is None else (self.v0[faces], self.e1[faces],
+                                                                            self.e2[faces])
+            corners = np.unique(np.concatenate([v0, v0 + e1, v0 + e2]), axis=0)
+            try:
+                self._hull = corners[ConvexHull(corners).vertices]
+            except (QhullError, ValueError):   # flat, or too few corners: every corner is on the hull
+                self._hull = corners
+        return self._hull
+
     @staticmethod
     def marching(cells: dda.Cells) -> "TriangleCaster":
         """The DDA's caster over `cells` alone (their triangles are the scene's)."""
