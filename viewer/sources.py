@@ -91,9 +91,6 @@ class Source:
     from_file: bool = False
     """Its probes come from a file the viewer opened (`gi-viewer GRID.npz`), so the command line does not
     offer it by name and a new scene drops it."""
-    traces_on_every_core: bool = False
-    """Its work on a new scene keeps every core busy (the physical solvers' traces): the renderer's own
-    rays for new geometry wait for its first probes instead of halving its pace."""
     steps_on_render_thread: bool = False
     """It works a slice of every frame on the render thread and shows its probes as they converge: the
     window draws previews while it is busy."""
@@ -242,9 +239,9 @@ NO_BAKED_GRID = "No baked grid: open one with `gi-viewer FILE.npz` (write it wit
 OFF = register(Source("off", "Off (direct only)", live=_live("OffLive")))
 COMPUTE = register(Source(
     "compute", "Compute solver", Needs(gl=True), _solve_compute, _live("ComputeLive"), _compute_unavailable,
-    traces_on_every_core=True, steps_on_render_thread=True))
+    steps_on_render_thread=True))
 SOLVER = register(Source(
-    "solver", "CPU solver (numpy)", Needs(), _solve_cpu, _live("SolverLive"), traces_on_every_core=True,
+    "solver", "CPU solver (numpy)", Needs(), _solve_cpu, _live("SolverLive"),
     aliases=("numpy", "physical")))
 NEURAL = register(Source(
     "neural", "Neural (ONNX)", Needs(model=True), _solve_neural, _live("NeuralLive"), _neural_unavailable))

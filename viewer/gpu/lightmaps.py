@@ -86,8 +86,7 @@ class LightmapUpkeep:
             s = self.settings
             if self._indirect is None and self.background_bake and s.indirect and s.final_gather:
                 self._indirect = self._new_indirect()   # its rays traced while the GI source makes the probes
-                if self.prefetch_new_scene:
-                    self._indirect.prefetch()
+                self._indirect.prefetch()
         lit = (self._shadow_key, self._lights, self.settings.shadow_bias)
         if lit != self._lit_key:
             program = self.programs.get("direct_bake")

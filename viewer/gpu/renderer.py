@@ -89,11 +89,6 @@ class Renderer(LightmapUpkeep):
         self.background_bake = False
         """New texel weights on a worker, the probes read per fragment meanwhile (the viewer), instead of in
         the frame that needs them (captures and tests: the same image every time)."""
-        self.prefetch_new_scene = True
-        """With `background_bake`, a new scene's lightmap rays start on the worker at once, beside the GI
-        source's work (the network leaves a core free), instead of when its first probes arrive (the
-        physical solvers trace on every core: the rays beside them halve their pace, and the first frame
-        with GI comes a second later for a settled frame no sooner)."""
         self._baked: BakedDirectLight | None = None
         self._geometry = 0
         self._scene_size = 1.0

@@ -69,13 +69,6 @@ class GIController:
         return sources.SOURCES.get(self.source)
 
     @property
-    def traces_on_every_core(self) -> bool:
-        """Whether the source's work on a new scene keeps every core busy (the physical solvers' traces),
-        so that the renderer's own work beside it would delay its first probes."""
-        spec = sources.SOURCES.get(self.source)
-        return spec is not None and spec.traces_on_every_core
-
-    @property
     def previewing(self) -> bool:
         """The source is converging a slice every frame on the render thread, its probes shown as they
         come: the window draws previews meanwhile."""

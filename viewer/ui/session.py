@@ -115,7 +115,6 @@ class Session:
             self.view_aspect = view_rect[2] / view_rect[3]
         self._finish_loading()
         self._apply_edits()
-        self.renderer.prefetch_new_scene = not self.gi.traces_on_every_core
         changed, grid = self.gi.update()
         if changed:
             self.renderer.set_probes(grid)
