@@ -305,3 +305,46 @@ def test_a_new_scenes_rays_are_traced_before_its_first_probes(gl_context, cornel
         assert traced == [1]
     finally:
         offscreen.release()
+
+
+def test_a_finely_cut_box_is_gathered_from_records_that_follow_its_area(gl_context, cornell, cornell_probes):
+    """Cut into 50,000 triangles, half of them narrower than two texels (a scanned mesh's), the large box
+    has 2.3 times the lightmap samples it had as 12 triangles: one a tile for the narrow ones. The final
+    gather casts its rays from one record per cell of a sample spacing and normal among those
+    (`gather_records`): 1.26 times as many as the box had before, and the box's indirect light on screen
+    is the same within the gather's noise."""
+    from dataclasses import replace
+
+    from viewer.bench.scans import refine
+    from viewer.gpu.texel_samples import SAMPLE_STRIDE
+
+    blue = np.array([0.2, 0.5, 0.8])                      # the box's colour: where it is on screen
+    box = cornell.face_group == cornell.group_index("large-box")
+    vertices, cut = refine(cornell.vertices, cornell.faces[box], 50_000)
+    keep = np.flatnonzero(~box)
+    whole = replace(cornell, albedo=np.where(box[:, None], blue, cornell.albedo))
+    fine = replace(cornell, vertices=vertices, faces=np.vstack([cornell.faces[keep], cut]),
+                   albedo=np.vstack([cornell.albedo[keep], np.tile(blue, (len(cut), 1))]),
+                   emission=np.vstack([cornell.emission[keep], np.zeros((len(cut), 3))]),
+                   face_group=np.concatenate([cornell.face_group[keep], np.full(len(cut), cornell.group_index("large-box"))]))
+    counts, views = {}, {}
+    for name, scene in (("whole", whole), ("cut", fine)):
+        offscreen = OffscreenRenderer((160, 160), samples=0, ctx=gl_context)
+        try:
+            renderer = offscreen.renderer
+            renderer.set_scene(scene)
+            renderer.set_probes(cornell_probes)
+            views[name] = {view: offscreen.render_hdr(view=view) for view in ("indirect", "albedo")}
+            faces = renderer._baked.texel_faces[renderer._indirect._samples]
+            on_box = np.isin(faces, np.flatnonzero(scene.face_group[scene.face_areas > 0] == scene.group_index("large-box")))
+            small = renderer._baked.tile_n[faces] <= SAMPLE_STRIDE
+            counts[name] = (on_box.sum(), on_box[renderer._indirect._records[0]].sum(), small[on_box].mean())
+        finally:
+            offscreen.release()
+    assert counts["cut"][2] > 0.4 and counts["whole"][2] == 0.0     # half its samples alone in their tiles
+    assert counts["cut"][0] > 2 * counts["whole"][0]
+    assert counts["cut"][1] < 1.4 * counts["whole"][1]                # rays that follow the area
+    on_screen = np.all(np.abs(views["whole"]["albedo"][..., :3] - blue) < 0.02, axis=-1)
+    assert on_screen.sum() > 1000
+    ratio = views["cut"]["indirect"][on_screen, :3].mean(axis=0) / views["whole"]["indirect"][on_screen, :3].mean(axis=0)
+    np.testing.assert_allclose(ratio, 1.0, atol=0.03)

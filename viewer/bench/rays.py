@@ -3,7 +3,7 @@
     python -m viewer.bench.rays cornell path/to/mesh.obj
 
 For each scene, the renderer's own gather rays (its lightmap at the default texel, RenderSettings'
-final_gather rays from each sample of both sides) are cast by `GatherRays.of` through each backend of
+final_gather rays from each of its gather records, both sides) are cast by `GatherRays.of` through each backend of
 viewer/rays/cast.py, the caster's build (Embree's BVH, the DDA's 32^3 cells) included, after one small
 cast that compiles or loads the kernels. embreex holds Python's lock while it traces, so its rows run
 on one core whatever numba's thread count; the DDA's kernels run on numba's threads. Runs alternate
@@ -19,18 +19,20 @@ import numpy as np
 
 
 def gather_inputs(ctx, scene):
-    """(points, normals, face_tile, tile_origin, tile_n, width, lift) of the renderer's gather samples."""
+    """(points, normals, face_tile, tile_origin, tile_n, width, lift) of the renderer's gather samples (its
+    records: `gather_records`)."""
     from viewer.gpu.direct_bake import BakedDirectLight, fitted_texel
     from viewer.gpu.lightmaps import max_texture_side
     from viewer.gpu.render_settings import RenderSettings
-    from viewer.gpu.texel_samples import strided_samples
+    from viewer.gpu.texel_samples import gather_records, strided_samples
 
     lo, hi = scene.bounds
     texel = fitted_texel(scene, RenderSettings().lightmap_texel * float(np.max(hi - lo)), max_texture_side(ctx))
     lightmap = BakedDirectLight(ctx, scene, texel)
     try:
         rows, columns = np.nonzero(lightmap.covered)
-        sample = strided_samples(lightmap, rows, columns)[0]
+        samples = np.flatnonzero(strided_samples(lightmap, rows, columns)[0])
+        sample = samples[gather_records(lightmap, samples)[0]]
         points = lightmap.texel_points[sample].astype(np.float64)
         normals = lightmap.texel_normals[sample].astype(np.float64)
         keep = scene.face_areas > 0

@@ -29,7 +29,8 @@ from viewer.rays import dda
 from viewer.rays.cast import TriangleCaster
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
-from viewer.gpu.texel_samples import SAMPLE_STRIDE, gather_texels, strided_samples, tent_neighbours, texture_ratio
+from viewer.gpu.texel_samples import (SAMPLE_STRIDE, gather_records, gather_texels, strided_samples, tent_neighbours,
+                                      texture_ratio)
 from viewer.probes.weights import SurfaceBake, SurfaceWeights
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
@@ -37,8 +38,6 @@ from viewer.rays.voxels import grid_frame
 
 VISIBILITY_VOXELS = 32
 """Cells per axis of the triangle grid that the probes' visibility is traced in."""
-
-
 MAX_SAMPLES = 3_000_000
 """Above this many samples (both sides) the probes stay per fragment: their weights would take minutes
 and gigabytes (a detailed mesh of 82k triangles has 0.3 M)."""
@@ -83,8 +82,8 @@ class BakedIndirectLight:
         self._cells: dda.Cells | None = None
         self.gather_rays = gather_rays
         """Final-gather rays per sample (viewer/gpu/final_gather.py); 0: the probes' light alone."""
-        self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None
-        """The final gather's rays and each sample's neighbours (`tent_neighbours`), once per geometry."""
+        self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None   # rays, `tent_neighbours`
+        self._records: tuple[np.ndarray, np.ndarray] | None = None   # `gather_records`, once per layout
         self._sample_rows = np.arange(len(self._pixels))
         self._direct: np.ndarray | None = None
         """The direct irradiance of every pixel, read back once per bake (`_reflected`)."""
@@ -92,8 +91,7 @@ class BakedIndirectLight:
         """(albedo, albedo x direct irradiance) of every pixel, once per bake or colour edit (`_reflected`)."""
         self._covered_pixels: tuple[np.ndarray, np.ndarray] | None = None
         self._texture_ratio: tuple[tuple, np.ndarray | None] | None = None   # (textures, texture_ratio)
-        self._scratch: np.ndarray | None = None
-        """The update's albedo x (direct + indirect) of every pixel, what the gather's rays read."""
+        self._scratch: np.ndarray | None = None   # albedo x (direct + indirect) of every pixel: the rays read it
         self._bake: SurfaceBake | None = None
         self.weights_key = None
         """lattice_key of the probe grid whose weights are installed (None: none yet)."""
@@ -102,14 +100,12 @@ class BakedIndirectLight:
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="indirect-weights") if background else None
         self._job: tuple[tuple, int, Future] | None = None
         """(lattice key, geometry, future) of the weights under way on the worker."""
-        self._prefetching: Future | None = None
-        """The geometry's work started by `prefetch`, while it runs."""
+        self._prefetching: Future | None = None   # the geometry's work started by `prefetch`, while it runs
         self._geometry = 0
         """Counts `moved` calls: work started for an earlier geometry is dropped."""
         self._made: tuple[int, dda.Cells, tuple | None] | None = None
         """(geometry, cells, gather or None) the last weights were made with: what the next job reuses."""
-        self._points: tuple[BakedDirectLight, tuple] | None = None
-        """The lightmap `_sample_points` last read, and what it made of it."""
+        self._points: tuple[BakedDirectLight, tuple] | None = None   # `_sample_points`' lightmap and answer
         self._traced: tuple[Scene, BakedDirectLight, GatherRays] | None = None
         """The scene and lightmap the last gather rays were traced for, and the rays (a moved lamp's job
         traces again only the rays the move can change)."""
@@ -212,8 +208,11 @@ class BakedIndirectLight:
         gather = None
         if self.gather_rays and rays:
             points, normals, normal_id = self._sample_points(lightmap)
-            traced = self._gather_rays(scene, lightmap, cells, points, normals[normal_id])
-            gather = (traced, tent_neighbours(lightmap, self._samples, traced))
+            if self._records is None:   # the same across moves (the same layout): the old rays stay theirs
+                self._records = gather_records(lightmap, self._samples)
+            records = np.concatenate([self._records[0], len(self._samples) + self._records[0]])
+            traced = self._gather_rays(scene, lightmap, cells, points[records], normals[normal_id[records]])
+            gather = (traced, tent_neighbours(lightmap, self._samples, *self._records, traced))
             self._traced = (scene, lightmap, traced)
         self._made = (geometry, cells, gather)
         return cells, gather
@@ -258,7 +257,7 @@ class BakedIndirectLight:
         if moved is None:
             return GatherRays.of(points, normals, *layout, self.gather_rays)
         _, old_lightmap, old_rays = self._traced
-        tiles = lightmap.texel_faces[self._samples]
+        tiles = lightmap.texel_faces[self._samples[self._records[0]]]
         sample_moved = np.isin(np.concatenate([tiles, tiles]), moved)
         pixels, faces = self._covered
         pixel_moved = np.zeros(lightmap.covered.size * 2, bool)
