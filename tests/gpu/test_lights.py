@@ -38,3 +38,41 @@ def test_a_scene_without_emitters_has_no_samples():
     scene = load("cornell")
     dark = scene.with_emission("light", [0.0, 0.0, 0.0])
     assert emitter_samples(dark, 16).count == 0
+
+
+def test_the_baked_sunlight_is_where_rays_reach_the_sun_in_a_room_lit_by_a_window(gl_context):
+    """The sun's shadow map against rays cast to the sun from every lightmap texel that faces it, in a
+    generated room whose sun comes in by a window (its lamps off) and grazes the back wall: inside the
+    room (the faces' front sides) the map let three times the sunlight in, a lit line down the corner
+    where that wall meets another; outside (the back sides, in the open sun) it must stay lit."""
+    from dataclasses import replace
+
+    from viewer.bench.stability.sun import sunny_room
+    from viewer.gpu.offscreen import OffscreenRenderer
+    from viewer.gpu.render_settings import RenderSettings
+    from viewer.rays.cast import TriangleCaster
+
+    room, _ = sunny_room(3)
+    room = replace(room, emission=np.zeros_like(room.emission))
+    offscreen = OffscreenRenderer((32, 32), RenderSettings(), samples=0, ctx=gl_context)
+    try:
+        offscreen.renderer.set_scene(room)
+        offscreen.render_hdr(view="direct")
+        lightmap, scene = offscreen.renderer._baked, offscreen.renderer._draw_scene
+        height, width = lightmap.covered.shape
+        texels = np.frombuffer(lightmap.texture.read(), np.float16).reshape(height, 2 * width, 4)
+        rows, columns = np.nonzero(lightmap.covered)
+        points, normals = lightmap.texel_points.astype(np.float64), lightmap.texel_normals.astype(np.float64)
+        caster = TriangleCaster(scene)
+        sun = scene.sun.direction / np.linalg.norm(scene.sun.direction)
+        for side, sign, shift in (("inside", 1.0, 0), ("outside", -1.0, width)):
+            cosine = sign * normals @ sun
+            facing = np.flatnonzero(cosine > 0.05)
+            seen = ~caster.blocked(points[facing] + 1e-5 * sign * normals[facing], np.tile(sun, (len(facing), 1)),
+                                   np.full(len(facing), 1e3))
+            baked = texels[rows[facing], columns[facing] + shift, :3].astype(np.float64).mean(axis=1)
+            share = baked / (np.mean(scene.sun.irradiance) * cosine[facing])
+            assert abs(share.mean() - seen.mean()) < 0.1 * seen.mean() + 0.002, side
+            assert np.mean(np.abs(share - seen) > 0.5) < 0.001, side       # texels at shadow edges
+    finally:
+        offscreen.release()
