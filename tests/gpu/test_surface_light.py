@@ -348,3 +348,44 @@ def test_a_finely_cut_box_is_gathered_from_records_that_follow_its_area(gl_conte
     assert on_screen.sum() > 1000
     ratio = views["cut"]["indirect"][on_screen, :3].mean(axis=0) / views["whole"]["indirect"][on_screen, :3].mean(axis=0)
     np.testing.assert_allclose(ratio, 1.0, atol=0.03)
+
+
+def test_after_a_colour_edit_the_indirect_light_waits_for_the_probes_the_gi_source_is_computing(
+        gl_context, cornell, cornell_probes, monkeypatch):
+    """A colour edit re-gathers the indirect lightmap once, with the probes computed for it, not first with
+    the old ones as well (`probes_pending`, set by the viewer while its GI source works); without pending
+    probes, or past AWAIT_PROBES, it is gathered at once."""
+    from dataclasses import replace
+
+    from viewer.gpu import lightmaps
+    from viewer.gpu.indirect_bake import BakedIndirectLight
+
+    updates = []
+    original = BakedIndirectLight.update
+    monkeypatch.setattr(BakedIndirectLight, "update", lambda self, probes: updates.append(probes) or original(self, probes))
+    offscreen = OffscreenRenderer((32, 32), samples=0, ctx=gl_context)
+    try:
+        renderer = offscreen.renderer
+        renderer.set_scene(cornell)
+        renderer.set_probes(cornell_probes)
+        offscreen.render_hdr(view="final")
+        assert len(updates) == 1
+        greener = replace(cornell, albedo=cornell.albedo * np.array([0.8, 1.0, 0.8]))
+        renderer.probes_pending = True
+        renderer.set_scene(greener)
+        offscreen.render_hdr(view="final")
+        assert len(updates) == 1                      # the last gather shows until the new probes come
+        renderer.set_probes(cornell_probes)
+        offscreen.render_hdr(view="final")
+        assert len(updates) == 2
+        renderer.set_scene(cornell)
+        monkeypatch.setattr(lightmaps, "AWAIT_PROBES", 0.0)
+        renderer._stale_indirect(awaiting=True)
+        offscreen.render_hdr(view="final")
+        assert len(updates) == 3                      # waited long enough
+        renderer.probes_pending = False
+        renderer.set_scene(greener)
+        offscreen.render_hdr(view="final")
+        assert len(updates) == 4                      # no probes coming: gathered at once
+    finally:
+        offscreen.release()

@@ -29,8 +29,8 @@ from viewer.rays import dda
 from viewer.rays.cast import TriangleCaster
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
-from viewer.gpu.texel_samples import (SAMPLE_STRIDE, gather_records, gather_texels, strided_samples, tent_neighbours,
-                                      texture_ratio)
+from viewer.gpu.texel_samples import (SAMPLE_STRIDE, gather_records, gather_texels, reflectance, strided_samples,
+                                      tent_neighbours, texture_ratio)
 from viewer.probes.weights import SurfaceBake, SurfaceWeights
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
@@ -354,14 +354,14 @@ class BakedIndirectLight:
             self._reflectance = None
         if self._reflectance is None:
             pixels, faces = self._covered
-            albedo = np.zeros_like(self._direct)
-            albedo[pixels] = self.scene.albedo[self.scene.face_areas > 0][faces]
+            albedo, reflected = np.zeros_like(self._direct), np.zeros_like(self._direct)
             textures = tuple(map(id, self.scene.textures or ()))    # the same across colour edits
             if self._texture_ratio is None or self._texture_ratio[0] != textures:
-                self._texture_ratio = (textures, texture_ratio(self.scene, self.lightmap, faces))
-            if self._texture_ratio[1] is not None:   # a textured face reflects its texture where a ray lands
-                albedo[pixels] = np.minimum(albedo[pixels] * self._texture_ratio[1], 0.999)
-            self._reflectance = (albedo, albedo * self._direct)
+                ratio = texture_ratio(self.scene, self.lightmap, faces)   # a textured face reflects its texture
+                self._texture_ratio = (textures, np.zeros((0, 3), np.float32) if ratio is None else ratio)
+            face_albedo = np.ascontiguousarray(self.scene.albedo[self.scene.face_areas > 0], np.float32)
+            reflectance(pixels, faces, face_albedo, self._texture_ratio[1], self._direct, albedo, reflected)
+            self._reflectance = (albedo, reflected)
             self._scratch = np.empty_like(albedo)
         return self._reflectance
 

@@ -8,6 +8,8 @@ own state), apart from the passes that draw with these lightmaps.
 
 from __future__ import annotations
 
+import time
+
 import moderngl
 import numpy as np
 
@@ -16,6 +18,11 @@ from viewer.gpu.indirect_bake import BakedIndirectLight
 from viewer.gpu.lights import emitter_samples
 from viewer.gpu.programs import set_uniforms
 from viewer.gpu.shadows import EmitterShadows, SunShadow
+
+AWAIT_PROBES = 0.25
+"""Seconds that the indirect lightmap waits, after a colour or light edit, for the probes the GI source is
+computing for it (`Renderer.probes_pending`), before it is gathered again with the old ones: gathering
+twice, once for the old probes and once for the new, cost a Cornell box's colour edit 70 of its 125 ms."""
 
 PROBE_UNIT, ATLAS_UNIT, SUN_UNIT, HDR_UNIT, INTERLEAVE_UNIT, BAKED_UNIT, INDIRECT_UNIT = 0, 7, 8, 9, 10, 14, 15
 """Texture units: the lightmaps' and the surface pass's, which reads them all in one draw."""
@@ -32,6 +39,17 @@ def max_texture_side(ctx: moderngl.Context) -> int:
 class LightmapUpkeep:
     """Shadow maps and lightmaps, made again when the triangles, the lights, the settings or the probes
     change (mixed into Renderer, whose attributes it reads and sets)."""
+
+    probes_pending = False
+    """Set by the viewer each frame: the GI source is computing probes for the scene shown (its last edit)."""
+    _awaiting: float | None = None
+    """Until when (perf_counter) the indirect lightmap shows its last gather after a colour or light edit."""
+
+    def _stale_indirect(self, awaiting: bool) -> None:
+        """The indirect lightmap is to be gathered again: for new probes, or (`awaiting`) for new colours or
+        lights, whose probes a busy GI source brings within AWAIT_PROBES."""
+        self._indirect_fresh = False
+        self._awaiting = time.perf_counter() + AWAIT_PROBES if awaiting else None
 
     def _ensure_shadows(self) -> None:
         """The emitter samples' shadow cubes and the sun's map: rendered again when the triangles or the
@@ -99,7 +117,7 @@ class LightmapUpkeep:
             self._lit_key = lit
             if self._indirect is not None:    # what its gather reflects changed with the direct light
                 self._indirect.relit(self._draw_scene)
-                self._indirect_fresh = False
+                self._stale_indirect(awaiting=True)
         return self._baked
 
     def _ensure_indirect(self) -> BakedIndirectLight | None:
@@ -112,6 +130,9 @@ class LightmapUpkeep:
         if not self._indirect.ready_for(self.probes):
             return None
         if not self._indirect_fresh or self._indirect.installs != self._indirect_installs:
+            waiting = self._awaiting is not None and self.probes_pending and time.perf_counter() < self._awaiting
+            if waiting and self._indirect.installs == self._indirect_installs:
+                return self._indirect   # its last gather, until the edit's probes come
             self._indirect.update(self.probes)   # new probes, lights or colours, or new weights installed
             self._indirect_fresh, self._indirect_installs = True, self._indirect.installs
         return self._indirect

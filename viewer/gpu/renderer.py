@@ -140,7 +140,7 @@ class Renderer(LightmapUpkeep):
             self._baked.recolour(draw_scene)
             if self._indirect is not None:
                 self._indirect.recolour(draw_scene)
-                self._indirect_fresh = False
+                self._stale_indirect(awaiting=True)
         self.scene = scene
         self.bounds = scene.bounds   # (lo, hi); Scene.bounds scans the faces, so not once per frame
         self._draw_scene = draw_scene
@@ -152,7 +152,7 @@ class Renderer(LightmapUpkeep):
         """The indirect light (incident radiance without emitters and sun), or None for GI off."""
         self.probes = probes
         self._probe_textures.update(probes if probes is not None else empty_grid())
-        self._indirect_fresh = False
+        self._stale_indirect(awaiting=False)
         self._debug.set_probes(probes)
 
     def set_voxels(self, voxels: VoxelGrid | None, radiance: np.ndarray | None = None) -> None:

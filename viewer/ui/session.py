@@ -119,6 +119,7 @@ class Session:
         if changed:
             self.renderer.set_probes(grid)
             self.probes_version += 1
+        self.renderer.probes_pending = self.gi.busy
         busy = self.gi.busy
         if self._gi_was_busy and not busy:
             line, _, error = self.gi.status()
