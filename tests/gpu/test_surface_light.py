@@ -389,3 +389,50 @@ def test_after_a_colour_edit_the_indirect_light_waits_for_the_probes_the_gi_sour
         assert len(updates) == 4                      # no probes coming: gathered at once
     finally:
         offscreen.release()
+
+
+def test_the_gathers_tent_reaches_farther_where_the_light_changes_slowly(gl_context, cornell, cornell_probes):
+    """The tent averages samples farther away where the light changes slowly: a face looking out of the
+    Cornell box's open side, metres from most of what its rays meet, against the floor beside the tall
+    box, where the light changes within centimetres (HARMONIC_SHARE of the harmonic mean distance of the
+    rays' hits, which is what `harmonic_distance` says)."""
+    from viewer.gpu.texel_samples import FILTER_RADIUS, SAMPLE_STRIDE, WIDE_RADIUS
+
+    offscreen = OffscreenRenderer((32, 32), samples=0, ctx=gl_context)
+    try:
+        renderer = offscreen.renderer
+        renderer.set_scene(cornell)
+        renderer.set_probes(cornell_probes)
+        offscreen.render_hdr(view="final")
+        lightmap, indirect = renderer._baked, renderer._indirect
+        rays, (near, tent) = indirect._gather
+        points = lightmap.texel_points[indirect._samples]
+        harmonic = rays.harmonic_distance(lightmap)
+        front = harmonic[:len(points)]
+        looking_out = lightmap.texel_normals[indirect._samples] @ [0.0, 0.0, 1.0] > 0.9   # the boxes' faces
+        far = int(np.argmax(np.where(np.isfinite(front) & looking_out, front, 0.0)))
+        box = cornell.triangles[cornell.face_group == cornell.group_index("large-box")].reshape(-1, 3)
+        corner = box[np.argmin(box[:, 1] - 0.01 * box[:, 0])]
+        beside = np.argmin(np.linalg.norm(points - corner, axis=1) + 10.0 * (np.abs(points[:, 1] + 1.0) > 1e-3))
+        spacing = SAMPLE_STRIDE * lightmap.texel
+
+        def reach(s: int) -> float:
+            """The tent's radius r of sample s, from its weights 1 - d / r (its own, at d = 0, the largest)."""
+            weighed = tent[s] > 0
+            d = np.linalg.norm(points[near[s][weighed] % len(points)] - points[s], axis=1)
+            w = tent[s][weighed] / tent[s][weighed][np.argmin(d)]
+            return float(np.median(d[d > 0] / (1.0 - w[d > 0])))
+
+        np.testing.assert_allclose(reach(far), WIDE_RADIUS * spacing, rtol=1e-3)
+        np.testing.assert_allclose(reach(beside), FILTER_RADIUS * spacing, rtol=1e-3)
+        height, width = lightmap.covered.shape
+        rows, columns = np.nonzero(lightmap.covered)
+        where = np.zeros((height * 2 * width, 3))
+        where[rows * 2 * width + columns] = where[rows * 2 * width + columns + width] = lightmap.texel_points
+        for s in (far, beside):
+            hits = rays.hits[s]
+            distance = np.linalg.norm(where[hits[hits >= 0]] - points[s], axis=1)
+            np.testing.assert_allclose(harmonic[s], len(hits) / np.sum(1.0 / distance), rtol=1e-4)
+        assert harmonic[far] > 2.0 and harmonic[beside] < 0.05
+    finally:
+        offscreen.release()
