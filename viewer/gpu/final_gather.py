@@ -107,9 +107,8 @@ class GatherRays:
         return _inside(self.hits, int(width))
 
     def harmonic_distance(self, lightmap) -> np.ndarray:
-        """(S,) the harmonic mean distance from each sample to what its rays meet, the rays that leave the
-        scene left out (Ward's irradiance caching measures how fast the light can change with it; inf where
-        none meets anything)."""
+        """(S,) the harmonic mean distance from each sample to what its rays meet (Ward's irradiance caching
+        measures how fast the light can change with it; inf for none)."""
         height, width = lightmap.covered.shape
         rows, columns = np.nonzero(lightmap.covered)
         points = np.zeros((height * 2 * width, 3), np.float32)
@@ -371,16 +370,14 @@ def _harmonic(hits, points, origins):
     out = np.full(count, np.inf)
     for s in range(count):   # once a geometry, a read a ray: one thread
         inverse = 0.0
-        met = 0
         for k in range(rays):
             p = hits[s, k]
             if p >= 0:
                 d = np.sqrt((points[p, 0] - origins[s, 0]) ** 2 + (points[p, 1] - origins[s, 1]) ** 2
                             + (points[p, 2] - origins[s, 2]) ** 2)
                 inverse += 1.0 / max(d, 1e-9)
-                met += 1
         if inverse > 0.0:
-            out[s] = met / inverse
+            out[s] = rays / inverse
     return out
 
 

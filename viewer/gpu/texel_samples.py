@@ -29,9 +29,8 @@ HARMONIC_SHARE = 0.05
 """Farther from what it sees, a sample's light changes more slowly (Ward's irradiance caching: by about
 the distance over the harmonic mean distance of what its rays meet): the tent reaches this share of that
 distance, between FILTER_RADIUS and WIDE_RADIUS sample spacings. Against a 2048-ray gather, relative RMS
-error of the samples' irradiance: Cornell box 6.93% -> 6.79%, a room lit by a window 9.03% -> 8.43%
-(99th percentile 29.9% -> 28.1%: the blotches on its walls); 2-3 ms more an update. A tenth of the
-distance did better in the window room (7.59%) and worse on the Cornell box (7.32%)."""
+error of the samples' irradiance: Cornell box 6.93% -> 6.73%, a room lit by a window 9.03% -> 8.02%
+(99th percentile 29.9% -> 25.8%: the blotches on its walls); 2-3 ms more an update."""
 WIDE_RADIUS = 2.5
 WIDE_MAX = 32
 """The most samples averaged by a wide tent."""
