@@ -49,8 +49,6 @@ class GatherRays:
 
     hits: np.ndarray
     """(S, K) int32."""
-    origins: np.ndarray | None = None
-    """(S, 3) the samples' points."""
 
     @staticmethod
     def of(points: np.ndarray, normals: np.ndarray, caster: TriangleCaster, face_tile: np.ndarray,
@@ -64,7 +62,7 @@ class GatherRays:
         hits = np.empty((frame.count, rays), np.int32)
         layout = (caster, face_tile, tile_origin, tile_n, width)
         _cast_samples(frame, lift, np.arange(frame.count), rays, layout, hits)
-        return GatherRays(hits, frame.points)
+        return GatherRays(hits)
 
     def after_moving(self, sample_moved: np.ndarray, pixel_moved: np.ndarray, pixel_points: np.ndarray,
                      moved: np.ndarray, slack: float, points: np.ndarray, normals: np.ndarray, caster: TriangleCaster,
@@ -99,22 +97,12 @@ class GatherRays:
         _cast_samples(frame, lift, again, rays, layout, hits)
         closed = np.flatnonzero(_all_backs(hits[:, scouts], int(width)) & ~enclosed)   # enclosed by the move
         _repeat_scouts(hits, closed, scouts)
-        return GatherRays(hits, frame.points)
+        return GatherRays(hits)
 
     def inside(self, width: int) -> np.ndarray:
         """(S,) bool: the samples most of whose rays meet the backs of faces (inside a solid); `width`:
         lightmap texels a side (the back sides' pixels are the columns from `width` to 2 `width`)."""
         return _inside(self.hits, int(width))
-
-    def harmonic_distance(self, lightmap) -> np.ndarray:
-        """(S,) the harmonic mean distance from each sample to what its rays meet (Ward's irradiance caching
-        measures how fast the light can change with it; inf for none)."""
-        height, width = lightmap.covered.shape
-        rows, columns = np.nonzero(lightmap.covered)
-        points = np.zeros((height * 2 * width, 3), np.float32)
-        front = rows * 2 * width + columns
-        points[front] = points[front + width] = lightmap.texel_points
-        return _harmonic(self.hits, points, self.origins)
 
     def irradiance(self, reflected: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """(S, 3) float32: each sample's irradiance from what the lightmap pixels reflect, `reflected`
@@ -361,23 +349,6 @@ def _inside(hits, width):
             if p >= 0 and p % (2 * width) >= width:
                 back += 1
         out[s] = back > 0.5 * rays
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _harmonic(hits, points, origins):
-    count, rays = hits.shape
-    out = np.full(count, np.inf)
-    for s in range(count):   # once a geometry, a read a ray: one thread
-        inverse = 0.0
-        for k in range(rays):
-            p = hits[s, k]
-            if p >= 0:
-                d = np.sqrt((points[p, 0] - origins[s, 0]) ** 2 + (points[p, 1] - origins[s, 1]) ** 2
-                            + (points[p, 2] - origins[s, 2]) ** 2)
-                inverse += 1.0 / max(d, 1e-9)
-        if inverse > 0.0:
-            out[s] = rays / inverse
     return out
 
 

@@ -21,19 +21,10 @@ default 2 cm texels, half a probe spacing of the Cornell box) and interpolated b
 weights' visibility rays and each update cost a quarter (a ninth on the many small tiles of a detailed
 mesh, which get one sample each)."""
 FILTER_RADIUS = 1.5
-"""The final gather's samples are averaged with those on their plane within at least this many sample
-spacings (a tent): its noise falls about 4x, and light that changes over less than 6 cm is still resolved."""
+"""The final gather's samples are averaged with those on their plane within this many sample spacings
+(a tent): its noise falls about 4x, and light that changes over less than 6 cm is still resolved."""
 FILTER_MAX = 16
 """The most samples averaged (the nearest; coincident samples repeat along the edges of a face's tiles)."""
-HARMONIC_SHARE = 0.05
-"""Farther from what it sees, a sample's light changes more slowly (Ward's irradiance caching: by about
-the distance over the harmonic mean distance of what its rays meet): the tent reaches this share of that
-distance, between FILTER_RADIUS and WIDE_RADIUS sample spacings. Against a 2048-ray gather, relative RMS
-error of the samples' irradiance: Cornell box 6.93% -> 6.73%, a room lit by a window 9.03% -> 8.02%
-(99th percentile 29.9% -> 25.8%: the blotches on its walls); 2-3 ms more an update."""
-WIDE_RADIUS = 2.5
-WIDE_MAX = 32
-"""The most samples averaged by a wide tent."""
 
 
 def strided_samples(lightmap: BakedDirectLight, rows: np.ndarray, columns: np.ndarray):
@@ -165,10 +156,9 @@ def tent_neighbours(lightmap: BakedDirectLight, samples: np.ndarray, records: np
                     rays: GatherRays) -> tuple[np.ndarray, np.ndarray]:
     """(2S, K) the records (`gather_records`) each sample of both sides averages, rows of the gather's
     (2R) samples, 0 with weight 0 past the last, and their tent weights 1 - distance / reach, normalized.
-    A sample of a tile with several reads the records within FILTER_RADIUS to WIDE_RADIUS sample
-    spacings (HARMONIC_SHARE of its distance to what it sees) on its plane and side (coplanar, the same
-    normal: across the edges of a face's triangles too); one of a tile with one reads those within
-    SMALL_RADIUS (or as far) whose normals are near its own. Records inside a solid (most of
+    A sample of a tile with several reads the records within FILTER_RADIUS sample spacings on its plane
+    and side (coplanar, the same normal: across the edges of a face's triangles too); one of a tile with
+    one reads those within SMALL_RADIUS whose normals are near its own. Records inside a solid (most of
     their rays meet the backs of faces: the floor under a box) are nobody's neighbours but their own
     samples', so that their darkness does not spread onto the visible floor beside."""
     points = lightmap.texel_points[samples].astype(np.float64)     # the front sides'; the back
@@ -176,18 +166,14 @@ def tent_neighbours(lightmap: BakedDirectLight, samples: np.ndarray, records: np
     small = lightmap.tile_n[lightmap.texel_faces[samples]] <= SAMPLE_STRIDE
     spacing = SAMPLE_STRIDE * lightmap.texel
     reach = np.where(small, SMALL_RADIUS, FILTER_RADIUS) * spacing
-    count = len(records)
-    inside = rays.inside(lightmap.covered.shape[1])
-    harmonic = np.where(inside, np.inf, rays.harmonic_distance(lightmap))   # a side inside a solid is unseen
-    nearer = np.minimum(harmonic[:count], harmonic[count:])                 # (a wall's back: outside, inf)
-    reach = np.clip(HARMONIC_SHARE * nearer[own], reach, np.maximum(reach, WIDE_RADIUS * spacing))
-    distance, near = cKDTree(points[records]).query(points, WIDE_MAX, distance_upper_bound=float(reach.max()),
+    distance, near = cKDTree(points[records]).query(points, FILTER_MAX, distance_upper_bound=float(reach.max()),
                                                     workers=-1)
     tent = record_tent(points, normals, points[records], normals[records], distance, near, reach, small)
+    count = len(records)
     near, tent = np.concatenate([near, near + count]), np.concatenate([tent, tent])
     own = np.concatenate([own, own + count])
     mine = near == own[:, None]
-    tent[inside[near] & ~mine] = 0.0
+    tent[rays.inside(lightmap.covered.shape[1])[near] & ~mine] = 0.0
     alone = tent.sum(axis=1) == 0.0      # (among more coincident samples than FILTER_MAX, or none near)
     near[alone, 0], tent[alone, 0] = own[alone], 1.0
     return near, tent / tent.sum(axis=1, keepdims=True)
