@@ -67,6 +67,11 @@ def usable_faces(scene) -> np.ndarray:
 class TriangleCaster:
     """A scene's triangles, ready for rays: an Embree hierarchy, or the DDA's cells."""
 
+    _faces: np.ndarray | None = None
+    """The scene faces Embree holds (`usable_faces`); None for the DDA, whose cells hold them all."""
+    _hull: np.ndarray | None = None
+    """`_hull_corners`, once asked."""
+
     def __init__(self, scene, cells: dda.Cells | None = None, backend: str | None = None):
         """`cells`: the scene's dda.Cells (any grid, Cells.blocking will do) when the caller has them, for
         the DDA backend; `backend`: "embree", "dda", or None for Embree where it is installed."""
@@ -109,13 +114,13 @@ class TriangleCaster:
 
     def _hull_corners(self) -> np.ndarray:
         """The corners of the convex hull of the faces rays can meet (all their corners where the hull is
-        flat)."""
-        if getattr(self, "_hull", None) is None:
+        flat). Qhull takes the corners as they are, shared ones repeated: sorting them out first took the
+        272k-triangle scan 1.4 s instead of 0.2."""
+        if self._hull is None:
             from scipy.spatial import ConvexHull, QhullError
-            faces = getattr(self, "_faces", None)
-            v0, e1, e2 = (self.v0, self.e1, self.e2) if faces is None else (self.v0[faces], self.e1[faces],
-                                                                            self.e2[faces])
-            corners = np.unique(np.concatenate([v0, v0 + e1, v0 + e2]), axis=0)
+            faces = slice(None) if self._faces is None else self._faces
+            v0, e1, e2 = self.v0[faces], self.e1[faces], self.e2[faces]
+            corners = np.concatenate([v0, v0 + e1, v0 + e2])
             try:
                 self._hull = corners[ConvexHull(corners).vertices]
             except (QhullError, ValueError):   # flat, or too few corners: every corner is on the hull
