@@ -354,9 +354,7 @@ class BakedIndirectLight:
             self._reflectance = None
         if self._reflectance is None:
             pixels, faces = self._covered
-            if self._scratch is None:   # once per lightmap, whose covered pixels stay (fresh pages: 14 ms an edit)
-                self._scratch, self._buffers = np.empty_like(self._direct), np.zeros((2, *self._direct.shape), "f4")
-            albedo, reflected = self._buffers
+            albedo, reflected = np.zeros_like(self._direct), np.zeros_like(self._direct)
             textures = tuple(map(id, self.scene.textures or ()))    # the same across colour edits
             if self._texture_ratio is None or self._texture_ratio[0] != textures:
                 ratio = texture_ratio(self.scene, self.lightmap, faces)   # a textured face reflects its texture
@@ -364,6 +362,7 @@ class BakedIndirectLight:
             face_albedo = np.ascontiguousarray(self.scene.albedo[self.scene.face_areas > 0], np.float32)
             reflectance(pixels, faces, face_albedo, self._texture_ratio[1], self._direct, albedo, reflected)
             self._reflectance = (albedo, reflected)
+            self._scratch = np.empty_like(albedo)
         return self._reflectance
 
     @property
