@@ -39,12 +39,14 @@ def test_colour_channels_are_independent():
     assert not changed[0].any() and not changed[2].any()
     expected = np.zeros(encoding.CHANNELS, bool)
     expected[encoding.FEATURES.index("albedo")] = True
-    expected[encoding.BOUNCE] = True
+    expected[encoding.BOUNCE] = expected[encoding.SEEN] = True
     np.testing.assert_array_equal(changed[1], expected)
-    # the green wall reflects more green: the bounce's DC grows, most beside the wall
-    more = (b.inputs[1, encoding.BOUNCE][0] - a.inputs[1, encoding.BOUNCE][0])
-    assert more.min() >= -1e-6 and more.max() > 0
-    assert more[0].mean() > more[-1].mean()  # red wall at -x
+    # the green wall reflects more green: the bounce's DC grows, most beside the wall, and so does what
+    # the probes see of it
+    for part in (encoding.BOUNCE, encoding.SEEN):
+        more = (b.inputs[1, part][0] - a.inputs[1, part][0])
+        assert more.min() >= -1e-6 and more.max() > 0
+        assert more[0].mean() > more[-1].mean()  # red wall at -x
 
 
 def test_no_light_gives_zero_scale_and_zero_inputs_of_light():
@@ -216,3 +218,39 @@ def test_the_bounce_floor_scores_each_gather_by_its_best_gain():
     assert errors["converged surface light"] < 1e-6
     assert all(0.0 <= e <= 1.0 + 1e-9 for e in errors.values())
     assert errors["bounce input"] > 0.01
+
+
+def test_the_seen_bounce_stops_at_a_wall():
+    """A wall from floor to ceiling splits the room; the lamp lights one side. The unshadowed bounce
+    reaches through the wall (half its open-room value), the seen bounce does not: the probes behind
+    the wall see only surfaces the lamp cannot reach. Without the wall both agree on the same light."""
+    lamp = ceiling_lamp(half_size=0.15, height=0.95, radiance=10.0)
+    room = box(inward=True, albedo=0.5, name="room")
+    v = np.array([[0.4, 1.0, -1.0], [0.4, 1.0, 1.0], [0.4, -1.0, 1.0], [0.4, -1.0, -1.0]])
+    wall = Scene("wall", v, np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]]), 0.8, 0.0, 0, ("wall",))
+
+    def behind(scene):   # the DC of both bounces at the probes with x > 0.5
+        enc = encode(scene, m=8, n=16)
+        dc = [enc.inputs[0, part.start, 6:].mean() * enc.scale[0] for part in (encoding.BOUNCE, encoding.SEEN)]
+        return dc[0], dc[1]
+
+    bounce, seen = behind(Scene.concatenate("split", [room, lamp, wall]))
+    open_bounce, open_seen = behind(Scene.concatenate("open", [room, lamp]))
+    assert 0.5 < open_seen / open_bounce < 2.0
+    assert bounce > 0.3 * open_bounce
+    assert seen < 0.1 * open_seen and seen < 0.25 * bounce
+
+
+@pytest.mark.parametrize("name", ["cornell", "paper-test"])
+def test_the_seen_rays_land_where_the_solvers_do(name):
+    """The seen rays' listing, remade from a voxel grid alone, names the voxels that the listing made
+    with the voxelization's own keys names."""
+    from viewer.rays import dda
+    from viewer.rays.voxels import voxelize_with_faces
+
+    scene = load(name)
+    voxelization = voxelize_with_faces(scene, 24)
+    ours = encoding.landing_cells(scene, voxelization.grid)
+    theirs = dda.Cells.of(voxelization, scene)
+    np.testing.assert_array_equal(ours.voxel, theirs.voxel)
+    np.testing.assert_array_equal(ours.triangle, theirs.triangle)

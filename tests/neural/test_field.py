@@ -191,13 +191,19 @@ def test_mirror_augmentation_is_the_mirrored_scene():
     mirrored, _, _ = mirror(x, y, v, axis=0)
     np.testing.assert_allclose(b.scale, a.scale, rtol=1e-4)
     rest = np.ones(encoding.CHANNELS, bool)
-    rest[encoding.BOUNCE] = False
+    rest[encoding.BOUNCE] = rest[encoding.SEEN] = False
     np.testing.assert_allclose(mirrored.numpy()[:, rest], b.inputs[:, rest], atol=2e-3)
     # the bounce's patches are merged on the voxel grid, which is not symmetric about the scene, so the
     # mirror is the mirrored scene's only in the mean (a wrong sign would be off by the whole coefficient)
     bounce = b.inputs[:, encoding.BOUNCE]
     difference = mirrored.numpy()[:, encoding.BOUNCE] - bounce
     assert np.sqrt(np.mean(difference ** 2)) < 0.03 * np.sqrt(np.mean(bounce ** 2))
+    # the seen rays' directions are turned at random per probe, so the mirror's seen light is another
+    # draw of the same noise: equal over the room, its signs those of the mirrored scene
+    seen, ours = b.inputs[:, encoding.SEEN], mirrored.numpy()[:, encoding.SEEN]
+    total = lambda values: values.sum(axis=(0, 2, 3, 4))   # noqa: E731  (9,) over the passes and probes
+    assert np.all(np.abs(total(ours) - total(seen)) < 0.25 * total(np.abs(seen)))
+    assert abs(total(ours)[0] - total(seen)[0]) < 0.05 * total(seen)[0]
 
 
 def _wait_for_grid(gi, seconds: float = 600.0):

@@ -11,7 +11,8 @@ from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import voxelize_with_faces
 from viewer.scene import Scene
 from viewer.training.cones import ConeTracer
-from viewer.training.ladder import ProbeRays, box_filtered
+from viewer.neural.seen import SeenRays
+from viewer.training.ladder import box_filtered
 
 VOXELS = 24
 DC_OF_ONE = np.sqrt(4.0 * np.pi)   # the constant radiance 1 over the sphere, in SH band 0
@@ -46,7 +47,7 @@ def test_a_room_of_uniform_light_is_seen_whole_by_rays_and_cones(room):
     scene, voxels, rays_of_scene = room
     points = near_points(3)
     ones = np.ones((voxels.count, 3))
-    rays = ProbeRays(rays_of_scene, voxels.count, points, 64).gathered(ones)
+    rays = SeenRays(rays_of_scene, voxels.count, points, 64).gathered(ones)
     np.testing.assert_allclose(rays[:, 0], DC_OF_ONE, rtol=1e-6)
     assert np.abs(rays[:, 1:]).max() < 0.01 * DC_OF_ONE   # the 64-point lattice integrates the rest nearly to 0
     cones = ConeTracer(voxels, 16).gathered(ones, points)
@@ -64,7 +65,7 @@ def test_a_thin_wall_hides_the_light_behind_it_from_rays_not_from_the_unshadowed
     lattice = np.linspace(lo[0], hi[0], 9)[1::2]
     near = np.stack(np.meshgrid(lattice, lattice, lattice, indexing="ij"), -1).reshape(-1, 3)[:, 0] < 0.2
     assert unshadowed[near, 0, 0].min() > 0.1 * DC_OF_ONE
-    rays = ProbeRays(rays_of_scene, voxels.count, points, 64).gathered(beyond)
+    rays = SeenRays(rays_of_scene, voxels.count, points, 64).gathered(beyond)
     assert np.abs(rays).max() == 0.0
     cones = ConeTracer(voxels, 16).gathered(beyond, points)
     # trilinear reads mix the lit cells past the wall into the samples at it: 17% of the unshadowed light

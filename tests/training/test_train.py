@@ -125,8 +125,9 @@ def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
 
 
 def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
-    """The head starts at zero: all the light is the encoding's direct light plus its bounce, and the
-    reflected light is the bounce; the convolutions read the light through an exportable asinh."""
+    """The head starts at zero: all the light is the encoding's direct light plus the reflected light,
+    which is the mean of the two bounces (unshadowed and seen); the convolutions read the light through
+    an exportable asinh."""
     from viewer.scene import load
     from viewer.training.models import REFLECTED, TOTAL, asinh
 
@@ -134,7 +135,8 @@ def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
     x = torch.from_numpy(enc.inputs)
     with torch.no_grad():
         out = ProbeNet(ProbeNetConfig(width=4, hidden=8))(x)
-    torch.testing.assert_close(out[:, REFLECTED], x[:, encoding.BOUNCE])
-    torch.testing.assert_close(out[:, TOTAL], x[:, encoding.DIRECT] + x[:, encoding.BOUNCE])
+    bounce = 0.5 * (x[:, encoding.BOUNCE] + x[:, encoding.SEEN])
+    torch.testing.assert_close(out[:, REFLECTED], bounce)
+    torch.testing.assert_close(out[:, TOTAL], x[:, encoding.DIRECT] + bounce)
     t = torch.linspace(-400.0, 400.0, 10001)
     torch.testing.assert_close(asinh(t), torch.asinh(t), atol=1e-6, rtol=1e-6)

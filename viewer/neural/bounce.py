@@ -95,6 +95,17 @@ class Bounce:
         coarse = emitter_sh(lights, self._points)
         return (self._spread @ coarse.reshape(len(self._points), -1)).reshape(-1, sh.SH_COUNT, 3)
 
+    def leaving(self, albedo: np.ndarray) -> np.ndarray:
+        """(K, 3) the radiance each voxel of `albedo` (K, 3) reflects under the direct light of the last
+        `sh` call: what the seen rays gather (viewer/neural/seen.py)."""
+        return albedo * self._leaving_per_albedo
+
+    def reflected(self, albedo: np.ndarray, light: np.ndarray) -> np.ndarray:
+        """(K, C) the radiance each voxel of `albedo` (K, C) reflects under `light` (P, 9, C), SH at the
+        probes read half a voxel in front of it, as `sh` reads the direct light."""
+        incident = sum(w[:, None, None] * light[index] for index, w in self._front)   # (K, 9, C)
+        return albedo * np.maximum(sh.irradiance(incident, self.normal), 0.0) / np.pi
+
     def sh(self, albedo: np.ndarray, direct: np.ndarray, channels: np.ndarray | None = None) -> np.ndarray:
         """(P, 9, 3) `bounce_sh` for the voxels' `albedo` (K, 3) under `direct` (P, 9, 3). Only the colour
         `channels` (3,) bool (default all) are brought up to date; the others hold an earlier call's

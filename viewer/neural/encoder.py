@@ -17,6 +17,8 @@ viewer/neural/lattice.py):
 - the sun's visibility for the last direction (`encoding.sun_visibility`): its irradiance is a factor;
 - the one-bounce feature's patches and their last light (`encoding.Bounce`): the bounce is linear in
   the patches' radiance, so an albedo edit gathers only the patches of the recoloured surfaces.
+- the seen rays (`encoding.seen_rays`), cast once per geometry and occluders: any edit of light or
+  colour gathers the voxels' new once-reflected light along them, without casting.
 
 So an emission colour or intensity edit is a few products over the cached bases, and an albedo edit
 recomputes the albedo feature and gathers the changed patches' bounce; neither traces a ray. New
@@ -42,7 +44,7 @@ from scipy import ndimage
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
-from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, Encoding
+from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, SEEN, Encoding
 from viewer.neural.lattice import LatticeGeometry, LatticeShadows
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
@@ -94,6 +96,7 @@ class Encoder:
         self._emitted = None                        # (cells, 3) splatted emitted radiance x area
         self._sun = (None, np.zeros(3))             # (direction or None, irradiance)
         self._bounce: encoding.Bounce | None = None   # the bounce's patches and their last light
+        self._seen: encoding.SeenRays | None = None   # the seen rays of this geometry and occluders
         self._last: Encoding | None = None
         self._last_voxels: VoxelGrid | None = None
 
@@ -117,6 +120,8 @@ class Encoder:
         if geometry_changed:
             self._geometry = LatticeGeometry(voxels, self.lo, self.hi, self.points)
             self.recomputed.append("geometry")
+        if geometry_changed or shadows_changed:
+            self._seen = encoding.seen_rays(blockers, voxels, self.points)
         if shadows_changed:
             self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing)
             self.emitters = []   # every basis holds the old shadows
@@ -165,6 +170,11 @@ class Encoder:
         if self._bounce is None or not self._bounce.fits(voxels):
             self._bounce = encoding.Bounce(voxels, self.lo, self.hi, m)
         bounce = self._bounce.sh(voxels.albedo, direct.transpose(2, 1, 0), redo)  # (P, 9, 3)
+        seen = np.zeros((len(self.points), sh.SH_COUNT, 3), np.float32)
+        if self._seen is not None and voxels.count:
+            albedo = voxels.albedo[:, redo]
+            seen[..., redo] = encoding.seen_light(self._seen, self._bounce, albedo,
+                                                  self._bounce.leaving(voxels.albedo)[:, redo])
         inv = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1.0), 0.0)
         inputs = np.empty((3, CHANNELS, m ** 3), np.float32)
         previous = None if self._last is None else self._last.inputs.reshape(3, CHANNELS, -1)
@@ -178,6 +188,7 @@ class Encoder:
             inputs[c, 5] = emitted[c] * inv[c]
             np.multiply(direct[c], np.float32(inv[c]), out=inputs[c, DIRECT])
             inputs[c, BOUNCE] = bounce[:, :, c].T * inv[c]
+            inputs[c, SEEN] = seen[:, :, c].T * inv[c]
         inputs = inputs.reshape(3, CHANNELS, m, m, m)
         inputs.flags.writeable = False  # shared with the next encoding when it is the same
         return inputs

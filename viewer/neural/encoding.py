@@ -24,7 +24,11 @@ Four choices make a small network generalize beyond the layouts it was trained o
 - **One bounce as an input.** The reflected light, which the renderer shades, is a gather over the whole
   room, beyond what a small network's receptive field carries well: `bounce_sh` reflects the direct
   light once off every surface (albedo x irradiance / pi) and gathers it at a coarse lattice, without
-  shadows. The network learns the rest: further bounces, and the shadows of the reflected light.
+  shadows.
+- **The bounce, seen.** Gathered without visibility, light passes through walls, and no network gets
+  back which surfaces a probe sees. The `seen` features gather the light reflected once and twice with
+  SEEN_RAYS exact rays a probe (viewer/neural/seen.py): noisy, but shadowed. The network learns the
+  rest: the denoising, further bounces.
 
 Layout: inputs (3, CHANNELS, M, M, M) float32, indexed [channel of colour, feature, x, y, z], on the
 same lattice as the probes (`ProbeGrid.positions_for(lo, hi, M)`): cell (i, j, k) of the lattice holds
@@ -35,24 +39,26 @@ The direct light's parts are viewer/neural/direct.py, the one bounce viewer/neur
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from types import SimpleNamespace
 
 import numpy as np
 
 from viewer.rays import dda
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.probes import sh
-from viewer.rays.voxels import VoxelGrid
+from viewer.rays.voxels import VoxelGrid, face_facing
 
 # The features' parts, re-exported: callers read them as `encoding.<name>`.
 from viewer.neural.bounce import BOUNCE_LATTICE, BOUNCE_PATCH, Bounce, bounce_sh  # noqa: F401
+from viewer.neural.seen import SEEN_RAYS, SeenRays, seen_light
 from viewer.neural.direct import (NEAR_FIELD, SHADOW_OFFSET, VISIBILITY_CELLS, emitter_sh,  # noqa: F401
                                   emitter_sh_rows, emitting_patches, facings, patch_visibility,
                                   shadow_targets, splat, sun_sh, sun_visibility)
 
-VERSION = 4
+VERSION = 5
 """Bump when the features change: a model card records the version its network was trained on, and
-`viewer.neural.field` refuses a model of another version."""
+`viewer.neural.field` refuses a model of a version it cannot feed (`VERSION_CHANNELS`)."""
 FEATURES = (
     "density",          # surface area in the cell / cell face area
     "normal_x", "normal_y", "normal_z",  # area-weighted normals / cell face area
@@ -62,12 +68,18 @@ FEATURES = (
     "coord_x", "coord_y", "coord_z",  # probe position in [-1, 1] over the lattice
     "extent_x", "extent_y", "extent_z",  # lattice extent per axis / the largest
     *(f"bounce_{k}" for k in range(sh.SH_COUNT)),  # one bounce of the direct light, unshadowed, / scale
+    *(f"seen_{k}" for k in range(sh.SH_COUNT)),  # two bounces gathered by SEEN_RAYS rays a probe, / scale
 )
 CHANNELS = len(FEATURES)
+VERSION_CHANNELS = {4: 30, 5: CHANNELS}
+"""The features a network of each encoding version reads: the first this many of FEATURES (version 4
+had no seen features)."""
 DIRECT = slice(6, 6 + sh.SH_COUNT)
 """Where the direct-light SH sits among the features (the network adds its output to it)."""
 BOUNCE = slice(21, 21 + sh.SH_COUNT)
 """Where the one-bounce SH sits (`bounce_sh`: the network's reflected light starts from it)."""
+SEEN = slice(30, 30 + sh.SH_COUNT)
+"""Where the seen bounce's SH sits (viewer/neural/seen.py)."""
 
 
 @dataclass(frozen=True)
@@ -88,11 +100,39 @@ SHADOW_CELLS = 2
 """The occluders' grid is this many times finer than the voxels' (the cells a shadow ray marches)."""
 
 
-def occluders(scene, voxels: VoxelGrid) -> VoxelRays:
+class Occluders(VoxelRays):
     """What casts the encoding's shadows: every triangle of `scene`, on the ray layer (Embree where it is
-    installed, else the DDA on the cells of `voxels` divided SHADOW_CELLS times per axis)."""
-    k = SHADOW_CELLS
-    return VoxelRays(scene, dda.Cells.blocking(scene, voxels.lo, voxels.voxel_size / k, voxels.resolution * k))
+    installed, else the DDA on the cells of `voxels` divided SHADOW_CELLS times per axis); and `landing`,
+    the same triangles listed on the voxels' own grid, where the seen rays land (one Embree hierarchy
+    serves both)."""
+
+    def __init__(self, scene, voxels: VoxelGrid):
+        k = SHADOW_CELLS
+        super().__init__(scene, dda.Cells.blocking(scene, voxels.lo, voxels.voxel_size / k, voxels.resolution * k))
+        self.landing = VoxelRays(scene, landing_cells(scene, voxels), self.backend, self.caster)
+
+
+def occluders(scene, voxels: VoxelGrid) -> Occluders:
+    """The `Occluders` of `scene`'s triangles, for the voxels made from it."""
+    return Occluders(scene, voxels)
+
+
+def landing_cells(scene, voxels: VoxelGrid) -> dda.Cells:
+    """`dda.Cells.of` for a voxel grid without its voxelization: each voxel's key (flat cell x 6 +
+    facing) is remade from its cell and its normal, whose signed dominant axis is its pieces' (their
+    area-weighted mean keeps it), and the listing's voxels are put back in the grid's order."""
+    n, c = voxels.resolution, voxels.coords
+    keys = (c[:, 0] + n * (c[:, 1] + n * c[:, 2])) * 6 + face_facing(voxels.normal)
+    order = np.argsort(keys, kind="stable")
+    cells = dda.Cells.of(SimpleNamespace(grid=voxels, keys=keys[order]), scene)
+    return replace(cells, voxel=np.where(cells.voxel >= 0, order[np.maximum(cells.voxel, 0)], cells.voxel))
+
+
+def seen_rays(blockers: VoxelRays | None, voxels: VoxelGrid, points: np.ndarray) -> SeenRays | None:
+    """The seen rays of the lattice `points` on `blockers`' landing listing; None without occluders
+    (nothing is seen then: the seen features are zero)."""
+    landing = getattr(blockers, "landing", None)
+    return None if landing is None else SeenRays(landing, voxels.count, points)
 
 
 def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None) -> Encoding:
@@ -139,7 +179,13 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
         visible = patch_visibility(blockers, points, lights[0], lights[1], lo, spacing)
     direct = emitter_sh(lights, points, visible)
     direct += sun_sh(sun, blockers, points)  # (P, 9, 3)
-    bounce = bounce_sh(voxels, direct, lo, hi, m)
+    bounce, seen = np.zeros((cells, sh.SH_COUNT, 3)), np.zeros((cells, sh.SH_COUNT, 3))
+    if voxels.count:
+        once = Bounce(voxels, lo, hi, m)
+        bounce = once.sh(voxels.albedo, direct)
+        rays = seen_rays(blockers, voxels, points)
+        if rays is not None:
+            seen = seen_light(rays, once, voxels.albedo, once.leaving(voxels.albedo))
     scale = np.maximum(direct[:, 0, :], 0.0).mean(axis=0)
     inv = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1.0), 0.0)
 
@@ -154,4 +200,5 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
     extent = hi - lo
     inputs[:, 18:21] = (extent / extent.max())[:, None]
     inputs[:, BOUNCE] = (bounce * inv).transpose(2, 1, 0)
+    inputs[:, SEEN] = (seen * inv).transpose(2, 1, 0)
     return Encoding(inputs=inputs.reshape(3, CHANNELS, m, m, m), scale=scale.astype(np.float32), lo=lo, hi=hi)

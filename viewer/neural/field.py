@@ -135,14 +135,16 @@ class NeuralField:
         if file_sha256(self.card.path) != self.card.sha256:
             raise ModelError(f"{self.card.path.name}: file does not match its card's sha256 (corrupt or replaced)")
         version = self.card.data["inputs"]["encoding_version"]
-        if version != encoding.VERSION:
+        if version not in encoding.VERSION_CHANNELS:
             raise ModelError(f"{self.card.path.name} was trained on encoding version {version}, "
-                             f"this viewer encodes version {encoding.VERSION}")
+                             f"this viewer encodes versions {', '.join(map(str, encoding.VERSION_CHANNELS))}")
+        self.channels = encoding.VERSION_CHANNELS[version]
+        """The encoding's features the network reads (the first this many: an older version's)."""
         self.session = open_session(self.card.path, threads)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
-        if len(inputs) != 1 or inputs[0].shape[1] != encoding.CHANNELS:
+        if len(inputs) != 1 or inputs[0].shape[1] != self.channels:
             raise ModelError(f"{self.card.path.name}: expects inputs {inputs[0].shape}, "
-                             f"the encoding gives (3, {encoding.CHANNELS}, M, M, M)")
+                             f"the encoding gives (3, {self.channels}, M, M, M)")
         if len(outputs) != 1 or outputs[0].shape[1] != OUTPUTS:
             raise ModelError(f"{self.card.path.name}: gives outputs {outputs[0].shape}, expected (3, {OUTPUTS}, M, M, M)")
         self.input_name = inputs[0].name
@@ -210,6 +212,8 @@ class NeuralField:
     def run(self, inputs: np.ndarray) -> np.ndarray:
         """The network on encoded inputs (passes, CHANNELS, M, M, M): its raw output (passes, 19, M, M, M)."""
         self.passes_run = len(inputs)
+        if inputs.shape[1] != self.channels:
+            inputs = np.ascontiguousarray(inputs[:, :self.channels])
         return self.session.run(None, {self.input_name: inputs})[0]
 
     def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:

@@ -34,11 +34,16 @@ single precision (about 1e-6 voxels at the grid's far side) cannot move it acros
 class VoxelRays:
     """A scene's triangles and the voxel listing of its grid, ready for rays that land on voxels."""
 
-    def __init__(self, scene, cells: dda.Cells, backend: str | None = None):
-        """`backend`: "embree", "dda", or None for Embree where it is installed."""
+    def __init__(self, scene, cells: dda.Cells, backend: str | None = None, caster: TriangleCaster | None = None):
+        """`backend`: "embree", "dda", or None for Embree where it is installed. `caster`: the Embree
+        hierarchy of the same triangles, when another listing of them already built one."""
         self.cells = cells
         self.backend = backend or ("embree" if embree_available() else "dda")
-        self.caster = TriangleCaster(scene, cells, self.backend) if self.backend == "embree" else None
+        if self.backend == "embree":
+            self.caster = caster if caster is not None and caster.backend == "embree" else TriangleCaster(
+                scene, cells, self.backend)
+        else:
+            self.caster = None
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """(R,) int64: the voxel each ray o + t d (t > 0, unit d) meets first, dda.MISS or dda.BACKFACE."""

@@ -31,6 +31,7 @@ def mirror(inputs: torch.Tensor, targets: torch.Tensor, valid: torch.Tensor, axi
     sign_in[COORD_CHANNEL[axis]] = -1
     sign_in[encoding.DIRECT] = sh_signs(axis)
     sign_in[encoding.BOUNCE] = sh_signs(axis)
+    sign_in[encoding.SEEN] = sh_signs(axis)
     sign_out = torch.cat([sh_signs(axis), sh_signs(axis)])
     return inputs * sign_in[:, None, None, None], targets * sign_out[:, None, None, None], valid
 

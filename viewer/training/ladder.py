@@ -6,10 +6,9 @@ the valid probes:
 
 - no visibility: the encoding's bounce gather (patches as points, no shadows; viewer.neural.bounce);
 - voxel cone tracing with 6 and 16 cones a probe (viewer.training.cones);
-- exact rays, 8 to 64 a probe, cast on the scene's triangles (viewer.rays.cast: Embree), each taking the
-  light of the voxel whose surface it hits (as the solver's own probe rays do, a back face or nothing:
-  no light); every probe's directions are a Fibonacci lattice turned by a random rotation of its own,
-  so the error is noise a filter can average rather than the same aliasing at every probe;
+- exact rays, 8 to 64 a probe, cast on the scene's triangles (viewer.neural.seen.SeenRays, the network's
+  seen feature: each ray takes the light of the voxel whose surface it hits, a back face or nothing
+  brings none; every probe's directions are a Fibonacci lattice turned by a random rotation of its own);
 - the solver's own probe rays on the same voxels (256 a probe): what any gather of this light reaches,
   the rest being the target's finer voxels (the dataset's solver runs on 32^3, the ladder on the
   encoder's 24^3).
@@ -29,6 +28,7 @@ from viewer.probes import sh
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.training.cones import ConeTracer
+from viewer.neural.seen import SeenRays
 
 CONES = (6, 16)
 RAYS = (8, 16, 32, 64)
@@ -59,37 +59,6 @@ def box_filtered(estimate: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return total / np.maximum(count, 1.0)
 
 
-class ProbeRays:
-    """`rays` directions from every probe, cast once on the scene's triangles: the voxel each one lands on,
-    as the solver's probe rays find it (viewer.rays.voxel_rays: a back face or nothing is K)."""
-
-    def __init__(self, rays_of_scene: VoxelRays, count: int, points: np.ndarray, rays: int, seed: int = 0):
-        self.count, self.rays = len(points), rays
-        self.directions = turned_lattices(len(points), rays, seed)                    # (P, R, 3)
-        hits = rays_of_scene.bundle_hits(points, self.directions).reshape(-1)
-        self.voxel = np.where(hits < 0, count, hits)
-        # Monte Carlo weight of a uniform direction on the sphere: 4 pi / rays
-        self.basis = sh.basis(self.directions) * (4.0 * np.pi / rays)                  # (P, R, 9)
-
-    def gathered(self, radiance: np.ndarray) -> np.ndarray:
-        """(P, 9, 3) the light of the voxels leaving with `radiance` (K, 3), as the rays see it."""
-        seen = np.vstack([radiance, np.zeros((1, 3))])[self.voxel].reshape(self.count, self.rays, 3)
-        return np.matmul(self.basis.transpose(0, 2, 1), seen)
-
-
-def turned_lattices(count: int, rays: int, seed: int) -> np.ndarray:
-    """(count, rays, 3): a spherical Fibonacci lattice of `rays` directions turned by a uniformly random
-    rotation per probe (a unit quaternion from a 4D Gaussian), the same for the same seed."""
-    lattice, _ = sh.sphere_directions(rays)
-    q = np.random.default_rng(seed).normal(size=(count, 4))
-    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
-    rotation = np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)  # (P, 3, 3)
-    return np.einsum("pij,rj->pri", rotation, lattice)
-
-
 def timed(run, runs: int = TIMING_RUNS) -> tuple[object, float]:
     """(the result of run(), the median milliseconds of `runs` calls after a first one that compiles)."""
     result = run()
@@ -118,7 +87,7 @@ def rungs(scene, lo, hi, probes: int, solver, bounce) -> list[tuple[str, np.ndar
         out.append((f"cone traced, {cones} cones", found, ms, setup))
     for rays in RAYS:
         clock = time.perf_counter()
-        cast = ProbeRays(solver.geometry.rays, voxels.count, points, rays, seed=rays)
+        cast = SeenRays(solver.geometry.rays, voxels.count, points, rays, seed=rays)
         setup = 1000.0 * (time.perf_counter() - clock)
         found, ms = timed(lambda: cast.gathered(reflected))
         out.append((f"exact rays, {rays} a probe", found, ms, setup))

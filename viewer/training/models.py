@@ -46,6 +46,10 @@ class ProbeNetConfig:
     """Stride-2 levels below the probe lattice (M must be divisible by 2^levels)."""
     upsample: str = "trilinear"
     """How a coarse level reaches the finer one: `trilinear` or `nearest` (cheaper, blockier)."""
+    seen: bool = True
+    """Whether the network reads the seen bounce (viewer/neural/seen.py); without it, those features are
+    zeroed as they come in: the same network blind to visibility beyond the direct light's shadows
+    (to measure what the seen rays bring)."""
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -81,12 +85,16 @@ class ProbeNet(nn.Module):
         nn.init.zeros_(self.head[-1].weight)  # start from "the direct light, and the bounce times a gain"
         nn.init.zeros_(self.head[-1].bias)
         self.bounce_gain = nn.Parameter(torch.tensor(BOUNCE_GAIN))
+        self.seen_gain = nn.Parameter(torch.tensor(SEEN_GAIN))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if not self.config.seen:
+            x = torch.cat([x[:, :encoding.SEEN.start], torch.zeros_like(x[:, encoding.SEEN])], dim=1)
         direct_dc = x[:, encoding.DIRECT.start:encoding.DIRECT.start + 1]
         bounce_dc = x[:, encoding.BOUNCE.start:encoding.BOUNCE.start + 1]
+        seen_dc = x[:, encoding.SEEN.start:encoding.SEEN.start + 1]
         magnitude = direct_dc.abs() + bounce_dc.abs() + MAGNITUDE_FLOOR
-        reflected_magnitude = bounce_dc.abs() + REFLECTED_FLOOR
+        reflected_magnitude = 0.5 * (bounce_dc.abs() + seen_dc.abs()) + REFLECTED_FLOOR
         x_in = compress(x)
         levels = []
         level = x_in
@@ -98,7 +106,8 @@ class ProbeNet(nn.Module):
             hidden = self.project[i](levels[i]) + self._up(hidden)
         hidden = F.relu(self.local(x_in) + self._up(hidden))
         out = self.head(hidden)
-        reflected = self.bounce_gain * x[:, encoding.BOUNCE] + out[:, REFLECTED] * reflected_magnitude
+        reflected = (self.bounce_gain * x[:, encoding.BOUNCE] + self.seen_gain * x[:, encoding.SEEN]
+                     + out[:, REFLECTED] * reflected_magnitude)
         total = x[:, encoding.DIRECT] + out[:, TOTAL] * magnitude + reflected  # direct - occlusion + reflected
         return torch.cat([total, reflected, out[:, VALIDITY:]], dim=1)
 
@@ -109,10 +118,12 @@ class ProbeNet(nn.Module):
 
 
 TOTAL, REFLECTED, VALIDITY = slice(0, 9), slice(9, 18), 18
-BOUNCE_GAIN = 1.0
-"""The reflected light's start: the one-bounce input times this (learned from there). The light bounces
-on, so the best single factor per v2 room is 1.4-2.1 on the bounce's DC, but over all nine
-coefficients and every probe 1.0 scored better (56% against 58% on 100 validation rooms)."""
+BOUNCE_GAIN = SEEN_GAIN = 0.5
+"""The reflected light's start: the unshadowed one-bounce input and the seen one (the same light through
+exact rays: shadowed, noisy) times these, half each (learned from there). With the unshadowed bounce
+alone the start was 1.0: the light bounces on, so the best single factor per v2 room is 1.4-2.1 on the
+bounce's DC, but over all nine coefficients and every probe 1.0 scored better (56% against 58% on 100
+validation rooms)."""
 MAGNITUDE_FLOOR = 0.1
 """The head's corrections are relative: the direct light's times |direct DC| + |bounce DC| + this (in
 the encoding's units, where the room's mean direct DC is 1), so one output unit is a tenth of a dim
@@ -129,9 +140,10 @@ def compress(x: torch.Tensor) -> torch.Tensor:
     span five orders of magnitude (a probe next to a lamp sees ~300x the room's mean, the far corner a
     hundredth of it); raw, the few cells by the lamps are all that the first layers' activations hold."""
     emission, bounce = encoding.FEATURES.index("emission"), encoding.BOUNCE
-    assert encoding.DIRECT.start == emission + 1 and bounce.stop == encoding.CHANNELS
+    assert encoding.DIRECT.start == emission + 1 and bounce.stop == encoding.SEEN.start
+    assert encoding.SEEN.stop == encoding.CHANNELS
     return torch.cat([x[:, :emission], asinh(x[:, emission:encoding.DIRECT.stop]),
-                      x[:, encoding.DIRECT.stop:bounce.start], asinh(x[:, bounce])], dim=1)
+                      x[:, encoding.DIRECT.stop:bounce.start], asinh(x[:, bounce.start:])], dim=1)
 
 
 def asinh(t: torch.Tensor) -> torch.Tensor:

@@ -257,6 +257,8 @@ def main(argv=None) -> int:
     parser.add_argument("--hidden", type=int, default=ProbeNetConfig.hidden)
     parser.add_argument("--head-layers", type=int, default=ProbeNetConfig.head_layers)
     parser.add_argument("--levels", type=int, default=ProbeNetConfig.levels)
+    parser.add_argument("--without-seen", action="store_true",
+                        help="zero the seen-bounce features (to measure what the seen rays bring)")
     parser.add_argument("--epochs", type=int, default=TrainSettings.epochs)
     parser.add_argument("--batch", type=int, default=TrainSettings.batch, help="scenes per step")
     parser.add_argument("--lr", type=float, default=TrainSettings.learning_rate)
@@ -282,7 +284,8 @@ def main(argv=None) -> int:
         train_set = train_set.subset(np.arange(min(args.limit, len(train_set))))
     record_data(args.out, args.data, train_set, val_set, args.probes,
                 " ".join(["python -m viewer.training.train", *(sys.argv[1:] if argv is None else argv)]))
-    config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels)
+    config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels,
+                            seen=not args.without_seen)
     model = ProbeNet(config)
     if args.init and not (args.out / "checkpoint.pt").exists():
         model.load_state_dict(torch.load(args.init, weights_only=False)["model"])

@@ -1,0 +1,92 @@
+"""The seen feature: the light the surfaces reflect once, gathered at each probe by a few exact rays.
+
+The one-bounce feature (viewer/neural/bounce.py) gathers that light with no visibility: every lit patch
+shines on every probe, through walls. Gathered that way, even the solver's exact converged surface light
+is 45% off the reflected light at the probes (docs/TRAINING.md, the visibility ladder), and a network
+cannot recover what the gather threw away: which surfaces a probe sees. A few rays a probe, cast once
+per geometry on the scene's own triangles, carry it: on the ladder, 16 rays a probe and a plain 3x3x3
+filter took the same light from 45% to 30%, where 16 voxel cones reached 42%. So the network gets the
+noisy ray gather beside the smooth unshadowed one and learns to denoise the first with the second.
+
+Each ray lands on the voxel whose surface it meets (viewer.rays.voxel_rays: the same lookup as the
+solver's probe rays; a back face or nothing brings no light) and takes that voxel's once-reflected
+light: albedo x its direct irradiance / pi (`Bounce.leaving`). The directions are a spherical Fibonacci
+lattice turned by a random rotation per probe (fixed by SEED, the same in training and in the viewer),
+so the error is noise that neighbouring probes average rather than the same aliasing everywhere.
+
+The light bounces on, and the seen feature follows it one bounce further (`seen_light`): what the rays
+gathered is read back at the voxels (half a voxel in front, as the direct light is) and reflected again,
+and gathered again. On 20 validation rooms, against the solver's reflected light (best gain a room,
+3x3x3 box filtered, median): the unshadowed bounce 46.6%, the seen bounce 33.0%, seen twice 29.5%
+(a third bounce 29.3%), where the solver's converged surface light gathered by the same 16 rays is
+30.0%. So two bounces carry all that these rays can.
+
+Kept per geometry (`SeenRays`): the rays are cast once; a light or colour edit is two gathers of the
+voxels' new light, each a (P, 9, R) x (P, R, 3) product.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from viewer.probes import sh
+from viewer.rays.voxel_rays import VoxelRays
+
+SEEN_RAYS = 16
+"""Rays a probe. On the ladder's 20 validation rooms (the converged light, box filtered): 8 rays 34.9%,
+16 rays 30.0%, 32 rays 28.1%, 64 rays 27.6%, for 80 / 184 / 362 / 823 ms of rays a geometry; 16 is
+where the error stops falling faster than the cost grows."""
+SEEN_BOUNCES = 2
+"""Bounces the seen feature carries (see above: a third adds 0.2 points)."""
+SEED = 0x5EE
+"""The directions' rotations: the same in training and in the viewer."""
+
+
+class SeenRays:
+    """`rays` directions from each of `points` (P, 3), cast once on `landing` (the encoder's voxels'
+    listing of the scene's triangles): the voxel each one lands on, and the SH weights that gather the
+    light it brings."""
+
+    def __init__(self, landing: VoxelRays, count: int, points: np.ndarray, rays: int = SEEN_RAYS,
+                 seed: int = SEED):
+        self.count, self.rays, self.probes = int(count), int(rays), len(points)
+        directions = turned_lattices(len(points), rays, seed)                      # (P, R, 3)
+        hits = landing.bundle_hits(points, directions).reshape(-1)
+        self.voxel = np.where(hits < 0, count, hits).astype(np.int64)
+        """(P x R,) the voxel each ray lands on; `count` where it brings no light."""
+        # Monte Carlo weight of a uniform direction on the sphere: 4 pi / rays
+        self._basis = np.ascontiguousarray(
+            (sh.basis(directions) * (4.0 * np.pi / rays)).transpose(0, 2, 1), np.float32)  # (P, 9, R)
+
+    def gathered(self, radiance: np.ndarray) -> np.ndarray:
+        """(P, 9, C) the light of the voxels leaving with `radiance` (K, C), as the rays see it."""
+        radiance = np.asarray(radiance, np.float32)
+        padded = np.vstack([radiance, np.zeros((1, radiance.shape[1]), np.float32)])
+        seen = padded[self.voxel].reshape(self.probes, self.rays, radiance.shape[1])
+        return np.matmul(self._basis, seen)
+
+
+def seen_light(rays: SeenRays, bounce, albedo: np.ndarray, leaving: np.ndarray,
+               bounces: int = SEEN_BOUNCES) -> np.ndarray:
+    """(P, 9, C) the light the voxels reflect once to `bounces` times, as `rays` see it: `leaving` (K, C)
+    is their once-reflected radiance (`Bounce.leaving`), and each further bounce reflects what the rays
+    gathered (`Bounce.reflected`, for the voxels' `albedo` (K, C))."""
+    gathered = rays.gathered(leaving)
+    total = gathered.copy()
+    for _ in range(bounces - 1):
+        gathered = rays.gathered(bounce.reflected(albedo, gathered))
+        total += gathered
+    return total
+
+
+def turned_lattices(count: int, rays: int, seed: int) -> np.ndarray:
+    """(count, rays, 3): a spherical Fibonacci lattice of `rays` directions turned by a uniformly random
+    rotation per probe (a unit quaternion from a 4D Gaussian), the same for the same seed."""
+    lattice, _ = sh.sphere_directions(rays)
+    q = np.random.default_rng(seed).normal(size=(count, 4))
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    rotation = np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)  # (P, 3, 3)
+    return np.einsum("pij,rj->pri", rotation, lattice)
