@@ -36,6 +36,7 @@ intensity) leaves that channel's network input as it was. The network then does 
 from __future__ import annotations
 
 import itertools
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,6 +90,8 @@ class Encoder:
         self.recomputed: list[str] = []
         """What the last `encode` had to recompute: `geometry`, `shadows` (new occluders), `albedo`,
         `emission`, `emitters` (a basis), `sun`."""
+        self.ray_seconds = 0.0
+        """How long the last `encode` spent casting the seen rays (a new geometry or new occluders)."""
         self._geometry: LatticeGeometry | None = None
         self._shadows: LatticeShadows | None = None
         self._albedo = self._emission = None        # the voxels' (K, 3) of the last call
@@ -116,12 +119,15 @@ class Encoder:
             self.recomputed = []
             return self._last
         self.recomputed = []
+        self.ray_seconds = 0.0
         geometry_changed = self._geometry is None or not self._geometry.fits(voxels)
         if geometry_changed:
             self._geometry = LatticeGeometry(voxels, self.lo, self.hi, self.points)
             self.recomputed.append("geometry")
         if geometry_changed or shadows_changed:
+            clock = time.perf_counter()
             self._seen = encoding.seen_rays(blockers, voxels, self.points)
+            self.ray_seconds = time.perf_counter() - clock
         if shadows_changed:
             self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing)
             self.emitters = []   # every basis holds the old shadows

@@ -51,7 +51,7 @@ from viewer.rays.voxels import VoxelGrid, face_facing
 
 # The features' parts, re-exported: callers read them as `encoding.<name>`.
 from viewer.neural.bounce import BOUNCE_LATTICE, BOUNCE_PATCH, Bounce, bounce_sh  # noqa: F401
-from viewer.neural.seen import SEEN_RAYS, SeenRays, seen_light
+from viewer.neural.seen import SEEN_RAYS, SeenRays, seen_light  # noqa: F401
 from viewer.neural.direct import (NEAR_FIELD, SHADOW_OFFSET, VISIBILITY_CELLS, emitter_sh,  # noqa: F401
                                   emitter_sh_rows, emitting_patches, facings, patch_visibility,
                                   shadow_targets, splat, sun_sh, sun_visibility)

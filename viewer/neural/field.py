@@ -181,7 +181,8 @@ class NeuralField:
         ran = clock_now()
         grid = unpack(out, enc.scale, enc.lo, enc.hi, include_emitted)
         if timings is not None:
-            timings.update(encode=encoded - clock, network=ran - encoded, unpack=clock_now() - ran)
+            rays = encoder.ray_seconds   # the seen rays, cast once per geometry (viewer/neural/seen.py)
+            timings.update(encode=encoded - clock - rays, rays=rays, network=ran - encoded, unpack=clock_now() - ran)
         return grid
 
     def forget(self) -> None:
