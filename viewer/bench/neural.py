@@ -123,7 +123,7 @@ def _before(scene: Scene, field: NeuralField, probes: int, voxels: int) -> dict[
     with one_blas_thread():
         enc = encoding.encode(grid, scene.sun, lo, hi, probes, blockers)
     encoded = clock_now()
-    out = field.session.run(None, {field.input_name: enc.inputs})[0]
+    out = field.run(enc.inputs)
     ran = clock_now()
     coefficients = (out[:, 9:18] * enc.scale[:, None, None, None, None]).transpose(2, 3, 4, 1, 0)
     _ = np.ascontiguousarray(coefficients, np.float32), out[:, 18].mean(axis=0) > 0.0

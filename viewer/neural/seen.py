@@ -27,6 +27,7 @@ voxels' new light, each a (P, 9, R) x (P, R, 3) product.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from viewer.probes import sh
@@ -55,15 +56,14 @@ class SeenRays:
         self.voxel = np.where(hits < 0, count, hits).astype(np.int64)
         """(P x R,) the voxel each ray lands on; `count` where it brings no light."""
         # Monte Carlo weight of a uniform direction on the sphere: 4 pi / rays
-        self._basis = np.ascontiguousarray(
-            (sh.basis(directions) * (4.0 * np.pi / rays)).transpose(0, 2, 1), np.float32)  # (P, 9, R)
+        self._basis = np.ascontiguousarray(sh.basis(directions) * (4.0 * np.pi / rays), np.float32)  # (P, R, 9)
 
     def gathered(self, radiance: np.ndarray) -> np.ndarray:
-        """(P, 9, C) the light of the voxels leaving with `radiance` (K, C), as the rays see it."""
+        """(P, 9, C) the light of the voxels leaving with `radiance` (K, C), as the rays see it (one
+        compiled pass over the rays: half the time of a fancy-indexed copy and a batched product)."""
         radiance = np.asarray(radiance, np.float32)
-        padded = np.vstack([radiance, np.zeros((1, radiance.shape[1]), np.float32)])
-        seen = padded[self.voxel].reshape(self.probes, self.rays, radiance.shape[1])
-        return np.matmul(self._basis, seen)
+        padded = np.ascontiguousarray(np.vstack([radiance, np.zeros((1, radiance.shape[1]), np.float32)]))
+        return _gathered(self.voxel.reshape(self.probes, self.rays), self._basis, padded)
 
 
 def seen_light(rays: SeenRays, bounce, albedo: np.ndarray, leaving: np.ndarray,
@@ -90,3 +90,25 @@ def turned_lattices(count: int, rays: int, seed: int) -> np.ndarray:
         np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
         np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)  # (P, 3, 3)
     return np.einsum("pij,rj->pri", rotation, lattice)
+
+
+@numba.njit(cache=True, nogil=True)
+def _gathered(voxel, basis, radiance):
+    """(P, 9, C): sum over each probe's rays r of basis[p, r, :] x radiance[voxel[p, r]]."""
+    probes, rays = voxel.shape
+    channels = radiance.shape[1]
+    out = np.zeros((probes, 9, channels), np.float32)
+    total = np.zeros((channels, 9), np.float32)
+    for p in range(probes):
+        total[:] = 0.0
+        for r in range(rays):
+            v = voxel[p, r]
+            for c in range(channels):
+                value = radiance[v, c]
+                if value != 0.0:
+                    for b in range(9):
+                        total[c, b] += basis[p, r, b] * value
+        for c in range(channels):
+            for b in range(9):
+                out[p, b, c] = total[c, b]
+    return out

@@ -9,7 +9,8 @@ For validation rooms of a dataset, the reflected light at the probes (the solver
 target) against three gathers of surface light the way `encoding.Bounce` gathers the one-bounce input
 (patches as points, no shadows): the input itself (its direct light from the encoding's shadowed SH),
 the same gather of the solver's exact direct irradiance of every voxel (one bounce), and of the
-solver's converged light of every voxel (every bounce). Each is scaled by its best gain for the room
+solver's converged light of every voxel (every bounce); and the seen input (viewer/neural/seen.py: two
+bounces gathered by exact rays), raw and after a 3x3x3 box filter. Each is scaled by its best gain for the room
 (the network learns a gain for free) and scored on the probes outside solids, relative RMSE per room.
 If even the converged surface light gathered this way is far off, the error is in the gather (the
 surfaces' transport to the probes), not in the surfaces' light: what the network cannot learn from
@@ -40,7 +41,8 @@ from viewer.physical.gi import GISettings, PhysicalGI
 from viewer.rays.voxels import voxelize
 from viewer.training import ladder
 
-GATHERS = ("bounce input", "exact one bounce", "converged surface light")
+GATHERS = ("bounce input", "exact one bounce", "converged surface light", "seen input",
+           "seen input, box filtered")
 NETWORK = "network (as it is)"
 
 
@@ -67,8 +69,10 @@ def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, vox
         bounce_input = lattice(bounce.sh(grid.albedo, direct_sh))
     else:
         bounce_input = enc.inputs[:, encoding.BOUNCE].astype(np.float64) * scale
+    seen = enc.inputs[:, encoding.SEEN].astype(np.float64) * scale
     estimates = (bounce_input, lattice(bounce.gathered(grid.albedo * solver.lighting.direct / np.pi)),
-                 lattice(bounce.gathered(solver.lighting.reflected.astype(np.float64))))
+                 lattice(bounce.gathered(solver.lighting.reflected.astype(np.float64))), seen,
+                 ladder.box_filtered(seen, valid))
     out = {name: ladder.best_gain_error(estimate, target, valid) for name, estimate in zip(GATHERS, estimates)}
     t = target[..., valid]
     if field is not None:
