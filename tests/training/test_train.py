@@ -38,9 +38,11 @@ def test_loss_falls_and_the_run_resumes(tiny, tmp_path):
     model = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2))
     first = train(model, train_set, val_set, TrainSettings(epochs=30, batch=1, learning_rate=1e-2), run=run,
                   quiet=True)
-    # the untrained network answers with the direct light (zero-initialized head): training must improve
-    # on that; how much depends on the four random rooms (the shipped model's accuracy is tested apart)
-    assert np.mean(first.train[-5:]) < 0.95 * np.mean(first.train[:3])
+    # the untrained network answers with the direct light and the two bounces (zero-initialized head):
+    # training must improve on that; how much depends on the four random rooms (the shipped model's
+    # accuracy is tested apart; the seen bounce's box-filtered start leaves less to gain than the
+    # unshadowed bounce did: 0.193 -> 0.180 here, where a blind network goes 0.235 -> 0.193)
+    assert np.mean(first.train[-5:]) < 0.97 * np.mean(first.train[:3])
     assert (run / "checkpoint.pt").exists() and (run / "loss.png").exists()
     again = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2))
     resumed = train(again, train_set, val_set, TrainSettings(epochs=32, batch=1, learning_rate=1e-2), run=run,
@@ -126,8 +128,8 @@ def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
 
 def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
     """The head starts at zero: all the light is the encoding's direct light plus the reflected light,
-    which is the mean of the two bounces (unshadowed and seen); the convolutions read the light through
-    an exportable asinh."""
+    which is the mean of the two bounces (unshadowed, and seen through the box filter); the
+    convolutions read the light through an exportable asinh."""
     from viewer.scene import load
     from viewer.training.models import REFLECTED, TOTAL, asinh
 
@@ -135,7 +137,9 @@ def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
     x = torch.from_numpy(enc.inputs)
     with torch.no_grad():
         out = ProbeNet(ProbeNetConfig(width=4, hidden=8))(x)
-    bounce = 0.5 * (x[:, encoding.BOUNCE] + x[:, encoding.SEEN])
+    box = torch.nn.functional.avg_pool3d(torch.nn.functional.pad(x[:, encoding.SEEN], (1,) * 6, mode="replicate"),
+                                         3, stride=1)
+    bounce = 0.5 * (x[:, encoding.BOUNCE] + box)
     torch.testing.assert_close(out[:, REFLECTED], bounce)
     torch.testing.assert_close(out[:, TOTAL], x[:, encoding.DIRECT] + bounce)
     t = torch.linspace(-400.0, 400.0, 10001)
