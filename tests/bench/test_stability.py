@@ -140,3 +140,24 @@ def test_the_ood_study_moves_past_the_shipped_models_own_ranges():
                 continue
             _, params = random_scene(np.random.default_rng([ood.SEED, number]), "step", step.ranges)
             assert ood.range_distance(step.axis, params, ranges) > 0, (preset, step.label)
+
+
+def test_the_input_study_rooms_are_what_their_cases_say():
+    """Each case of the network's input study draws the rooms it names: two thin partitions, a small window
+    with the sun, lights on objects alone, and every surface near black or near white."""
+    from viewer.bench.stability import inputs
+
+    rooms = {case.name: inputs.case_scenes(case, 1, n)[0] for n, case in enumerate(inputs.CASES)}
+    thin = rooms["thin walls"]
+    assert sum(name.startswith("partition") for name in thin.groups) == 2
+    assert {"jamb", "wall"} <= set(rooms["thin wall, doorway"].groups)
+    window = rooms["small window"]
+    assert window.sun is not None
+    glowing = rooms["glowing objects"]
+    lit_groups = {glowing.groups[g] for g in np.unique(glowing.face_group[np.any(glowing.emission > 0, axis=1)])}
+    assert lit_groups and not any(name.startswith("light") or name in ("floor", "ceiling", "back", "left-wall",
+                                                                          "right-wall") for name in lit_groups)
+    for case, (low, high) in (("near-black walls", inputs.DARK), ("near-white walls", inputs.WHITE)):
+        room = rooms[case]
+        surfaces = ~np.any(room.emission > 0, axis=1)      # the lamps' own faces keep their albedo
+        assert room.albedo[surfaces].min() >= low and room.albedo[surfaces].max() <= high

@@ -27,6 +27,7 @@ TITLES = {
     "resolution": "Resolution: which scenes need which grid",
     "ood": "Out of distribution (neural model)",
     "sun": "Sunlight through a window",
+    "inputs": "Where the network's inputs fail",
 }
 TITLE = "# Stability"
 
