@@ -64,7 +64,8 @@ def capture_request(args, **changes) -> CaptureRequest:
                           msaa=int(value("msaa", CaptureRequest.msaa)), sun=sun,
                           gi_settings=gi_settings(args, size, int(value("msaa", CaptureRequest.msaa)),
                                                   max(1, int(value("turntable", 1)))),
-                          model=value("model"), turntable=int(value("turntable", 0)))
+                          model=value("model"), turntable=int(value("turntable", 0)),
+                          supersample=int(value("supersample", CaptureRequest.supersample)))
 
 
 def run_capture(request: CaptureRequest) -> int:
@@ -193,7 +194,8 @@ def render(request: CaptureRequest, probe_source: ProbeSource | None = None) -> 
                 turntable(scene, probes, out, size, view, camera, settings, voxels, radiance, request, ctx)
             else:
                 capture(scene, probes, out, size=size, view=view, camera=camera, settings=settings,
-                        voxels=voxels, voxel_radiance=radiance, samples=int(request.msaa), ctx=ctx)
+                        voxels=voxels, voxel_radiance=radiance, samples=int(request.msaa), ctx=ctx,
+                        supersample=int(request.supersample))
     finally:
         ctx.release()
     shown = (getattr(probe_source, "label", None) if probes is not None else None) or gi
@@ -233,7 +235,7 @@ def turntable(scene, probes, out, size, view, camera, settings, voxels, radiance
             c, s = math.cos(angle), math.sin(angle)
             turn = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
             frame = Camera(tuple(centre + turn @ offset), tuple(centre + turn @ target), camera.up, camera.fov)
-            frames.append(Image.fromarray(offscreen.render(frame, view)))
+            frames.append(Image.fromarray(offscreen.render(frame, view, int(request.supersample))))
     finally:
         offscreen.release()
     with replacing(out) as file:   # whole or not at all, as every picture

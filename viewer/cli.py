@@ -15,7 +15,7 @@ import numpy as np
 from viewer import sources
 from viewer.bench.run import add_arguments as bench_arguments  # no GL, Mitsuba or matplotlib import
 from viewer import capture as captures  # no GL import until a capture runs
-from viewer.cli_parsing import (NEGATIVE_VALUE_FLAGS, msaa_count, add_dataclass_flags, add_gi_flags, gi_settings,
+from viewer.cli_parsing import (NEGATIVE_VALUE_FLAGS, msaa_count, supersample_count, add_dataclass_flags, add_gi_flags, gi_settings,
                                 joined_negative_values)
 from viewer.errors import ArgumentParser, InputError, exit_status
 from viewer.gpu.render_settings import RenderSettings
@@ -82,6 +82,11 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     capture.add_argument("--view", choices=VIEWS, default="final", help="what the picture shows")
     capture.add_argument("--msaa", type=msaa_count, default=4, metavar="N",
                          help="multisample count: edge anti-aliasing (0: off; default: %(default)s)")
+    capture.add_argument("--supersample", type=supersample_count, default=1, metavar="N",
+                         help="N x N subpixel images averaged in linear light instead of multisampling: a "
+                              "bright lamp's edges as a path tracer draws them (16: 41.6 dB against Mitsuba on "
+                              "the box scenes, where multisampling gives 37.4-37.6; costs N^2 draws; "
+                              "default: %(default)s, off)")
     capture.add_argument("--turntable", type=int, default=0, metavar="N",
                          help="N frames of a turn around the scene's centre, as an animated .gif --out")
     capture.add_argument("--camera", metavar="ox,oy,oz,tx,ty,tz",

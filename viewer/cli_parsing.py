@@ -56,6 +56,21 @@ MSAA_COUNTS = (0, 1, 2, 4, 8, 16)
 lowered to it."""
 
 
+def supersample_count(text) -> int:
+    """`--supersample N` (an argparse type): 1 (off) to MAX_SUPERSAMPLE."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, not {text!r}") from None
+    if not 1 <= value <= MAX_SUPERSAMPLE:
+        raise argparse.ArgumentTypeError(f"{value}: expected 1 (off) to {MAX_SUPERSAMPLE}")
+    return value
+
+
+MAX_SUPERSAMPLE = 32
+"""32 x 32 = 1024 images a picture: Mitsuba's own sample count in the gallery."""
+
+
 def msaa_count(text) -> int:
     """`--msaa N` (an argparse type): one of MSAA_COUNTS."""
     try:

@@ -365,3 +365,28 @@ def test_a_capture_without_a_camera_shows_what_the_viewer_opens_with(tmp_path):
     image = np.asarray(Image.open(out), np.float64)
     assert image[16:32, 24:40].mean() > 40      # the back wall fills the middle
     assert (image.mean(axis=2) > 10).mean() > 0.25   # the framed box, margins around it
+
+
+def test_a_jittered_frame_is_the_frame_moved_and_supersampling_resolves_a_lamps_edge(ctx, cornell):
+    """A jitter of one whole pixel moves the image by one pixel; n x n jittered images averaged in linear
+    light give the lamp's edge pixels the share of the lamp they cover (between the ceiling's light and
+    the lamp's, where one sample a pixel gives either), and keep the image's mean."""
+    offscreen = OffscreenRenderer(SIZE, samples=0, ctx=ctx)
+    try:
+        offscreen.renderer.set_scene(cornell)
+        offscreen.renderer.set_probes(constant_probes(cornell, (0.2, 0.2, 0.2)))
+        albedo = offscreen.render_hdr(view="albedo")
+        offscreen.renderer.draw(offscreen.hdr, None, "albedo", jitter=(1.0, 0.0))
+        moved = offscreen.hdr.read()
+        np.testing.assert_array_equal(moved[:, 1:], albedo[:, :-1])
+        one = offscreen.render_hdr(view="direct")
+        many = offscreen.render_hdr(view="direct", supersample=8)
+        lamp = float(np.max(cornell.emission))
+        assert one.max() > 0.99 * lamp and many.max() > 0.99 * lamp
+        partial = (many.mean(axis=2) > 2.0) & (many.mean(axis=2) < 0.5 * lamp)   # part lamp, part ceiling
+        assert partial.sum() >= 0.5 * (np.abs(np.diff(one.mean(axis=2) > 0.5 * lamp, axis=1)).sum())
+        assert not ((one.mean(axis=2) > 2.0) & (one.mean(axis=2) < 0.5 * lamp)).any()
+        more = offscreen.render_hdr(view="direct", supersample=16)   # the lamp's area converges
+        assert abs(many.mean() - more.mean()) < min(0.02 * more.mean(), 0.5 * abs(one.mean() - more.mean()))
+    finally:
+        offscreen.release()

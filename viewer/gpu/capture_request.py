@@ -43,6 +43,9 @@ class CaptureRequest:
     """How the frame is drawn (exposure, tone curve, light samples, voxel colour ...)."""
     msaa: int = 4
     """Multisample count (edge anti-aliasing)."""
+    supersample: int = 1
+    """n > 1: n x n subpixel images averaged in linear light in place of multisampling (a path tracer's
+    box filter: a bright lamp's edge as Mitsuba draws it; `OffscreenRenderer.render_hdr`)."""
     sun: DirectionalLight | None = None
     """A directional light in place of the scene's own (None: the scene's, if any)."""
     gi_settings: GISettings = GISettings()

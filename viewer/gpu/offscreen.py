@@ -50,13 +50,39 @@ class OffscreenRenderer:
             self._hdr = HdrTarget(self.ctx, self.size, samples=self.samples)
         return self._hdr
 
-    def render_hdr(self, camera: Camera | None = None, view: str = "final") -> np.ndarray:
-        """(H, W, 3) float32 linear values (radiance, or the debug quantity of `view`)."""
-        self.renderer.draw(self.hdr, camera, view)
-        return self.hdr.read()
+    def render_hdr(self, camera: Camera | None = None, view: str = "final", supersample: int = 1) -> np.ndarray:
+        """(H, W, 3) float32 linear values (radiance, or the debug quantity of `view`). `supersample` n:
+        the mean of n x n images, each one sample a pixel at a stratified offset inside it: the box filter
+        in linear light that a path tracer's image has. The multisampling's 4 samples leave a lamp's
+        edge stepped where it is hundreds of times brighter than the ceiling beside it: on the box
+        scenes against Mitsuba (1024 samples a pixel, box filter) 37.4-37.6 dB PSNR with them, 38.1 at
+        n = 8 and 41.6 at n = 16 (docs/GALLERY.md)."""
+        n = max(int(supersample), 1)
+        if n == 1:
+            self.renderer.draw(self.hdr, camera, view)
+            return self.hdr.read()
+        # one sample a pixel each time (no multisampling: its samples would move out of the pixel), on an
+        # n x n grid of offsets inside it
+        single = HdrTarget(self.ctx, self.size, samples=0)
+        try:
+            total = np.zeros((self.size[1], self.size[0], 3), np.float64)
+            for i in range(n):
+                for j in range(n):
+                    self.renderer.draw(single, camera, view, jitter=((i + 0.5) / n - 0.5, (j + 0.5) / n - 0.5))
+                    total += single.read()
+        finally:
+            single.release()
+        return (total / (n * n)).astype(np.float32)
 
-    def render(self, camera: Camera | None = None, view: str = "final") -> np.ndarray:
-        """(H, W, 3) uint8 sRGB display image."""
+    def render(self, camera: Camera | None = None, view: str = "final", supersample: int = 1) -> np.ndarray:
+        """(H, W, 3) uint8 sRGB display image; with `supersample` n > 1, `render_hdr`'s n x n images
+        averaged in linear light, then tone mapped."""
+        if supersample > 1:
+            image = self.render_hdr(camera, view, supersample)
+            rgba = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
+            self.hdr.texture.write(np.ascontiguousarray(rgba[::-1], np.float32).tobytes())
+            self.renderer.present(self.hdr, self.display, view)
+            return self.display.read()
         self.renderer.draw(self.display, camera, view)
         return self.display.read()
 
@@ -93,12 +119,13 @@ class OffscreenRenderer:
 def capture(scene: Scene, probes: ProbeGrid | None, out_path: str | Path | None = None,
             size: tuple[int, int] = (512, 512), view: str = "final", camera: Camera | None = None,
             settings: RenderSettings | None = None, voxels=None, voxel_radiance: np.ndarray | None = None,
-            samples: int = 4, ctx: moderngl.Context | None = None) -> np.ndarray:
+            samples: int = 4, ctx: moderngl.Context | None = None, supersample: int = 1) -> np.ndarray:
     """Render one image headless and save it (PNG, or `.npy` for linear HDR) if `out_path` is given.
 
     probes: indirect-light ProbeGrid or None (GI off). view: one of VIEWS; `voxels` voxelizes the scene
-    (32^3) unless `voxels` is given. samples: multisampling (edge anti-aliasing). Returns the uint8
-    display image (H, W, 3), or the float32 HDR image for an `.npy` path.
+    (32^3) unless `voxels` is given. samples: multisampling (edge anti-aliasing); supersample n > 1:
+    n x n subpixel images averaged in linear light instead (`OffscreenRenderer.render_hdr`). Returns
+    the uint8 display image (H, W, 3), or the float32 HDR image for an `.npy` path.
     """
     if view not in VIEWS:
         raise CaptureError(f"view must be one of {', '.join(VIEWS)}, not {view!r}")
@@ -118,7 +145,8 @@ def capture(scene: Scene, probes: ProbeGrid | None, out_path: str | Path | None 
         renderer.set_probes(probes)
         if view == "voxels":
             renderer.set_voxels(voxels, voxel_radiance)
-        image = offscreen.render_hdr(camera, view) if hdr_out else offscreen.render(camera, view)
+        image = (offscreen.render_hdr(camera, view, supersample) if hdr_out
+                 else offscreen.render(camera, view, supersample))
     finally:
         offscreen.release()
     if out_path is not None:

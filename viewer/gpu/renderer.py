@@ -177,10 +177,12 @@ class Renderer(LightmapUpkeep):
             self._shadow_key = None
 
     # ---- drawing -----------------------------------------------------------------------------------
-    def draw(self, target: HdrTarget | DisplayTarget, camera: Camera | None = None, view: str = "final") -> None:
+    def draw(self, target: HdrTarget | DisplayTarget, camera: Camera | None = None, view: str = "final",
+             jitter: tuple[float, float] = (0.0, 0.0)) -> None:
         """Draw `view` into the target, resolved, ready to present or read: linear HDR values into an
         HdrTarget; the tone-mapped, sRGB-encoded image into a DisplayTarget (in one pass where the view
-        allows it, see `fused`, else through an HDR image and the tone-mapping pass: the same pixels)."""
+        allows it, see `fused`, else through an HDR image and the tone-mapping pass: the same pixels).
+        `jitter`: the image moved by this many pixels (x right, y up), for supersampling."""
         if view not in VIEWS:
             raise ValueError(f"view must be one of {', '.join(VIEWS)}, not {view!r}")
         if self.scene is None:
@@ -188,7 +190,7 @@ class Renderer(LightmapUpkeep):
         camera = camera or self.scene.camera
         if isinstance(target, DisplayTarget) and not self.fused(target, view):
             hdr = self._scratch_hdr(target.size, target.samples)
-            self.draw(hdr, camera, view)
+            self.draw(hdr, camera, view, jitter)
             self.present(hdr, target, view)
             return
         display = isinstance(target, DisplayTarget)
@@ -199,6 +201,10 @@ class Renderer(LightmapUpkeep):
                 self._ensure_indirect()
         lo, hi = self.bounds
         view_proj = view_projection(camera, target.aspect, lo, hi)
+        if jitter != (0.0, 0.0):   # a translation in clip space: 2 / size per pixel
+            shift = np.eye(4)
+            shift[0, 3], shift[1, 3] = 2.0 * jitter[0] / target.size[0], 2.0 * jitter[1] / target.size[1]
+            view_proj = shift @ view_proj
         ctx = self.ctx
         target.framebuffer.use()
         with self._timed("clear"):
