@@ -73,6 +73,16 @@ def try_method(name: str, scene: Scene, settings: MethodSettings, result: StudyR
         return None
 
 
+def neural_study(name: str, config: RunConfig, here, columns) -> tuple[list[str], StudyResult, bool]:
+    """For a study of the network: the methods of `here` that the run asks for, the study's empty result
+    (`columns(methods)`), and whether `neural` is among them (if not, a note says it was not run)."""
+    methods = [m for m in here if m in config.methods]
+    result = StudyResult(name, columns(methods))
+    if "neural" not in methods:
+        result.notes.append("Not run: the study measures `neural`, which was not asked for.")
+    return methods, result, "neural" in methods
+
+
 def format_table(result: StudyResult) -> str:
     """The rows as a Markdown table."""
     lines = ["| " + " | ".join(h for _, h, _ in result.columns) + " |",

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from viewer.bench.stability import scenes
-from viewer.bench.stability.common import RunConfig, StudyResult, try_method
+from viewer.bench.stability.common import RunConfig, StudyResult, neural_study, try_method
 from viewer.bench.stability.methods import MethodSettings
 from viewer.evaluation.error import relative_rmse
 from viewer.evaluation.points import free_space_points
@@ -109,10 +109,8 @@ def measure(case: Case, scene, number: int, methods, points_count: int, directio
 
 
 def run(config: RunConfig) -> StudyResult:
-    methods = [m for m in METHODS_HERE if m in config.methods]
-    result = StudyResult("inputs", columns(methods))
-    if "neural" not in methods:
-        result.notes.append("Not run: the study measures `neural`, which was not asked for.")
+    methods, result, runs = neural_study("inputs", config, METHODS_HERE, columns)
+    if not runs:
         return result
     rooms = 1 if config.quick else 2
     directions = 128 if config.quick else DIRECTIONS

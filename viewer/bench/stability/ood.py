@@ -23,7 +23,7 @@ import numpy as np
 from viewer.physical import gi
 from viewer.evaluation.error import relative_rmse
 from viewer.evaluation.points import free_space_points
-from viewer.bench.stability.common import RunConfig, StudyResult, try_method
+from viewer.bench.stability.common import RunConfig, StudyResult, neural_study, try_method
 from viewer.bench.stability.distance import ROOT, outside, scene_encoding, training_distances
 from viewer.bench.stability.methods import MethodSettings
 from viewer.evaluation.truth import truth_sh
@@ -206,10 +206,8 @@ def measure_room(number: int, step: Step, distances: dict, methods, points_count
 
 
 def run(config: RunConfig) -> StudyResult:
-    methods = [m for m in METHODS_HERE if m in config.methods]
-    result = StudyResult("ood", columns(methods))
-    if "neural" not in methods:
-        result.notes.append("Not run: the study measures `neural`, which was not asked for.")
+    methods, result, runs = neural_study("ood", config, METHODS_HERE, columns)
+    if not runs:
         return result
     try:
         distances = training_distances(resolution=PROBES, data=training_data(CARD))
