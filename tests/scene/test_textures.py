@@ -115,6 +115,7 @@ def test_concatenate_keeps_textures_and_their_coordinates(tmp_path):
 
     quad = load(checker_quad(tmp_path / "checker.gltf"))
     both = Scene.concatenate("both", [box(), quad])
+    assert both.name == "both"   # not its last group's
     assert both.groups == ("box", "checker") and both.texture_of(0) is None
     assert both.texture_of(1) is quad.textures[0]
     np.testing.assert_array_equal(both.uv[-2:], quad.uv)

@@ -275,13 +275,13 @@ class Scene:
             uvs.append(p.uv if p.uv is not None else np.zeros((len(p.faces), 3, 2)))
             lookup = []
             for index, g in enumerate(p.groups):
-                texture, name, copy = p.texture_of(index), g, 2
-                while name in names and textures[names.index(name)] is not texture:
-                    name, copy = f"{g} ({copy})", copy + 1
-                if name not in names:
-                    names.append(name)
+                texture, label, copy = p.texture_of(index), g, 2
+                while label in names and textures[names.index(label)] is not texture:
+                    label, copy = f"{g} ({copy})", copy + 1
+                if label not in names:
+                    names.append(label)
                     textures.append(texture)
-                lookup.append(names.index(name))
+                lookup.append(names.index(label))
             grp.append(np.asarray(lookup)[p.face_group])
         return Scene(name, np.concatenate(verts), np.concatenate(faces), np.concatenate(alb),
                      np.concatenate(emi), np.concatenate(grp), tuple(names), sun=sun,
