@@ -317,6 +317,8 @@ def measure_run(run: Path, args, evaluation) -> dict:
     training["dataset"] = {"command": manifest.get("command"), "truth": truth, "files_used": files}
     if recorded.exists():
         training.update(json.loads(recorded.read_text()))
+    if history.get("val_metrics"):   # the kept epoch's validation: all the light and the reflected light
+        training["final_val"] = history["val_metrics"][-1]
     candidate = Candidate(config["width"], config["hidden"], config["levels"], m)
     path = run / f"{candidate.name}.onnx"   # named by its size: the benchmark lists every sweep model
     card = exporter.export(run, path, m, inputs, training,
