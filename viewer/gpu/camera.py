@@ -51,6 +51,16 @@ def view_projection(camera: Camera, aspect: float, lo: np.ndarray, hi: np.ndarra
     return perspective(camera.fov, aspect, near, far) @ view_matrix(camera)
 
 
+def jittered(view_proj: np.ndarray, jitter: tuple[float, float], size: tuple[int, int]) -> np.ndarray:
+    """`view_proj` with the image moved by `jitter` pixels (x right, y up) in an image of `size`: a
+    translation in clip space, 2 / size per pixel (supersampling's subpixel offsets)."""
+    if jitter == (0.0, 0.0):
+        return view_proj
+    shift = np.eye(4)
+    shift[0, 3], shift[1, 3] = 2.0 * jitter[0] / size[0], 2.0 * jitter[1] / size[1]
+    return shift @ view_proj
+
+
 def gl_bytes(matrix: np.ndarray) -> bytes:
     """A 4x4 math-convention matrix as the bytes of a GLSL mat4 (column-major float32)."""
     return np.ascontiguousarray(np.asarray(matrix, np.float32).T).tobytes()

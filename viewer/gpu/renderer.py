@@ -26,7 +26,7 @@ import numpy as np
 
 from viewer.gpu.direct_bake import MIN_TILE, BakedDirectLight, lightmap_holds
 from viewer.gpu.indirect_bake import BakedIndirectLight
-from viewer.gpu.camera import gl_bytes, view_projection
+from viewer.gpu.camera import gl_bytes, jittered, view_projection
 from viewer.gpu.debug_views import DebugViews
 from viewer.gpu.lightmaps import (ATLAS_UNIT, BAKED_UNIT, HDR_UNIT, INDIRECT_UNIT, INTERLEAVE_UNIT, PROBE_UNIT,
                                   SUN_UNIT, LightmapUpkeep, max_texture_side)
@@ -200,11 +200,7 @@ class Renderer(LightmapUpkeep):
                 self._ensure_baked()
                 self._ensure_indirect()
         lo, hi = self.bounds
-        view_proj = view_projection(camera, target.aspect, lo, hi)
-        if jitter != (0.0, 0.0):   # a translation in clip space: 2 / size per pixel
-            shift = np.eye(4)
-            shift[0, 3], shift[1, 3] = 2.0 * jitter[0] / target.size[0], 2.0 * jitter[1] / target.size[1]
-            view_proj = shift @ view_proj
+        view_proj = jittered(view_projection(camera, target.aspect, lo, hi), jitter, target.size)
         ctx = self.ctx
         target.framebuffer.use()
         with self._timed("clear"):
