@@ -57,34 +57,40 @@ class OffscreenRenderer:
         edge stepped where it is hundreds of times brighter than the ceiling beside it: on the box
         scenes against Mitsuba (1024 samples a pixel, box filter) 37.4-37.6 dB PSNR with them, 38.1 at
         n = 8 and 41.6 at n = 16 (docs/GALLERY.md)."""
-        n = max(int(supersample), 1)
-        if n == 1:
+        if supersample <= 1:
             self.renderer.draw(self.hdr, camera, view)
             return self.hdr.read()
-        # one sample a pixel each time (no multisampling: its samples would move out of the pixel), on an
-        # n x n grid of offsets inside it
         single = HdrTarget(self.ctx, self.size, samples=0)
         try:
-            total = np.zeros((self.size[1], self.size[0], 3), np.float64)
-            for i in range(n):
-                for j in range(n):
-                    self.renderer.draw(single, camera, view, jitter=((i + 0.5) / n - 0.5, (j + 0.5) / n - 0.5))
-                    total += single.read()
+            return self._supersampled(single, camera, view, supersample)
         finally:
             single.release()
-        return (total / (n * n)).astype(np.float32)
 
     def render(self, camera: Camera | None = None, view: str = "final", supersample: int = 1) -> np.ndarray:
         """(H, W, 3) uint8 sRGB display image; with `supersample` n > 1, `render_hdr`'s n x n images
         averaged in linear light, then tone mapped."""
         if supersample > 1:
-            image = self.render_hdr(camera, view, supersample)
-            rgba = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
-            self.hdr.texture.write(np.ascontiguousarray(rgba[::-1], np.float32).tobytes())
-            self.renderer.present(self.hdr, self.display, view)
-            return self.display.read()
+            single = HdrTarget(self.ctx, self.size, samples=0)
+            try:
+                image = self._supersampled(single, camera, view, supersample)
+                rgba = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
+                single.texture.write(np.ascontiguousarray(rgba[::-1]).tobytes())   # the mean, to tone map
+                self.renderer.present(single, self.display, view)
+                return self.display.read()
+            finally:
+                single.release()
         self.renderer.draw(self.display, camera, view)
         return self.display.read()
+
+    def _supersampled(self, single: HdrTarget, camera: Camera | None, view: str, n: int) -> np.ndarray:
+        """(H, W, 3) float32: the mean of n x n images drawn into `single` (one sample a pixel: a
+        multisample would move out of the pixel) at an n x n grid of offsets inside the pixel."""
+        total = np.zeros((self.size[1], self.size[0], 3), np.float64)
+        for i in range(n):
+            for j in range(n):
+                self.renderer.draw(single, camera, view, jitter=((i + 0.5) / n - 0.5, (j + 0.5) / n - 0.5))
+                total += single.read()
+        return (total / (n * n)).astype(np.float32)
 
     def frame_time(self, camera: Camera | None = None, view: str = "final", frames: int = 7) -> float:
         """Median milliseconds of a frame (a draw into the display target and its blit to another

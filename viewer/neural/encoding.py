@@ -129,10 +129,11 @@ def landing_cells(scene, voxels: VoxelGrid) -> dda.Cells:
 
 
 def seen_rays(blockers: VoxelRays | None, voxels: VoxelGrid, points: np.ndarray) -> SeenRays | None:
-    """The seen rays of the lattice `points` on `blockers`' landing listing; None without occluders
+    """The seen rays of the lattice `points` on `blockers`' landing listing; None without `Occluders`
     (nothing is seen then: the seen features are zero)."""
-    landing = getattr(blockers, "landing", None)
-    return None if landing is None else SeenRays(landing, voxels.count, points)
+    if not isinstance(blockers, Occluders):
+        return None
+    return SeenRays(blockers.landing, voxels.count, points)
 
 
 def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None) -> Encoding:
