@@ -21,7 +21,11 @@
 // a full-screen tone-mapping pass, which cost about a third of a frame on llvmpipe). TEXTURED (1: the
 // albedo is the vertex albedo times the base-colour texture at the fragment's texture coordinate:
 // mipmapped, trilinear, sRGB decoded to linear by the texture unit before it is filtered; the vertex
-// albedo is then the face's albedo over the texture's mean colour, viewer/gpu/mesh.py).
+// albedo is then the face's albedo over the texture's mean colour, viewer/gpu/mesh.py). ACCUMULATE (1,
+// with DISPLAY: one more jittered image of a still view, averaged with the ones before: the display value
+// mixed with the mean so far at this pixel, `accumulated`, by `accumulate_weight` = 1 / images: the
+// display image of viewer/gpu/targets.py RefiningTarget. The nearest fragment writes last, so the mean is
+// that of the visible surfaces).
 
 #define VIEW_FINAL 0
 #define VIEW_DIRECT 1
@@ -49,6 +53,9 @@
 #endif
 #ifndef TEXTURED
 #define TEXTURED 0
+#endif
+#ifndef ACCUMULATE
+#define ACCUMULATE 0
 #endif
 
 #if defined VERTEX_SHADER
@@ -126,6 +133,10 @@ layout(location = 1) out vec4 frag_direct_irradiance;
 layout(location = 2) out vec4 frag_albedo_over_pi;
 layout(location = 3) out vec4 frag_plane;
 #endif
+#if ACCUMULATE
+uniform sampler2D accumulated;
+uniform float accumulate_weight;
+#endif
 
 void main() {
     // Surfaces reflect on both sides (Mitsuba's two-sided diffuse); emitters emit from the front only.
@@ -166,7 +177,11 @@ void main() {
     result += albedo / PI * probe_irradiance(v_position, n);
 #endif
 #endif
-#if DISPLAY
+#if DISPLAY && ACCUMULATE
+    vec3 mean = mix(texelFetch(accumulated, ivec2(gl_FragCoord.xy), 0).rgb,
+                    linear_to_srgb(display_value(result)), accumulate_weight);
+    frag_color = vec4(mean, 1.0);
+#elif DISPLAY
     frag_color = vec4(linear_to_srgb(display_value(result)), 1.0);
 #else
     frag_color = vec4(result, 1.0);

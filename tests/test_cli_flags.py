@@ -140,6 +140,8 @@ def test_sizes_keep_each_commands_limits():
     with pytest.raises(InputError, match="expected WxH, e.g. 1280x720"):
         parse_size("big")
     assert cli.main(["view", "cornell", "--size", "10x10"]) == 2     # a window: 64 and up
+    for refine in ("-1", "65", "many"):                               # images averaged: 0 (off) to 64
+        assert cli.main(["view", "cornell", "--refine", refine]) == 2
     request = capture_request(Namespace(out="x.png", size="10x10"))   # a picture: 1 and up
     assert request.size == (10, 10)
 

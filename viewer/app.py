@@ -90,9 +90,11 @@ def render_headless(options) -> int:
     out = getattr(options, "screenshot", None) or f"{Path(str(options.scene)).stem}.png"
     gi = options.gi if options.gi in ("off", "solver", "compute") else "compute"
     # the viewer's flags that a capture has too (scene, size, view, the GI settings) carry over; the
-    # rest of the picture is the capture's defaults
+    # rest of the picture is the capture's defaults. A picture taken once is multisampled where the
+    # window refines its still image frame by frame (the capture's default, 4 samples)
+    msaa = options.msaa if options.msaa > 1 or options.refine <= 1 else 4
     capture = capture_request(SimpleNamespace(scene=options.scene, size=options.size, view=options.view,
-                                              msaa=options.msaa, **vars(gi_settings(options))), out=out, gi=gi)
+                                              msaa=msaa, **vars(gi_settings(options))), out=out, gi=gi)
     status = run_capture(capture)
     if status == 0:
         log(f"wrote {os.path.abspath(out)}")
@@ -171,7 +173,8 @@ class ViewerApp(mglw.WindowConfig):
         self.renderer = Renderer(self.ctx, settings, options.shader_dir or SHADERS)
         self.renderer.background_bake = True   # a new scene's probe weights never stall a frame
         self.renderer.warm_up()
-        self.viewport = Viewport(self.ctx, self.renderer, self.render_scale, self.preview_scale, samples=options.msaa)
+        self.viewport = Viewport(self.ctx, self.renderer, self.render_scale, self.preview_scale, samples=options.msaa,
+                                 refine=options.refine)
         self.times = FrameTimes(self.ctx)
         gi = GIController(self.ctx, "baked" if baked else options.gi,
                           gi_settings(options),

@@ -56,19 +56,33 @@ MSAA_COUNTS = (0, 1, 2, 4, 8, 16)
 lowered to it."""
 
 
-def supersample_count(text) -> int:
-    """`--supersample N` (an argparse type): 1 (off) to MAX_SUPERSAMPLE."""
+def _whole_number(text, low: int, high: int) -> int:
+    """An argparse type's body: a whole number from `low` (off) to `high`."""
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a whole number, not {text!r}") from None
-    if not 1 <= value <= MAX_SUPERSAMPLE:
-        raise argparse.ArgumentTypeError(f"{value}: expected 1 (off) to {MAX_SUPERSAMPLE}")
+    if not low <= value <= high:
+        raise argparse.ArgumentTypeError(f"{value}: expected {low} (off) to {high}")
     return value
+
+
+def supersample_count(text) -> int:
+    """`--supersample N` (an argparse type): 1 (off) to MAX_SUPERSAMPLE."""
+    return _whole_number(text, 1, MAX_SUPERSAMPLE)
 
 
 MAX_SUPERSAMPLE = 32
 """32 x 32 = 1024 images a picture: Mitsuba's own sample count in the gallery."""
+
+
+MAX_REFINE = 64
+"""Images averaged into the window's still image at most (about a second of frames)."""
+
+
+def refine_count(text) -> int:
+    """`--refine N` (an argparse type): 0 (off) to MAX_REFINE; 1 is off too (one image)."""
+    return _whole_number(text, 0, MAX_REFINE)
 
 
 def msaa_count(text) -> int:

@@ -4,11 +4,12 @@ given size for each view, with the probe grid from the compute-shader solver; th
 background of the frames, as in the viewer.
 
     python -m viewer.bench.frame [--scene cornell] [--size 1280x720] [--frames 15] [--exact]
-                                 [--passes] [--progressive] [--write]
+                                 [--aa] [--passes] [--progressive] [--write]
 
 A frame is what the viewer does to redraw its view: draw into an 8-bit display target (tone mapping in
 the surface pass) and blit it to another framebuffer, waited for with glFinish. `--exact` adds the exact
-path (direct light and probe grid per fragment). `--passes` times each pass of a fast final frame with
+path (direct light and probe grid per fragment). `--aa` times still frames with each kind of edge
+anti-aliasing (none, the window's refinement, 4x multisampling). `--passes` times each pass of a fast final frame with
 a glFinish after it. `--progressive` runs the viewer's GI controller and viewport frame by frame from
 a new scene to a converged compute solver: each frame steps the solver within its budget (or publishes
 its probes) and redraws when the probes changed, at the preview scale while the solver works, and the
@@ -59,6 +60,44 @@ def frame_table(ctx, scene, probes, size, light_samples, exact: bool, frames: in
             lines.append(f"| {path} | {samples} | " + " | ".join(f"{t:.1f}" for t in times)
                          + f" | {1000.0 / times[0]:.0f} |")
             print(lines[-1], flush=True)
+    return "\n".join(lines)
+
+
+def anti_aliasing_table(ctx, scene, probes, size, light_samples: int, frames: int, refine: int = 8) -> str:
+    """Still frames of the fast final view with each kind of edge anti-aliasing, as the window draws them
+    (the draw and its blit, waited for): none; refinement, a frame per image of `refine` averaged (the
+    window's default, viewer/ui/viewport.py); 4x multisampling, every still frame."""
+    from viewer.gpu.targets import RefiningTarget
+
+    offscreen = OffscreenRenderer(size, RenderSettings(light_samples=light_samples), samples=0, ctx=ctx)
+    renderer = offscreen.renderer
+    renderer.set_scene(scene)
+    renderer.set_probes(probes)
+    offscreen.render()
+    screen = DisplayTarget(ctx, size)
+    kinds = {"none": (DisplayTarget(ctx, size), 1), f"refined, {refine} images": (RefiningTarget(ctx, size), refine),
+             "4x multisampling": (DisplayTarget(ctx, size, samples=min(4, ctx.max_samples)), 1)}
+    lines = ["| anti-aliasing | frame ms, median | worst | frames to the anti-aliased image | ms to it |",
+             "|---|---|---|---|---|"]
+    try:
+        for name, (target, images) in kinds.items():
+            times = []
+            for _ in range(max(frames, images) + 1):   # the first: compiles the variant
+                if isinstance(target, RefiningTarget) and target.images >= images:
+                    target.restart()
+                start = time.perf_counter()
+                renderer.draw(target, None, "final")
+                renderer.present(target, screen.resolved, "final")
+                ctx.finish()
+                times.append(1e3 * (time.perf_counter() - start))
+            median = float(np.median(times[1:]))
+            lines.append(f"| {name} | {median:.1f} | {max(times[1:]):.1f} | {images} | {images * median:.0f} |")
+            print(lines[-1], flush=True)
+    finally:
+        for target, _ in kinds.values():
+            target.release()
+        screen.release()
+        offscreen.release()
     return "\n".join(lines)
 
 
@@ -201,6 +240,8 @@ def main(argv=None):
     parser.add_argument("--exact", action="store_true",
                         help="also time the exact path (direct light and probe grid per fragment)")
     parser.add_argument("--passes", action="store_true", help="time each pass of a fast final frame")
+    parser.add_argument("--aa", action="store_true",
+                        help="time still frames with each kind of edge anti-aliasing (none, refined, 4x MSAA)")
     parser.add_argument("--progressive", action="store_true",
                         help="frame times while the compute solver converges, as in the viewer")
     parser.add_argument("--budget", type=float, nargs="*",
@@ -217,6 +258,9 @@ def main(argv=None):
     loads.append(os.getloadavg()[0])
     sections.append(gi_update_table(ctx, scene, probes, size, args.frames))
     loads.append(os.getloadavg()[0])
+    if args.aa:
+        sections.append(anti_aliasing_table(ctx, scene, probes, size, args.light_samples[0], args.frames))
+        loads.append(os.getloadavg()[0])
     if args.passes:
         sections.append(pass_table(ctx, scene, probes, size, args.light_samples[0], args.frames))
         loads.append(os.getloadavg()[0])
@@ -233,7 +277,7 @@ def main(argv=None):
     print(line)
     if args.write:
         command = "python -m viewer.bench.frame " + " ".join(argv if argv is not None else sys.argv[1:])
-        block = (f"Generated by `{command.strip()}` on {line}; {args.scene}, {size[0]}x{size[1]}, no MSAA.\n\n"
+        block = (f"Generated by `{command.strip()}` on {line}; {args.scene}, {size[0]}x{size[1]}, no anti-aliasing but in its own table.\n\n"
                  + "\n\n".join(sections))
         replace_block(ROOT / "docs" / "PERFORMANCE.md", MARKER, block, "# Performance")
         print("wrote docs/PERFORMANCE.md")

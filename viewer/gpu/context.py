@@ -22,6 +22,11 @@ def create_context(require: int = GL_REQUIRED) -> moderngl.Context:
     try:
         return moderngl.create_standalone_context(backend="egl", require=require)
     except Exception as exc:  # moderngl raises plain Exception subclasses for every failure
+        try:   # the runtime packages alone (libegl1, libgl1) have only the versioned names
+            return moderngl.create_standalone_context(backend="egl", require=require, libegl="libEGL.so.1",
+                                                      libgl="libGL.so.1")
+        except Exception:
+            pass
         raise GLUnavailable(
             f"cannot create a headless OpenGL {require // 100}.{require % 100 // 10} context through EGL "
             f"({exc}); install libegl1 and libgl1 (Mesa llvmpipe works without a GPU)") from None

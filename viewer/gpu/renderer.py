@@ -36,7 +36,7 @@ from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
 from viewer.gpu.render_settings import TONEMAPS, VIEWS, VOXEL_COLORS, RenderSettings  # noqa: F401 (re-exported)
 from viewer.gpu.shadows import EmitterShadows, SunShadow
 from viewer.gpu.surface_textures import SurfaceTextures
-from viewer.gpu.targets import DisplayTarget, HdrTarget, InterleaveBuffers
+from viewer.gpu.targets import DisplayTarget, HdrTarget, InterleaveBuffers, RefiningTarget, remade
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Camera, Scene
 from viewer.scene.types import note
@@ -67,7 +67,7 @@ class Renderer(LightmapUpkeep):
         self._faces, self._fits = 0, True   # the scene's faces, and whether a lightmap holds them
         self.programs = ProgramLibrary(ctx, shader_dir)
         for name in ("surface", "shadow_depth", "present", "voxel_cubes", "probe_spheres", "interleave_resolve",
-                     "direct_bake"):
+                     "direct_bake", "refine_background"):
             self.programs.get(name)  # compile everything now: a broken shader fails here, not mid-frame
         self.scene: Scene | None = None
         self.bounds: tuple[np.ndarray, np.ndarray] | None = None
@@ -91,10 +91,10 @@ class Renderer(LightmapUpkeep):
         the frame that needs them (captures and tests: the same image every time)."""
         self._baked: BakedDirectLight | None = None
         self._geometry = 0
+        """Counts the scenes whose triangles differ from the one before (a colour edit keeps them)."""
         self._scene_size = 1.0
         """The longest side of the scene's box when its faces were set: lengths (the lightmap's texel) are
         fractions of it, so that a scene renders alike in any unit."""
-        """Counts the scenes whose triangles differ from the one before (a colour edit keeps them)."""
         self._layout_key = None
         """What the lightmap's layout and the indirect light's weights and rays were made for."""
         self._lit_key = None
@@ -182,7 +182,8 @@ class Renderer(LightmapUpkeep):
         """Draw `view` into the target, resolved, ready to present or read: linear HDR values into an
         HdrTarget; the tone-mapped, sRGB-encoded image into a DisplayTarget (in one pass where the view
         allows it, see `fused`, else through an HDR image and the tone-mapping pass: the same pixels).
-        `jitter`: the image moved by this many pixels (x right, y up), for supersampling."""
+        `jitter`: the image moved by this many pixels (x right, y up), for supersampling. A fused draw
+        into a RefiningTarget is one more image of its mean, at the target's own jitter."""
         if view not in VIEWS:
             raise ValueError(f"view must be one of {', '.join(VIEWS)}, not {view!r}")
         if self.scene is None:
@@ -194,35 +195,39 @@ class Renderer(LightmapUpkeep):
             self.present(hdr, target, view)
             return
         display = isinstance(target, DisplayTarget)
+        step = target.step() if isinstance(target, RefiningTarget) else None
         with self._timed("shadows and bake"):
             self._ensure_shadows()
             if self._baked_applies(view):
                 self._ensure_baked()
                 self._ensure_indirect()
         lo, hi = self.bounds
-        view_proj = jittered(view_projection(camera, target.aspect, lo, hi), jitter, target.size)
-        ctx = self.ctx
-        target.framebuffer.use()
+        view_proj = jittered(view_projection(camera, target.aspect, lo, hi), step.jitter if step else jitter,
+                             target.size)
+        ctx, framebuffer = self.ctx, step.framebuffer if step else target.framebuffer
+        framebuffer.use()
         with self._timed("clear"):
-            target.framebuffer.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
+            framebuffer.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         if view == "voxels":
             self._debug.draw_voxels(view_proj, self.settings.voxel_color)
         elif self._baked_applies(view):
             with self._timed("surfaces"):
-                self._draw_surfaces(view_proj, view, target.framebuffer, baked=True, display=display)
+                self._draw_surfaces(view_proj, view, framebuffer, baked=True, display=display, refine=step)
         elif self._interleaved(target, view):
             with self._timed("surfaces (interleaved)"):
                 self._draw_interleaved(target, view_proj, view)
         else:
             with self._timed("surfaces"):
-                self._draw_surfaces(view_proj, view, target.framebuffer, display=display)
+                self._draw_surfaces(view_proj, view, framebuffer, display=display, refine=step)
             if view == "probes":
                 if self.probes is not None:
                     self._debug.draw_probes(camera, target.aspect, self.probes, self._probe_textures.use(PROBE_UNIT),
                                             (self._probe_textures.lo, self._probe_textures.hi), self.bounds,
                                             self.settings.probe_radius)
+        if step is not None:
+            target.finish(step, self.programs)
         with self._timed("resolve"):
             target.resolve()
 
@@ -234,10 +239,8 @@ class Renderer(LightmapUpkeep):
 
     def _scratch_hdr(self, size: tuple[int, int], samples: int) -> HdrTarget:
         """An HDR image for the views drawn into a display target through the tone-mapping pass."""
-        if self._scratch is None or (self._scratch.size, self._scratch.samples) != (tuple(size), samples):
-            if self._scratch is not None:
-                self._scratch.release()
-            self._scratch = HdrTarget(self.ctx, size, samples=samples)
+        fits = self._scratch is not None and (self._scratch.size, self._scratch.samples) == (tuple(size), samples)
+        self._scratch = remade(self._scratch, fits, lambda: HdrTarget(self.ctx, size, samples=samples))
         return self._scratch
 
     @property
@@ -260,11 +263,8 @@ class Renderer(LightmapUpkeep):
 
     def _draw_interleaved(self, target: HdrTarget, view_proj: np.ndarray, view: str) -> None:
         """Surfaces into the interleave buffers, then the recombining filter into the target."""
-        if self._interleave is None or self._interleave.size != target.size:
-            if self._interleave is not None:
-                self._interleave.release()
-            self._interleave = InterleaveBuffers(self.ctx, target.size)
-        buffers = self._interleave
+        fits = self._interleave is not None and self._interleave.size == target.size
+        buffers = self._interleave = remade(self._interleave, fits, lambda: InterleaveBuffers(self.ctx, target.size))
         buffers.framebuffer.use()
         buffers.framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         self._draw_surfaces(view_proj, view, buffers.framebuffer, interleave=True)
@@ -311,7 +311,7 @@ class Renderer(LightmapUpkeep):
             self._present_arrays[key].render(moderngl.TRIANGLES, vertices=3)
 
     def _draw_surfaces(self, view_proj: np.ndarray, view: str, framebuffer: moderngl.Framebuffer,
-                       interleave: bool = False, baked: bool = False, display: bool = False) -> None:
+                       interleave: bool = False, baked: bool = False, display: bool = False, refine=None) -> None:
         s = self.settings
         probes = self.probes if s.indirect else None
         mesh = self.mesh
@@ -326,7 +326,8 @@ class Renderer(LightmapUpkeep):
         defines = self._surface_defines(view, probes is not None, interleave, baked,
                                         baked and indirect is not None, display)
         if display:
-            extra.update(exposure_scale=float(2.0 ** s.exposure))
+            extra.update(exposure_scale=float(2.0 ** s.exposure), **(refine.uniforms if refine else {}))
+            defines["ACCUMULATE"] = int(refine is not None)
         program = self.programs.get("surface", **defines)
         # a textured scene's groups without a texture are drawn by the variant that samples nothing
         plain = self.programs.get("surface", **{**defines, "TEXTURED": 0}) if defines["TEXTURED"] else program

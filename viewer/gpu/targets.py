@@ -76,6 +76,7 @@ class DisplayTarget:
             depth = ctx.depth_renderbuffer(self.size)
             self.framebuffer = ctx.framebuffer([self.texture], depth)
             self._owned = [depth, self.resolved]
+        self.depth = depth
 
     @property
     def aspect(self) -> float:
@@ -93,6 +94,87 @@ class DisplayTarget:
 
     def release(self) -> None:
         for obj in (*self._owned, self.framebuffer, self.texture):
+            obj.release()
+
+
+def remade(old, fits: bool, make):
+    """`old` where it `fits`, else what `make()` returns, `old` released (a target of another size)."""
+    if old is not None and fits:
+        return old
+    if old is not None:
+        old.release()
+    return make()
+
+
+PLASTIC = 1.324717957244746
+"""The plastic number: the R2 sequence's steps are its inverse and inverse square (Roberts 2018)."""
+
+
+def refine_jitter(image: int) -> tuple[float, float]:
+    """The subpixel offset of image number `image` (0, 1, ...) of a refined still view: the R2
+    low-discrepancy sequence, centred on the pixel, so that the first image is the unjittered one and
+    every prefix of the sequence covers the pixel evenly."""
+    return (float((0.5 + image / PLASTIC) % 1.0 - 0.5), float((0.5 + image / PLASTIC ** 2) % 1.0 - 0.5))
+
+
+class RefineStep:
+    """What one more image of a RefiningTarget draws with: its framebuffer, its jitter and the surface
+    shader's uniforms (surface.glsl ACCUMULATE)."""
+
+    def __init__(self, framebuffer: moderngl.Framebuffer, jitter: tuple[float, float], uniforms: dict):
+        self.framebuffer, self.jitter, self.uniforms = framebuffer, jitter, uniforms
+
+
+class RefiningTarget(DisplayTarget):
+    """A display target whose still image gets sharper frame by frame: each draw is one more image, moved
+    by a subpixel jitter (`refine_jitter`), averaged with the ones before in display values (as a
+    multisampled display target's resolve averages its samples), so that edges come out anti-aliased at
+    the cost of one single-sampled frame a frame instead of a multisampled one. The surface pass mixes
+    each image into the mean so far (surface.glsl ACCUMULATE), read from one 8-bit image and written to
+    the other, which then becomes `texture`; the pixels no surface covers get the background's share
+    (refine_background.glsl). Rounding the mean to 8 bits at each image moves an edge pixel by at most
+    a level or two; where the images agree (all but the edges) the mean is exact. `images` counts the
+    images in the mean; `restart` begins a new mean with the next draw."""
+
+    UNIT = 9
+    """The texture unit of the mean the next image reads (the HDR image's, unused by the surface pass)."""
+
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]):
+        super().__init__(ctx, size, samples=0)
+        self.images = 0
+        other = ctx.texture(self.size, 4, data=bytes(4 * self.size[0] * self.size[1]))
+        other.filter, other.repeat_x, other.repeat_y = self.texture.filter, False, False
+        self._other = (other, ctx.framebuffer([other]), ctx.framebuffer([other], self.depth))
+        self._background = None
+
+    def restart(self) -> None:
+        self.images = 0
+
+    def step(self) -> RefineStep:
+        """The next image's framebuffer, jitter and uniforms (`finish` makes it the target's image)."""
+        self.texture.use(location=self.UNIT)
+        return RefineStep(self._other[2], refine_jitter(self.images),
+                          dict(accumulated=self.UNIT, accumulate_weight=1.0 / (self.images + 1)))
+
+    def finish(self, step: RefineStep, programs) -> None:
+        """After the surfaces: the uncovered pixels' share of the background; the new mean becomes the
+        target's image."""
+        program = programs.get("refine_background")
+        if self._background is None:
+            self._background = self.ctx.vertex_array(program, [])
+        program["accumulated"] = step.uniforms["accumulated"]
+        program["accumulate_weight"] = step.uniforms["accumulate_weight"]
+        self.ctx.depth_func = "<="
+        self._background.render(moderngl.TRIANGLES, vertices=3)
+        self.ctx.depth_func = "<"
+        mine = (self.texture, self.resolved, self.framebuffer)
+        (self.texture, self.resolved, self.framebuffer), self._other = self._other, mine
+        self.images += 1
+
+    def release(self) -> None:
+        if self._background is not None:
+            self._background.release()
+        for obj in (*self._other, self.framebuffer, self.resolved, self.texture, self.depth):
             obj.release()
 
 

@@ -8,7 +8,7 @@ import argparse
 from types import SimpleNamespace
 
 from viewer import sources
-from viewer.cli_parsing import add_gi_flags, msaa_count
+from viewer.cli_parsing import add_gi_flags, msaa_count, refine_count
 from viewer.errors import ArgumentParser
 
 VIEW_CHOICES = ("final", "direct", "indirect", "albedo", "normals", "voxels", "probes")
@@ -20,9 +20,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="indirect light source at start (compute: the compute-shader solver)")
     parser.add_argument("--view", choices=VIEW_CHOICES, default="final", help="what the view shows at start")
     parser.add_argument("--size", default="1280x720", metavar="WxH", help="window size (default: %(default)s)")
-    parser.add_argument("--msaa", type=msaa_count, default=4, metavar="N",
-                        help="multisample count of the still image (edge anti-aliasing; 0: off); the image "
-                             "drawn while things move is not multisampled (default: %(default)s)")
+    parser.add_argument("--refine", type=refine_count, default=8, metavar="N",
+                        help="edge anti-aliasing: once the view rests, N images at subpixel offsets are averaged "
+                             "into the still image, one a frame (0: off; default: %(default)s)")
+    parser.add_argument("--msaa", type=msaa_count, default=0, metavar="N",
+                        help="multisample the still image instead (2, 4 or 8 samples; each still frame then "
+                             "costs 3-4 times as much on a software GL; default: %(default)s, off)")
     add_gi_flags(parser)
     parser.add_argument("--screenshot", help="save the rendered image (no panels) here once it has settled "
                                              "(GI done, full resolution), then quit")

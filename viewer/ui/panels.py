@@ -6,7 +6,7 @@ whether it changed anything; the app decides what that means for the scene, the 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from imgui_bundle import imgui
@@ -17,9 +17,9 @@ from viewer.gpu.renderer import TONEMAPS, VIEWS, RenderSettings
 from viewer.ui.background import BackgroundTask
 from viewer.ui.frame_graph import FrameTimes, draw_frame_graph
 from viewer.ui.gi_sources import GIController
+from viewer.ui.messages import PANEL_WIDTH, Message  # noqa: F401 (the panels' own names too)
 from viewer.ui.scene_edits import SceneEdits
 
-PANEL_WIDTH = 360
 ERROR_COLOUR = imgui.ImVec4(1.0, 0.45, 0.4, 1.0)
 NOTE_COLOUR = imgui.ImVec4(0.75, 0.75, 0.75, 1.0)
 WARNING_COLOUR = imgui.ImVec4(1.0, 0.78, 0.3, 1.0)
@@ -46,15 +46,6 @@ HELP = (
     ("Files", (("drop a file", "open an .obj .glb .gltf or .ply file"),)),
 )
 """The F1 help: sections of (input, what it does), drawn as a two-column table."""
-
-
-@dataclass
-class Message:
-    text: str
-    error: bool = False
-    warning: bool = False
-    """A warning stays until dismissed, as an error does (a note fades)."""
-    at: float = field(default_factory=time.perf_counter)
 
 
 @dataclass
@@ -218,6 +209,11 @@ def view_section(options: ViewOptions, settings: RenderSettings, viewport) -> No
     _tooltip("Points on the emitters for direct light and soft shadows (more: smoother, slower)")
     _, settings.interleave = imgui.checkbox("interleaved direct light", settings.interleave)
     _tooltip("Each pixel of a 2x2 block shades a quarter of the light samples (about 3x faster)")
+    counts = sorted({0, 4, 8, 16, viewport.refine})
+    changed, index = imgui.combo("anti-aliasing", counts.index(viewport.refine),
+                                 [f"{n} images" if n > 1 else "off" for n in counts])
+    viewport.refine = counts[index] if changed else viewport.refine
+    _tooltip("Once the view rests, images at subpixel offsets are averaged into it, one a frame (--msaa: instead)")
     _, viewport.render_scale = imgui.slider_float("resolution", viewport.render_scale, 0.25, 1.0, "%.2f x")
     _, viewport.preview_scale = imgui.slider_float("while moving", viewport.preview_scale, 0.25, 1.0, "%.2f x")
     _tooltip("Resolution while the camera or scene changes; full resolution follows when it stops")

@@ -19,7 +19,7 @@ from viewer.scene.camera import home_camera
 from viewer.ui.background import BackgroundTask
 from viewer.ui.camera_controller import OrbitCamera
 from viewer.ui.gi_sources import GIController
-from viewer.ui.panels import PANEL_WIDTH, Message
+from viewer.ui.messages import PANEL_WIDTH, Message
 from viewer.ui.scene_edits import SceneEdits
 
 
