@@ -109,6 +109,7 @@ flat in vec3 v_emission;
 #if BAKED
 in vec2 v_lightmap;
 uniform sampler2D lightmap;            // direct irradiance: front sides of the faces left, back sides right
+uniform vec3 direct_scale;             // times this: the lamps' colour or intensity since the bake
 uniform sampler2D indirect_lightmap;   // the probe grid's indirect irradiance, the same texels
 #endif
 #if TEXTURED
@@ -163,7 +164,7 @@ void main() {
     vec2 texel = v_lightmap + vec2(gl_FrontFacing ? 0.0 : 0.5, 0.0);
     vec3 irradiance = vec3(0.0);
 #if VIEW != VIEW_INDIRECT
-    irradiance += textureLod(lightmap, texel, 0.0).rgb;
+    irradiance += direct_scale * textureLod(lightmap, texel, 0.0).rgb;
     result += emission;
 #endif
 #if VIEW != VIEW_DIRECT && INDIRECT && BAKED_INDIRECT

@@ -131,7 +131,7 @@ def test_a_refined_still_image_is_the_mean_of_its_jittered_images(gl_context, co
     lo, hi = cornell.bounds
     centre = (lo + hi) / 2
     outside = look_at(centre + np.array([1.2, 0.8, 3.5]) * (hi - lo), centre)
-    refined, single = RefiningTarget(gl_context, (96, 72)), DisplayTarget(gl_context, (96, 72))
+    refined, single = RefiningTarget(gl_context, (96, 72), renderer.programs), DisplayTarget(gl_context, (96, 72))
     try:
         for camera in (cornell.camera, outside):
             refined.restart()

@@ -34,7 +34,7 @@ def images(ctx, scene, probes, size: int) -> dict[str, np.ndarray]:
             out[name] = target.read()
             target.release()
         for count in REFINED:
-            target = RefiningTarget(ctx, (size, size))
+            target = RefiningTarget(ctx, (size, size), renderer.programs)
             for _ in range(count):
                 renderer.draw(target)
             out[f"refined, {count} images"] = target.read()

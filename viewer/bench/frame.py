@@ -75,7 +75,7 @@ def anti_aliasing_table(ctx, scene, probes, size, light_samples: int, frames: in
     renderer.set_probes(probes)
     offscreen.render()
     screen = DisplayTarget(ctx, size)
-    kinds = {"none": (DisplayTarget(ctx, size), 1), f"refined, {refine} images": (RefiningTarget(ctx, size), refine),
+    kinds = {"none": (DisplayTarget(ctx, size), 1), f"refined, {refine} images": (RefiningTarget(ctx, size, renderer.programs), refine),
              "4x multisampling": (DisplayTarget(ctx, size, samples=min(4, ctx.max_samples)), 1)}
     lines = ["| anti-aliasing | frame ms, median | worst | frames to the anti-aliased image | ms to it |",
              "|---|---|---|---|---|"]

@@ -176,6 +176,9 @@ class BakedDirectLight(TriangleBuffer):
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
         self.framebuffer = ctx.framebuffer([self.texture])
+        self.scale = np.ones(3, np.float32)
+        """What the baked irradiance is multiplied by where it is read: a lamp's new colour or intensity in a
+        scene lit by its lamps alone scales it (`LightmapUpkeep._ensure_shadows`) instead of a bake."""
 
     def recolour(self, scene: Scene) -> None:
         """Take the colours (albedo, emission) of `scene`, whose triangles are those this was made for;
@@ -194,11 +197,12 @@ class BakedDirectLight(TriangleBuffer):
         array = self.ctx.vertex_array(program, [])
         array.render(moderngl.TRIANGLES, vertices=3)
         array.release()
+        self.scale = np.ones(3, np.float32)
 
     def use(self, unit: int) -> dict:
         """Bind the lightmap; returns the surface shader's uniforms."""
         self.texture.use(location=unit)
-        return dict(lightmap=unit)
+        return dict(lightmap=unit, direct_scale=tuple(float(v) for v in self.scale))
 
     @property
     def normal_texture(self) -> moderngl.Texture:

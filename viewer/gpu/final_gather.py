@@ -22,18 +22,19 @@ lightmap holds the lamps' light. A ray that leaves the scene brings nothing (the
 
 from __future__ import annotations
 
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
+from viewer.gpu import gather_workers as workers
+from viewer.gpu.gather_cast import CHUNK, ESCAPED, cast_rays, direction  # noqa: F401 (ESCAPED: the hits' own)
 from viewer.rays.cast import TriangleCaster
 from viewer.physical.geometry import tangent_frames
 
 RAYS = 72
 """Gather rays per sample (RenderSettings.final_gather's default): 2 r^2, a grid of r x 2r strata in (u1, u2)."""
-ESCAPED = -1
-"""GatherRays.hits of a ray that leaves the scene (or lands on a face without a tile)."""
 SCOUTS = 8
 """Rays of each sample cast first, spread over its strata: a sample all of whose scouts meet the backs of
 faces is taken to lie inside a closed solid (the back side of a scanned mesh's surface, where nothing
@@ -147,35 +148,13 @@ class _Frame:
             float(lift)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _direction(s, k, normals, tangents, bitangents, rows, columns, shift):
-    """Ray k of sample s: stratum (k // columns, k % columns) of (u1, u2), shifted by the sample's shift,
-    cosine-weighted (r = sqrt(u1), phi = 2 pi u2)."""
-    u1 = (k // columns + shift[s, 0]) / rows
-    u2 = (k % columns + shift[s, 1]) / columns
-    r, phi = np.sqrt(u1), 2.0 * np.pi * u2
-    lx, ly, lz = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(1.0 - u1, 0.0))
-    dx = lx * tangents[s, 0] + ly * bitangents[s, 0] + lz * normals[s, 0]
-    dy = lx * tangents[s, 1] + ly * bitangents[s, 1] + lz * normals[s, 1]
-    dz = lx * tangents[s, 2] + ly * bitangents[s, 2] + lz * normals[s, 2]
-    return dx, dy, dz
-
-
-CHUNK = 1 << 18
-"""Rays cast at a time: their origins and directions take 12 MB, where all of a detailed mesh's take a gigabyte."""
-
-
 def _cast(frame: "_Frame", lift: float, todo: np.ndarray, caster: TriangleCaster, face_tile, tile_origin, tile_n,
           width: int, hits: np.ndarray) -> None:
     """Cast the rays todo (N, 2) = (sample, ray) of `frame` and write the pixel each lands on into hits."""
-    face_tile = np.ascontiguousarray(face_tile, np.int64)
-    tile_origin, tile_n = np.ascontiguousarray(tile_origin, np.int64), np.ascontiguousarray(tile_n, np.int64)
-    for start in range(0, len(todo), CHUNK):
-        part = np.ascontiguousarray(todo[start:start + CHUNK], np.int64)
-        origins, directions = _rays(*frame.args(lift), part)
-        found = caster.closest_hits(origins, directions)
-        hits[part[:, 0], part[:, 1]] = _pixels(found.face, found.u, found.v, found.front, face_tile, tile_origin,
-                                               tile_n, int(width))
+    todo = np.ascontiguousarray(todo, np.int64)
+    out = np.empty(len(todo), np.int32)
+    cast_rays(frame.args(lift), todo, caster, face_tile, tile_origin, tile_n, width, out)
+    hits[todo[:, 0], todo[:, 1]] = out
 
 
 def scout_rays(rays: int) -> np.ndarray:
@@ -193,12 +172,26 @@ def _cast_samples(frame: "_Frame", lift: float, samples: np.ndarray, rays: int, 
     hits[samples[outward]] = ESCAPED
     samples = samples[~outward]
     scouts = scout_rays(rays)
-    for todo in _rays_of(samples, scouts):
-        _cast(frame, lift, todo, *layout, hits)
-    enclosed = _all_backs(hits[samples[:, None], scouts], int(layout[-1]))
-    others = np.setdiff1d(np.arange(rays), scouts)
-    for todo in _rays_of(samples[~enclosed], others):
-        _cast(frame, lift, todo, *layout, hits)
+    pooled, shared = workers.pooled_cast(frame, lift, layout) if len(samples) else (None, None)
+
+    def cast(which: np.ndarray, these: np.ndarray) -> None:
+        nonlocal pooled
+        if pooled is not None:
+            try:
+                return pooled(which, these, hits)
+            except (BrokenProcessPool, OSError):   # a worker died: the rest here, from now on
+                workers.broke()
+                pooled = None
+        for todo in _rays_of(which, these):
+            _cast(frame, lift, todo, *layout, hits)
+
+    try:
+        cast(samples, scouts)
+        enclosed = _all_backs(hits[samples[:, None], scouts], int(layout[-1]))
+        cast(samples[~enclosed], np.setdiff1d(np.arange(rays), scouts))
+    finally:
+        if shared is not None:
+            shared.release()
     _repeat_scouts(hits, samples[enclosed], scouts)
 
 
@@ -219,42 +212,6 @@ def _all_backs(hits: np.ndarray, width: int) -> np.ndarray:
     """(S,) bool: every one of the hits (S, k) landed on the back side of a face (the back image's
     pixels are the columns from `width` to 2 `width` of each row)."""
     return np.all((hits >= 0) & (hits % (2 * width) >= width), axis=1)
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _rays(points, normals, tangents, bitangents, rows, columns, shift, lift, todo):
-    """The origins (lifted off the surface) and directions of the rays todo (N, 2) = (sample, ray)."""
-    origins = np.empty((todo.shape[0], 3))
-    directions = np.empty((todo.shape[0], 3))
-    for i in numba.prange(todo.shape[0]):
-        s, k = todo[i, 0], todo[i, 1]
-        for a in range(3):
-            origins[i, a] = points[s, a] + lift * normals[s, a]
-        directions[i, 0], directions[i, 1], directions[i, 2] = _direction(s, k, normals, tangents, bitangents, rows,
-                                                                          columns, shift)
-    return origins, directions
-
-
-@numba.njit(cache=True, nogil=True)
-def _pixels(face, u, v, front, face_tile, tile_origin, tile_n, width):
-    """The lightmap pixel of each hit (face, barycentrics u, v, side), ESCAPED for none or a face without
-    a tile: the front image's for a front hit, the back image's (`width` further along the row) else.
-    One thread: a few nanoseconds a ray beside Embree's microsecond, and a parallel loop would add
-    seconds to a first run's compile."""
-    out = np.empty(face.shape[0], np.int32)
-    for r in range(face.shape[0]):
-        f = face[r]
-        if f < 0 or face_tile[f] < 0:
-            out[r] = ESCAPED
-            continue
-        tile = face_tile[f]
-        m = tile_n[tile]
-        # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
-        ku = min(max(int(np.floor(u[r] * m + 1.0)), 0), m + 1)
-        kv = min(max(int(np.floor(v[r] * m + 1.0)), 0), m + 1)
-        side = 0 if front[r] else width
-        out[r] = (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side
-    return out
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -293,7 +250,7 @@ def _affected(points, normals, tangents, bitangents, rows, columns, shift, lift,
                 continue
             if far_away and row_misses:
                 continue
-            dx, dy, dz = _direction(s, k, normals, tangents, bitangents, rows, columns, shift)
+            dx, dy, dz = direction(s, k, normals, tangents, bitangents, rows, columns, shift)
             along = ox * dx + oy * dy + oz * dz
             if distance * distance - along * along > radius * radius:
                 continue   # the ray's line passes outside the sphere

@@ -26,6 +26,7 @@ import moderngl
 import numpy as np
 
 from viewer.rays import dda
+from viewer.gpu import gather_workers
 from viewer.rays.cast import TriangleCaster
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
@@ -66,8 +67,7 @@ class BakedIndirectLight:
         self.scene = scene
         height, width = lightmap.covered.shape
         self.texture = ctx.texture((2 * width, height), 3, dtype="f4")
-        self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self.texture.repeat_x = self.texture.repeat_y = False
+        self.texture.filter, self.texture.repeat_x, self.texture.repeat_y = (moderngl.LINEAR, moderngl.LINEAR), False, False
         self._image = np.zeros((height * 2 * width, 3), np.float32)
         rows, columns = np.nonzero(lightmap.covered)           # the order of lightmap.texel_points
         sample, sources, weights = strided_samples(lightmap, rows, columns)
@@ -85,8 +85,7 @@ class BakedIndirectLight:
         self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None   # rays, `tent_neighbours`
         self._records: tuple[np.ndarray, np.ndarray] | None = None   # `gather_records`, once per layout
         self._sample_rows = np.arange(len(self._pixels))
-        self._direct: np.ndarray | None = None
-        """The direct irradiance of every pixel, read back once per bake (`_reflected`)."""
+        self._direct: np.ndarray | None = None   # each pixel's direct irradiance, read back once per bake
         self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
         """(albedo, albedo x direct irradiance) of every pixel, once per bake or colour edit (`_reflected`)."""
         self._covered_pixels: tuple[np.ndarray, np.ndarray] | None = None
@@ -98,6 +97,8 @@ class BakedIndirectLight:
         self.installs = 0
         """Counts the weights installed (a new lattice's, or a moved geometry's)."""
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="indirect-weights") if background else None
+        if background and gather_rays:
+            gather_workers.warm()   # the gather's rays are cast in worker processes: started before they are needed
         self._job: tuple[tuple, int, Future] | None = None
         """(lattice key, geometry, future) of the weights under way on the worker."""
         self._prefetching: Future | None = None   # the geometry's work started by `prefetch`, while it runs
@@ -350,7 +351,7 @@ class BakedIndirectLight:
             lightmap = self.lightmap
             height, width = lightmap.covered.shape
             texels = np.frombuffer(lightmap.texture.read(), np.float16).reshape(height * 2 * width, 4)
-            self._direct = texels[:, :3].astype(np.float32)
+            self._direct = texels[:, :3].astype(np.float32) * lightmap.scale   # a lamp recoloured since the bake
             self._reflectance = None
         if self._reflectance is None:
             pixels, faces = self._covered

@@ -28,6 +28,16 @@ PROBE_UNIT, ATLAS_UNIT, SUN_UNIT, HDR_UNIT, INTERLEAVE_UNIT, BAKED_UNIT, INDIREC
 """Texture units: the lightmaps' and the surface pass's, which reads them all in one draw."""
 
 
+def power_ratio(old: np.ndarray, new: np.ndarray) -> np.ndarray | None:
+    """(3,) the factor a channel that makes every light sample's `old` power (N, 3) its `new` one, or None
+    where there is none (the lamps changed apart, or a channel was dark)."""
+    total = old.sum(axis=0)
+    if len(old) == 0 or np.any(total <= 0.0):
+        return None
+    ratio = new.sum(axis=0) / total
+    return ratio if np.allclose(new, old * ratio, rtol=1e-5, atol=1e-9 * float(new.max(initial=0.0))) else None
+
+
 def max_texture_side(ctx: moderngl.Context) -> int:
     """The longest side of a texture the context can make and render into (llvmpipe: 16384)."""
     info = ctx.info
@@ -66,7 +76,7 @@ class LightmapUpkeep:
                     and self._sun_shadow.resun(self.scene.sun)):
                 same_sun = sun is None or np.array_equal(sun.irradiance, self._sun_shadow.sun.irradiance)
                 if not (same_sun and np.array_equal(power, self._emitter_shadows.samples.power)):
-                    self._lights += 1   # an albedo edit leaves the direct irradiance as it was
+                    self._relight(power, sun)   # an albedo edit leaves the direct irradiance as it was
                 return
         for shadow in (self._emitter_shadows, self._sun_shadow):
             if shadow is not None:
@@ -80,6 +90,20 @@ class LightmapUpkeep:
         self._sun_shadow.render(depth, self.mesh.render)
         self._shadow_key, self._shadows_for = key, self._scene_version
         self._lights += 1
+
+    def _relight(self, power: np.ndarray, sun) -> None:
+        """The lights' powers (or the sun's) changed, not their places: the lightmap baked again, or, where
+        the lamps light the scene alone and all their samples' powers changed by one factor a channel (a
+        lamp's colour or intensity, which a bake took 130 ms of a Cornell box's colour edit for), its
+        irradiance scaled where it is read."""
+        ratio = power_ratio(power, self._emitter_shadows.samples.power)
+        if sun is None and self._sun_shadow.sun is None and ratio is not None and self._baked is not None:
+            self._baked.scale = (self._baked.scale * ratio).astype(np.float32)
+            if self._indirect is not None:   # what its gather reflects
+                self._indirect.relit(self._draw_scene)
+                self._stale_indirect(awaiting=True)
+        else:
+            self._lights += 1
 
     def _ensure_baked(self) -> BakedDirectLight:
         """The lightmapped mesh and its baked direct irradiance: laid out again when the triangles or the

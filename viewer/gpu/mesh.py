@@ -102,13 +102,28 @@ class SceneMesh(TriangleBuffer):
 
     def __init__(self, ctx: moderngl.Context, scene: Scene):
         super().__init__(ctx)
+        vertices = self._vertices(scene)
+        self.vertex_count = len(vertices)
+        self.buffer = ctx.buffer(vertices.tobytes())
+
+    @staticmethod
+    def _vertices(scene: Scene) -> np.ndarray:
         keep = scene.face_areas > 0
         corners = scene.triangles[keep]                                   # (F, 3, 3)
         per_face = [scene.face_normals[keep], vertex_albedo(scene)[keep], scene.emission[keep]]
         columns = [corners] + [np.repeat(a[:, None, :], 3, axis=1) for a in per_face] + [face_uv(scene)[keep]]
-        vertices = np.concatenate(columns, axis=2).astype(np.float32)     # (F, 3, 14)
-        self.vertex_count = 3 * len(corners)
-        self.buffer = ctx.buffer(vertices.tobytes())
+        return np.concatenate(columns, axis=2).astype(np.float32).reshape(-1, 14)   # (3 F, 14)
+
+    @staticmethod
+    def remade(old: "SceneMesh | None", ctx: moderngl.Context, scene: Scene, same_triangles: bool) -> "SceneMesh":
+        """The mesh of `scene`: `old` with the new colours written into its buffer where the triangles are
+        the same (a colour edit: its vertex arrays kept), else a new one (`old` released)."""
+        if old is not None and same_triangles:
+            old.buffer.write(SceneMesh._vertices(scene).tobytes())
+            return old
+        if old is not None:
+            old.release()
+        return SceneMesh(ctx, scene)
 
 
 def cube() -> np.ndarray:

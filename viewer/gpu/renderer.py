@@ -120,10 +120,9 @@ class Renderer(LightmapUpkeep):
         depend on the geometry alone: its lightmap is baked again and the indirect light gathered again.
         The same faces moved (a lamp dragged) keep the old rays, for the worker to trace again only those
         the move can change (`_ensure_baked`). A scene past `lightmapped` is drawn per fragment, said once."""
-        if self.mesh is not None:
-            self.mesh.release()
         draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
-        if self.scene is None or not same_triangles(draw_scene, self._draw_scene):
+        same = self.scene is not None and same_triangles(draw_scene, self._draw_scene)
+        if not same:
             self._geometry += 1
             if self.scene is None or not np.array_equal(draw_scene.faces, self._draw_scene.faces):
                 self._release_baked()
@@ -144,7 +143,7 @@ class Renderer(LightmapUpkeep):
         self.scene = scene
         self.bounds = scene.bounds   # (lo, hi); Scene.bounds scans the faces, so not once per frame
         self._draw_scene = draw_scene
-        self.mesh = SceneMesh(self.ctx, self._draw_scene)
+        self.mesh = SceneMesh.remade(self.mesh, self.ctx, self._draw_scene, same)   # a colour edit keeps its arrays
         self._textures.set_scene(self._draw_scene)
         self._scene_version += 1
 
@@ -227,7 +226,7 @@ class Renderer(LightmapUpkeep):
                                             (self._probe_textures.lo, self._probe_textures.hi), self.bounds,
                                             self.settings.probe_radius)
         if step is not None:
-            target.finish(step, self.programs)
+            target.finish(step)
         with self._timed("resolve"):
             target.resolve()
 
@@ -334,6 +333,7 @@ class Renderer(LightmapUpkeep):
         units = self._probe_textures.use(PROBE_UNIT)
         self._emitter_shadows.use(ATLAS_UNIT)
         self._sun_shadow.use(SUN_UNIT)
+        refine and refine.bind()   # the mean so far, bound last: nothing rebinds its unit before the draw
         for shader in {id(program): program, id(plain): plain}.values():
             set_uniforms(shader, view_proj=gl_bytes(view_proj), probe_sh=units, **self._probe_uniforms(probes),
                          shadow_bias=float(s.shadow_bias), **self._emitter_shadows.uniforms(ATLAS_UNIT),

@@ -121,8 +121,14 @@ class RefineStep:
     """What one more image of a RefiningTarget draws with: its framebuffer, its jitter and the surface
     shader's uniforms (surface.glsl ACCUMULATE)."""
 
-    def __init__(self, framebuffer: moderngl.Framebuffer, jitter: tuple[float, float], uniforms: dict):
-        self.framebuffer, self.jitter, self.uniforms = framebuffer, jitter, uniforms
+    def __init__(self, framebuffer: moderngl.Framebuffer, jitter: tuple[float, float], mean: moderngl.Texture,
+                 uniforms: dict):
+        self.framebuffer, self.jitter, self.mean, self.uniforms = framebuffer, jitter, mean, uniforms
+
+    def bind(self) -> dict:
+        """Bind the mean so far to its unit (just before the pass that reads it); the shader's uniforms."""
+        self.mean.use(location=RefiningTarget.UNIT)
+        return self.uniforms
 
 
 class RefiningTarget(DisplayTarget):
@@ -139,41 +145,43 @@ class RefiningTarget(DisplayTarget):
     UNIT = 9
     """The texture unit of the mean the next image reads (the HDR image's, unused by the surface pass)."""
 
-    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]):
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], programs):
+        """`programs`: the renderer's ProgramLibrary (refine_background.glsl)."""
         super().__init__(ctx, size, samples=0)
         self.images = 0
         other = ctx.texture(self.size, 4, data=bytes(4 * self.size[0] * self.size[1]))
         other.filter, other.repeat_x, other.repeat_y = self.texture.filter, False, False
         self._other = (other, ctx.framebuffer([other]), ctx.framebuffer([other], self.depth))
-        self._background = None
+        self._programs = programs
+        program = programs.get("refine_background")
+        self._background = (program, ctx.vertex_array(program, []))   # made with the target: its GL objects
 
     def restart(self) -> None:
         self.images = 0
 
     def step(self) -> RefineStep:
         """The next image's framebuffer, jitter and uniforms (`finish` makes it the target's image)."""
-        self.texture.use(location=self.UNIT)
-        return RefineStep(self._other[2], refine_jitter(self.images),
+        return RefineStep(self._other[2], refine_jitter(self.images), self.texture,
                           dict(accumulated=self.UNIT, accumulate_weight=1.0 / (self.images + 1)))
 
-    def finish(self, step: RefineStep, programs) -> None:
+    def finish(self, step: RefineStep) -> None:
         """After the surfaces: the uncovered pixels' share of the background; the new mean becomes the
         target's image."""
-        program = programs.get("refine_background")
-        if self._background is None:
-            self._background = self.ctx.vertex_array(program, [])
-        program["accumulated"] = step.uniforms["accumulated"]
-        program["accumulate_weight"] = step.uniforms["accumulate_weight"]
+        program = self._programs.get("refine_background")
+        if program is not self._background[0]:   # the shaders were reloaded
+            self._background[1].release()
+            self._background = (program, self.ctx.vertex_array(program, []))
+        for name, value in step.bind().items():
+            program[name] = value
         self.ctx.depth_func = "<="
-        self._background.render(moderngl.TRIANGLES, vertices=3)
+        self._background[1].render(moderngl.TRIANGLES, vertices=3)
         self.ctx.depth_func = "<"
         mine = (self.texture, self.resolved, self.framebuffer)
         (self.texture, self.resolved, self.framebuffer), self._other = self._other, mine
         self.images += 1
 
     def release(self) -> None:
-        if self._background is not None:
-            self._background.release()
+        self._background[1].release()
         for obj in (*self._other, self.framebuffer, self.resolved, self.texture, self.depth):
             obj.release()
 

@@ -88,12 +88,32 @@ class TriangleCaster:
             self._march(cells)
             return
         triangles = np.asarray(scene.triangles, np.float64)
-        self.v0 = np.ascontiguousarray(triangles[:, 0])
-        self.e1 = np.ascontiguousarray(triangles[:, 1] - triangles[:, 0])
-        self.e2 = np.ascontiguousarray(triangles[:, 2] - triangles[:, 0])
-        self._faces = usable_faces(scene)
+        faces = usable_faces(scene)
+        self._embrace(np.ascontiguousarray(triangles[faces], np.float32), faces, triangles[:, 0],
+                      triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+
+    @staticmethod
+    def of_triangles(mesh: np.ndarray, faces: np.ndarray, v0: np.ndarray, e1: np.ndarray,
+                     e2: np.ndarray) -> "TriangleCaster":
+        """The Embree caster of another one's `mesh`, `faces`, `v0`, `e1`, `e2` (a worker process's copy:
+        viewer/gpu/gather_workers.py), the same hits."""
+        caster = TriangleCaster.__new__(TriangleCaster)
+        caster.backend = "embree"
+        caster._embrace(mesh, faces, v0, e1, e2)
+        return caster
+
+    def _embrace(self, mesh, faces, v0, e1, e2) -> None:
+        self.mesh = np.ascontiguousarray(mesh, np.float32)
+        """(usable faces, 3, 3) float32: the corners Embree holds."""
+        self._faces = np.asarray(faces)
+        self.v0, self.e1, self.e2 = (np.ascontiguousarray(a, np.float64) for a in (v0, e1, e2))
         self._embree = rtcore_scene.EmbreeScene()
-        TriangleMesh(self._embree, np.ascontiguousarray(triangles[self._faces], np.float32))
+        TriangleMesh(self._embree, self.mesh)
+
+    @property
+    def faces(self) -> np.ndarray | None:
+        """The scene faces Embree holds, in the order of `mesh` (None for the DDA)."""
+        return self._faces
 
     def nothing_ahead(self, points: np.ndarray, normals: np.ndarray, margin: float) -> np.ndarray:
         """(P,) bool: no face reaches more than `margin` in front of the plane through each point with its

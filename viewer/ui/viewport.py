@@ -66,7 +66,8 @@ class Viewport:
                 if target is self._shown:
                     self._shown, self._drawn = None, None
                 target.release()
-            target = RefiningTarget(self.ctx, size) if refining else DisplayTarget(self.ctx, size, samples=samples)
+            target = (RefiningTarget(self.ctx, size, self.renderer.programs) if refining
+                      else DisplayTarget(self.ctx, size, samples=samples))
             self._targets[quality] = target
         return target
 
