@@ -16,10 +16,10 @@
 
 #if defined VERTEX_SHADER
 
+#include "fullscreen.glsl"
+
 void main() {
-    // One triangle that covers the screen: (-1,-1), (3,-1), (-1,3).
-    vec2 corner = vec2(float((gl_VertexID & 1) << 2) - 1.0, float((gl_VertexID & 2) << 1) - 1.0);
-    gl_Position = vec4(corner, 0.0, 1.0);
+    gl_Position = fullscreen_corner(0.0);
 }
 
 #elif defined FRAGMENT_SHADER
