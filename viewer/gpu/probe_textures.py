@@ -53,10 +53,19 @@ class ProbeTextures:
         self.resolution = 0
         self.texel_scale = 1.0
         """The power of two every texel carries (see the module's docstring)."""
-        self.update(probes)
+        self._upload(probes)
+        self._pending: ProbeGrid | None = None
+        self.lo, self.hi = probes.lo.astype(np.float32), probes.hi.astype(np.float32)
 
     def update(self, probes: ProbeGrid) -> None:
-        """Upload new coefficients (reusing the textures when the resolution is unchanged)."""
+        """Take new coefficients, uploaded when a draw first reads them (`use`): where the renderer reads
+        the probes from its lightmap, an edit's probes cost no upload (8 ms of a Cornell box's colour edit
+        on llvmpipe)."""
+        self._pending = probes
+        self.lo, self.hi = probes.lo.astype(np.float32), probes.hi.astype(np.float32)
+
+    def _upload(self, probes: ProbeGrid) -> None:
+        """Upload coefficients (reusing the textures when the resolution is unchanged)."""
         m = probes.resolution
         volumes, self.texel_scale = texel_volumes(probes, self.dtype)
         if m != self.resolution:
@@ -69,10 +78,13 @@ class ProbeTextures:
             self.resolution = m
         for texture, volume in zip(self.textures, volumes):
             texture.write(volume.tobytes())
-        self.lo, self.hi = probes.lo.astype(np.float32), probes.hi.astype(np.float32)
 
-    def use(self, first_unit: int) -> list[int]:
-        """Bind the seven textures to consecutive units; returns the units (for `probe_sh[7]`)."""
+    def use(self, first_unit: int, upload: bool = True) -> list[int]:
+        """Bind the seven textures to consecutive units, the last `update`'s coefficients uploaded first
+        (unless not `upload`: a draw that does not read them); returns the units (for `probe_sh[7]`)."""
+        if upload and self._pending is not None:
+            self._upload(self._pending)
+            self._pending = None
         units = list(range(first_unit, first_unit + TEXTURE_COUNT))
         for texture, unit in zip(self.textures, units):
             texture.use(location=unit)

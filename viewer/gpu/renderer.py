@@ -330,7 +330,7 @@ class Renderer(LightmapUpkeep):
         program = self.programs.get("surface", **defines)
         # a textured scene's groups without a texture are drawn by the variant that samples nothing
         plain = self.programs.get("surface", **{**defines, "TEXTURED": 0}) if defines["TEXTURED"] else program
-        units = self._probe_textures.use(PROBE_UNIT)
+        units = self._probe_textures.use(PROBE_UNIT, upload=bool(defines["INDIRECT"]) and not defines["BAKED_INDIRECT"])
         self._emitter_shadows.use(ATLAS_UNIT)
         self._sun_shadow.use(SUN_UNIT)
         refine and refine.bind()   # the mean so far, bound last: nothing rebinds its unit before the draw
