@@ -12,10 +12,8 @@ The weights depend on the scene and the probe lattice only: they are computed on
 second for the Cornell box, numba) with each texel's (probe, normal) pairs (`SurfaceBake`). Each new
 probe grid (a relight, a network update) is then evaluated on the CPU, about 24 multiply-adds a texel,
 and uploaded. On llvmpipe that is about 10x cheaper than the same weighted sum in a fragment shader
-(8 probes x 7 texel fetches a texel: ~300 ms for the Cornell box's 0.77 M atlas texels). Indirect light
-is smooth over a probe spacing and the texels are `RenderSettings.lightmap_texel` of the scene's size
-apart, so the surface pass needs no screen-space upsampling and has no edges to respect: a silhouette is
-a change of face, and each face reads its own texels.
+(8 probes x 7 texel fetches a texel: ~300 ms for the Cornell box's 0.77 M atlas texels). The surface
+pass needs no screen-space upsampling: each face reads its own texels, `lightmap_texel` of the scene apart.
 """
 
 from __future__ import annotations
@@ -377,20 +375,22 @@ class BakedIndirectLight:
             self._covered_pixels = (np.concatenate([front, front + width]), np.concatenate([lightmap.texel_faces] * 2))
         return self._covered_pixels
 
-    def relit(self, scene: Scene) -> None:
-        """The lightmap was baked again, for `scene` (the same triangles: the weights, rays and neighbours
-        stay): the direct light is read back again on the next update."""
+    def relit(self, scene: Scene, ratio: np.ndarray | None = None) -> None:
+        """The lightmap was baked again for `scene` (the same triangles): its direct light is read back on the
+        next update; or only scaled by `ratio` (3,) (`BakedDirectLight.scale`: the copy read back, alike)."""
         self.scene = scene
-        self._direct = None
+        if ratio is not None and self._direct is not None:
+            self._direct *= np.asarray(ratio, np.float32)
+            self._reflectance = None
+        else:
+            self._direct = None
 
     def recolour(self, scene: Scene) -> None:
-        """`scene` has the same triangles and lights but other albedos: what each pixel reflects is
-        computed again on the next update."""
+        """`scene` has other albedos: what each pixel reflects is computed again on the next update."""
         self.scene = scene
         self._reflectance = None
 
-    def use(self, unit: int) -> dict:
-        """Bind the indirect lightmap; returns the surface shader's uniforms."""
+    def use(self, unit: int) -> dict:   # the surface shader's uniforms, the indirect lightmap bound
         self.texture.use(location=unit)
         return dict(indirect_lightmap=unit)
 

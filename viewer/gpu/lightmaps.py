@@ -100,7 +100,7 @@ class LightmapUpkeep:
         if sun is None and self._sun_shadow.sun is None and ratio is not None and self._baked is not None:
             self._baked.scale = (self._baked.scale * ratio).astype(np.float32)
             if self._indirect is not None:   # what its gather reflects
-                self._indirect.relit(self._draw_scene)
+                self._indirect.relit(self._draw_scene, ratio)
                 self._stale_indirect(awaiting=True)
         else:
             self._lights += 1
