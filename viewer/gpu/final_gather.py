@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from functools import cached_property
 
 import numba
 import numpy as np
@@ -111,8 +112,13 @@ class GatherRays:
         row-major (one array: the rays land anywhere, and each further array read costs a cache miss)."""
         if out is None:
             out = np.empty((len(self.hits), 3), np.float32)
-        _sum(reflected, self.hits, out)
+        _sum(reflected, self.hits, self._cast_samples, out)
         return out
+
+    @cached_property
+    def _cast_samples(self) -> np.ndarray:
+        """The samples with a ray that landed (38% of the Cornell box's see nothing: the walls' backs)."""
+        return np.flatnonzero((self.hits >= 0).any(axis=1))
 
 
 @dataclass(frozen=True)
@@ -310,9 +316,11 @@ def _inside(hits, width):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _sum(reflected, hits, out):
+def _sum(reflected, hits, cast, out):
     rays = hits.shape[1]
-    for s in numba.prange(hits.shape[0]):
+    out[:] = 0.0
+    for i in numba.prange(cast.shape[0]):
+        s = cast[i]
         r = g = b = np.float32(0.0)
         for k in range(rays):
             p = hits[s, k]
