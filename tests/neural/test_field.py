@@ -119,7 +119,9 @@ def test_predictions_after_edits_equal_fresh_ones(exported):
 
 def test_neural_gi_recolours_the_voxels_of_a_colour_edit(exported):
     """The viewer's path: a colour edit keeps the voxels (recoloured by the faces' shares), a moved lamp
-    voxelizes again; either way the probes are those of the edited scene from scratch."""
+    voxelizes again; either way the probes are those of the edited scene from scratch. Which probes are
+    valid is the geometry's: a colour edit keeps the first prediction's vote (a borderline vote that
+    flipped with a colour cost the renderer a new lattice's weights), new geometry votes afresh."""
     _, path = exported
     gi = neural.NeuralGI(neural.NeuralField(path))
     scene = load("cornell")
@@ -137,6 +139,8 @@ def test_neural_gi_recolours_the_voxels_of_a_colour_edit(exported):
         fresh = neural.NeuralField(path).solve(edited, include_emitted=True)
         np.testing.assert_allclose(grid.coefficients, fresh.coefficients, rtol=1e-4,
                                    atol=1e-5 * np.abs(fresh.coefficients).max(), err_msg=what)
+        first = grid if what == "new" else first
+        assert np.array_equal(grid.valid, first.valid if what in ("albedo", "lamp colour") else fresh.valid), what
 
 
 @pytest.mark.parametrize("damage", ["garbage", "truncated", "no-card", "bad-card", "sha", "version"])
@@ -261,3 +265,37 @@ def test_viewer_falls_back_to_the_compute_solver_on_a_corrupt_model(exported, tm
         assert error is not None and "Neural model unusable" in error and "compute solver" in error
     finally:
         gi.close()
+
+
+def test_a_colour_edit_keeps_the_geometrys_validity_vote(exported, monkeypatch):
+    """A validity vote that flips with a colour (a borderline probe) is not passed on: for the same
+    geometry (the same encoder and blockers) the first prediction's vote stays; new blockers vote again."""
+    from dataclasses import replace
+
+    from viewer.neural import field as field_module
+
+    _, path = exported
+    field = neural.NeuralField(path)
+    scene = load("cornell")
+    lo, hi = scene.bounds
+    voxels = voxelize(scene, 16)
+    blockers = encoding.occluders(scene, voxels)
+    calls = []
+    unpack = field_module.unpack
+
+    def flipping(*args):   # every vote after the first differs at one probe
+        grid = unpack(*args)
+        calls.append(1)
+        if len(calls) > 1:
+            valid = grid.valid.copy()
+            valid.flat[0] = not valid.flat[0]
+            grid = replace(grid, valid=valid)
+        return grid
+
+    monkeypatch.setattr(field_module, "unpack", flipping)
+    first = field.predict(voxels, scene.sun, lo, hi, blockers, include_emitted=False)
+    recoloured = voxelize(scene.with_albedo("red-wall", (0.2, 0.7, 0.2)), 16)
+    kept = field.predict(recoloured, scene.sun, lo, hi, blockers, include_emitted=False)
+    assert np.array_equal(kept.valid, first.valid)
+    again = field.predict(recoloured, scene.sun, lo, hi, encoding.occluders(scene, recoloured), include_emitted=False)
+    assert again.valid.flat[0] != first.valid.flat[0]     # new blockers: a new geometry's own vote
