@@ -48,6 +48,12 @@ def group_faces(scene, name):
     return scene.face_group == scene.group_index(name)
 
 
+def srgb_to_linear(c):
+    """IEC 61966-2-1 from 8-bit values: the tests' own, to check the loaders' decoding against."""
+    c = np.asarray(c, np.float64) / 255
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
 def covered(points: np.ndarray, triangles: np.ndarray, tolerance: float = 1e-9) -> np.ndarray:
     """Whether each point (P, 3) lies on one of the triangles (T, 3, 3) (in its plane and inside)."""
     a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
