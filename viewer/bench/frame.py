@@ -69,11 +69,8 @@ def anti_aliasing_table(ctx, scene, probes, size, light_samples: int, frames: in
     window's default, viewer/ui/viewport.py); 4x multisampling, every still frame."""
     from viewer.gpu.targets import RefiningTarget
 
-    offscreen = OffscreenRenderer(size, RenderSettings(light_samples=light_samples), samples=0, ctx=ctx)
+    offscreen = lit_offscreen(ctx, scene, probes, size, light_samples)
     renderer = offscreen.renderer
-    renderer.set_scene(scene)
-    renderer.set_probes(probes)
-    offscreen.render()
     screen = DisplayTarget(ctx, size)
     kinds = {"none": (DisplayTarget(ctx, size), 1), f"refined, {refine} images": (RefiningTarget(ctx, size, renderer.programs), refine),
              "4x multisampling": (DisplayTarget(ctx, size, samples=min(4, ctx.max_samples)), 1)}
@@ -101,15 +98,21 @@ def anti_aliasing_table(ctx, scene, probes, size, light_samples: int, frames: in
     return "\n".join(lines)
 
 
+def lit_offscreen(ctx, scene, probes, size, light_samples: int) -> OffscreenRenderer:
+    """A single-sampled renderer of `scene` lit by `probes`, drawn once (shadows, lightmaps, compiles)."""
+    offscreen = OffscreenRenderer(size, RenderSettings(light_samples=light_samples), samples=0, ctx=ctx)
+    offscreen.renderer.set_scene(scene)
+    offscreen.renderer.set_probes(probes)
+    offscreen.render()
+    return offscreen
+
+
 def pass_table(ctx, scene, probes, size, light_samples: int, frames: int) -> str:
     """Median GPU and CPU ms of each pass of the fast final view, each pass waited for."""
-    offscreen = OffscreenRenderer(size, RenderSettings(light_samples=light_samples), samples=0, ctx=ctx)
+    offscreen = lit_offscreen(ctx, scene, probes, size, light_samples)
     screen = DisplayTarget(ctx, size)
     try:
         renderer = offscreen.renderer
-        renderer.set_scene(scene)
-        renderer.set_probes(probes)
-        offscreen.render()
         renderer.timer = PassTimer(ctx)
         rows = []
         for _ in range(frames):

@@ -112,11 +112,11 @@ class GatherRays:
         row-major (one array: the rays land anywhere, and each further array read costs a cache miss)."""
         if out is None:
             out = np.empty((len(self.hits), 3), np.float32)
-        _sum(reflected, self.hits, self._cast_samples, out)
+        _sum(reflected, self.hits, self._landed, out)
         return out
 
     @cached_property
-    def _cast_samples(self) -> np.ndarray:
+    def _landed(self) -> np.ndarray:
         """The samples with a ray that landed (38% of the Cornell box's see nothing: the walls' backs)."""
         return np.flatnonzero((self.hits >= 0).any(axis=1))
 

@@ -106,12 +106,8 @@ class SharedArrays:
             self.spec[name] = (offset, a.shape, a.dtype.str)
             offset += (a.nbytes + 63) // 64 * 64
         self.block = shared_memory.SharedMemory(create=True, size=max(offset, 1))
-        for name, a in arrays.items():
-            self.view(self.block, name)[...] = a
-
-    def view(self, block: shared_memory.SharedMemory, name: str) -> np.ndarray:
-        offset, shape, dtype = self.spec[name]
-        return np.ndarray(shape, np.dtype(dtype), buffer=block.buf, offset=offset)
+        for name, view in views(self.block, self.spec).items():
+            view[...] = arrays[name]
 
     @property
     def handle(self) -> tuple[str, dict]:
@@ -120,6 +116,12 @@ class SharedArrays:
     def release(self) -> None:
         self.block.close()
         self.block.unlink()
+
+
+def views(block: shared_memory.SharedMemory, spec: dict) -> dict[str, np.ndarray]:
+    """The arrays a block holds, by name (`SharedArrays.spec`), without a copy."""
+    return {name: np.ndarray(shape, np.dtype(dtype), buffer=block.buf, offset=offset)
+            for name, (offset, shape, dtype) in spec.items()}
 
 
 def pooled_cast(frame, lift: float, layout: tuple):
@@ -175,8 +177,7 @@ def _attach(name: str, spec: dict) -> tuple[dict, object]:
         for old, _ in list(_attached.items()):
             _attached.pop(old)[0].close()
         block = shared_memory.SharedMemory(name=name)
-        arrays = {key: np.ndarray(shape, np.dtype(dtype), buffer=block.buf, offset=offset)
-                  for key, (offset, shape, dtype) in spec.items()}
+        arrays = views(block, spec)
         caster = TriangleCaster.of_triangles(*(arrays[key] for key in ("triangles", "faces", "v0", "e1", "e2")))
         _attached[name] = (block, arrays, caster)
     return _attached[name][1], _attached[name][2]

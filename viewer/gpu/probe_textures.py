@@ -53,9 +53,8 @@ class ProbeTextures:
         self.resolution = 0
         self.texel_scale = 1.0
         """The power of two every texel carries (see the module's docstring)."""
-        self._upload(probes)
-        self._pending: ProbeGrid | None = None
-        self.lo, self.hi = probes.lo.astype(np.float32), probes.hi.astype(np.float32)
+        self.update(probes)
+        self._upload()   # at once: the compute solver writes into the textures themselves
 
     def update(self, probes: ProbeGrid) -> None:
         """Take new coefficients, uploaded when a draw first reads them (`use`): where the renderer reads
@@ -64,8 +63,12 @@ class ProbeTextures:
         self._pending = probes
         self.lo, self.hi = probes.lo.astype(np.float32), probes.hi.astype(np.float32)
 
-    def _upload(self, probes: ProbeGrid) -> None:
-        """Upload coefficients (reusing the textures when the resolution is unchanged)."""
+    def _upload(self) -> None:
+        """Upload the coefficients `update` took, if any (reusing the textures when the resolution is
+        unchanged)."""
+        probes, self._pending = self._pending, None
+        if probes is None:
+            return
         m = probes.resolution
         volumes, self.texel_scale = texel_volumes(probes, self.dtype)
         if m != self.resolution:
@@ -82,9 +85,8 @@ class ProbeTextures:
     def use(self, first_unit: int, upload: bool = True) -> list[int]:
         """Bind the seven textures to consecutive units, the last `update`'s coefficients uploaded first
         (unless not `upload`: a draw that does not read them); returns the units (for `probe_sh[7]`)."""
-        if upload and self._pending is not None:
-            self._upload(self._pending)
-            self._pending = None
+        if upload:
+            self._upload()
         units = list(range(first_unit, first_unit + TEXTURE_COUNT))
         for texture, unit in zip(self.textures, units):
             texture.use(location=unit)

@@ -333,7 +333,8 @@ class Renderer(LightmapUpkeep):
         units = self._probe_textures.use(PROBE_UNIT, upload=bool(defines["INDIRECT"]) and not defines["BAKED_INDIRECT"])
         self._emitter_shadows.use(ATLAS_UNIT)
         self._sun_shadow.use(SUN_UNIT)
-        refine and refine.bind()   # the mean so far, bound last: nothing rebinds its unit before the draw
+        if refine is not None:   # the mean so far, bound last: nothing rebinds its unit before the draw
+            refine.bind()
         for shader in {id(program): program, id(plain): plain}.values():
             set_uniforms(shader, view_proj=gl_bytes(view_proj), probe_sh=units, **self._probe_uniforms(probes),
                          shadow_bias=float(s.shadow_bias), **self._emitter_shadows.uniforms(ATLAS_UNIT),

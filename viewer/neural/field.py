@@ -152,7 +152,7 @@ class NeuralField:
         self._output: np.ndarray | None = None       # the network's last output, and per colour pass
         self._output_keys: list = [None] * 3         # the (encoder, revision) of the inputs it ran on
         self._valid: tuple | None = None
-        """((encoder, blockers), valid): the validity the network voted for the geometry's first probes. A
+        """(encoder, blockers, valid): the validity the network voted for the geometry's first probes. A
         probe's validity is where it stands (inside a solid or not), so a colour edit keeps it: a
         borderline vote that flipped with a wall's colour cost the renderer a new lattice's weights
         (0.2 s) and an install (16 ms) on that edit."""
@@ -186,11 +186,10 @@ class NeuralField:
         ran = clock_now()
         grid = unpack(out, enc.scale, enc.lo, enc.hi, include_emitted)
         if reuse and blockers is not None:   # the geometry's first vote on which probes are valid stays
-            key = (encoder, blockers)
-            if self._valid is not None and self._valid[0][0] is encoder and self._valid[0][1] is blockers:
-                grid = replace(grid, valid=self._valid[1])
+            if self._valid is not None and self._valid[0] is encoder and self._valid[1] is blockers:
+                grid = replace(grid, valid=self._valid[2])
             else:
-                self._valid = (key, grid.valid)
+                self._valid = (encoder, blockers, grid.valid)
         if timings is not None:
             rays = encoder.ray_seconds   # the seen rays, cast once per geometry (viewer/neural/seen.py)
             timings.update(encode=encoded - clock - rays, rays=rays, network=ran - encoded, unpack=clock_now() - ran)
