@@ -202,6 +202,8 @@ def test_samples_that_look_out_of_the_room_are_not_cast_and_land_as_if_they_were
     sent = []
     counting = caster.closest_hits
     monkeypatch.setattr(caster, "closest_hits", lambda o, d, t=np.inf: sent.append(len(o)) or counting(o, d, t))
+    landing = final_gather.land_grid     # Embree's rays made and cast in one compiled loop: (samples, rays)
+    monkeypatch.setattr(final_gather, "land_grid", lambda *a: sent.append(len(a[8]) * len(a[9])) or landing(*a))
     skipped, _ = gather_with(caster, scene, points, normals)
     cast_all = sum(sent)
     monkeypatch.setattr(caster, "nothing_ahead", lambda p, n, m: np.zeros(len(p), bool))

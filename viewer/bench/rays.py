@@ -1,12 +1,14 @@
-"""Rays a second of the lightmap's final gather: Embree and the numba DDA on the same rays, 1 and 2 threads.
+"""Rays a second of the lightmap's final gather: Embree (called from compiled loops, and through embreex's
+own binding) and the numba DDA on the same rays, 1 and 2 threads.
 
     python -m viewer.bench.rays cornell path/to/mesh.obj
 
 For each scene, the renderer's own gather rays (its lightmap at the default texel, RenderSettings'
 final_gather rays from each of its gather records, both sides) are cast by `GatherRays.of` through each backend of
 viewer/rays/cast.py, the caster's build (Embree's BVH, the DDA's 32^3 cells) included, after one small
-cast that compiles or loads the kernels. embreex holds Python's lock while it traces, so its rows run
-on one core whatever numba's thread count; the DDA's kernels run on numba's threads. Runs alternate
+cast that compiles or loads the kernels. embreex's binding holds Python's lock while it traces, so its
+rows run on one core whatever numba's thread count; Embree called from compiled loops (viewer/rays/embree.py)
+and the DDA's kernels run on numba's threads. Runs alternate
 backends, so that other work on the machine weighs on both alike.
 """
 
@@ -53,7 +55,7 @@ def measure(ctx, name: str, rays: int, threads: list[int]) -> list[str]:
 
     scene = in_draw_order(load(name))
     points, normals, *layout = gather_inputs(ctx, scene)
-    backends = ["dda"] + (["embree"] if embree_available() else [])
+    backends = ["dda"] + (["embreex", "embree"] if embree_available() else [])
     lines = []
     for count in threads:
         numba.set_num_threads(count)

@@ -30,7 +30,8 @@ import numba
 import numpy as np
 
 from viewer.gpu import gather_workers as workers
-from viewer.gpu.gather_cast import CHUNK, ESCAPED, cast_rays, direction  # noqa: F401 (ESCAPED: the hits' own)
+from viewer.gpu.gather_cast import (CHUNK, ESCAPED, cast_rays, direct_args, direction,  # noqa: F401 (ESCAPED)
+                                   land_grid)
 from viewer.rays.cast import TriangleCaster
 from viewer.physical.geometry import tangent_frames
 
@@ -179,6 +180,7 @@ def _cast_samples(frame: "_Frame", lift: float, samples: np.ndarray, rays: int, 
     samples = samples[~outward]
     scouts = scout_rays(rays)
     pooled, shared = workers.pooled_cast(frame, lift, layout) if len(samples) else (None, None)
+    direct = direct_args(*layout)
 
     def cast(which: np.ndarray, these: np.ndarray) -> None:
         nonlocal pooled
@@ -188,6 +190,9 @@ def _cast_samples(frame: "_Frame", lift: float, samples: np.ndarray, rays: int, 
             except (BrokenProcessPool, OSError):   # a worker died: the rest here, from now on
                 workers.broke()
                 pooled = None
+        if direct is not None:   # the rays made, traced and landed in one compiled loop
+            return land_grid(*frame.args(lift), np.ascontiguousarray(which, np.int64),
+                             np.ascontiguousarray(these, np.int64), *direct, hits)
         for todo in _rays_of(which, these):
             _cast(frame, lift, todo, *layout, hits)
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from viewer.rays import embree
+
 ESCAPED = -1
 """GatherRays.hits of a ray that leaves the scene (or lands on a face without a tile)."""
 
@@ -42,32 +44,94 @@ def rays_of(points, normals, tangents, bitangents, rows, columns, shift, lift, t
     return origins, directions
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def pixel_of(f, u, v, front, face_tile, tile_origin, tile_n, width):
+    """The lightmap pixel of a hit (face f, barycentrics u, v, side), ESCAPED for none or a face without a
+    tile: the front image's for a front hit, the back image's (`width` further along the row) else."""
+    if f < 0 or face_tile[f] < 0:
+        return ESCAPED
+    tile = face_tile[f]
+    m = tile_n[tile]
+    # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
+    ku = min(max(int(np.floor(u * m + 1.0)), 0), m + 1)
+    kv = min(max(int(np.floor(v * m + 1.0)), 0), m + 1)
+    side = 0 if front else width
+    return (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side
+
+
 @numba.njit(cache=True, nogil=True)
 def pixels_of(face, u, v, front, face_tile, tile_origin, tile_n, width):
-    """The lightmap pixel of each hit (face, barycentrics u, v, side), ESCAPED for none or a face without
-    a tile: the front image's for a front hit, the back image's (`width` further along the row) else.
-    One thread: a few nanoseconds a ray beside Embree's microsecond, and a parallel loop would add
-    seconds to a first run's compile."""
+    """`pixel_of` each hit. One thread: a few nanoseconds a ray beside Embree's microsecond, and a parallel
+    loop would add seconds to a first run's compile."""
     out = np.empty(face.shape[0], np.int32)
     for r in range(face.shape[0]):
-        f = face[r]
-        if f < 0 or face_tile[f] < 0:
-            out[r] = ESCAPED
-            continue
-        tile = face_tile[f]
-        m = tile_n[tile]
-        # texel k of a tile holds the point at (k - 0.5) / m: the nearest to u is floor(u m + 1)
-        ku = min(max(int(np.floor(u[r] * m + 1.0)), 0), m + 1)
-        kv = min(max(int(np.floor(v[r] * m + 1.0)), 0), m + 1)
-        side = 0 if front[r] else width
-        out[r] = (tile_origin[tile, 1] + kv) * 2 * width + tile_origin[tile, 0] + ku + side
+        out[r] = pixel_of(face[r], u[r], v[r], front[r], face_tile, tile_origin, tile_n, width)
     return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def land(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, intersect, scene, record, faces,
+         e1, e2, face_tile, tile_origin, tile_n, width):
+    """The pixel that ray k of sample s lands on, traced through Embree as it is made (viewer.rays.embree)."""
+    dx, dy, dz = direction(s, k, normals, tangents, bitangents, rows, columns, shift)
+    ray, bits, at, address = record
+    primitive, _, u, v = embree.closest(intersect, scene, ray, bits, at, address, points[s, 0] + lift * normals[s, 0],
+                                        points[s, 1] + lift * normals[s, 1], points[s, 2] + lift * normals[s, 2],
+                                        dx, dy, dz, np.inf)
+    if primitive < 0:
+        return ESCAPED
+    f = faces[primitive]
+    # the side: d . (e1 x e2) < 0 is the front, the DDA's test (viewer.rays.cast)
+    nx = e1[f, 1] * e2[f, 2] - e1[f, 2] * e2[f, 1]
+    ny = e1[f, 2] * e2[f, 0] - e1[f, 0] * e2[f, 2]
+    nz = e1[f, 0] * e2[f, 1] - e1[f, 1] * e2[f, 0]
+    front = dx * nx + dy * ny + dz * nz < 0.0
+    return pixel_of(f, u, v, front, face_tile, tile_origin, tile_n, width)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def land_grid(points, normals, tangents, bitangents, rows, columns, shift, lift, samples, rays, intersect, scene, faces,
+              e1, e2, face_tile, tile_origin, tile_n, width, hits):
+    """hits[s, k] for every ray k of `rays` of every sample s of `samples`, on all cores."""
+    for i in numba.prange(samples.shape[0]):
+        record = embree.record()
+        s = samples[i]
+        for k in rays:
+            hits[s, k] = land(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, intersect, scene,
+                              record, faces, e1, e2, face_tile, tile_origin, tile_n, width)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def land_listed(points, normals, tangents, bitangents, rows, columns, shift, lift, todo, intersect, scene, faces,
+                e1, e2, face_tile, tile_origin, tile_n, width, out):
+    """out[i]: the pixel ray todo[i] = (sample, ray) lands on, on all cores."""
+    count = todo.shape[0]
+    for block in numba.prange((count + embree.BLOCK - 1) // embree.BLOCK):
+        record = embree.record()
+        for i in range(block * embree.BLOCK, min(count, (block + 1) * embree.BLOCK)):
+            out[i] = land(todo[i, 0], todo[i, 1], points, normals, tangents, bitangents, rows, columns, shift, lift,
+                          intersect, scene, record, faces, e1, e2, face_tile, tile_origin, tile_n, width)
+
+
+def direct_args(caster, face_tile, tile_origin, tile_n, width: int) -> tuple | None:
+    """The arguments after the rays of `land_grid` and `land_listed` for a caster that calls Embree from
+    compiled loops (None for another: the DDA, embreex's binding)."""
+    if getattr(caster, "direct", None) is None:
+        return None
+    intersect, scene = caster.direct.handle
+    return (intersect, scene, np.ascontiguousarray(caster.faces, np.int64), caster.e1, caster.e2,
+            np.ascontiguousarray(face_tile, np.int64), np.ascontiguousarray(tile_origin, np.int64),
+            np.ascontiguousarray(tile_n, np.int64), int(width))
 
 
 def cast_rays(frame_args: tuple, todo: np.ndarray, caster, face_tile, tile_origin, tile_n,
               width: int, out: np.ndarray) -> None:
     """out[i]: the pixel that ray todo[i] = (sample, ray) of the frame (`_Frame.args`) lands on, CHUNK
     rays at a time (here, or in a worker process: viewer/gpu/gather_workers.py)."""
+    direct = direct_args(caster, face_tile, tile_origin, tile_n, width)
+    if direct is not None:   # made and traced in one compiled loop
+        land_listed(*frame_args, np.ascontiguousarray(todo, np.int64), *direct, out)
+        return
     face_tile = np.ascontiguousarray(face_tile, np.int64)
     tile_origin, tile_n = np.ascontiguousarray(tile_origin, np.int64), np.ascontiguousarray(tile_n, np.int64)
     for start in range(0, len(todo), CHUNK):

@@ -60,7 +60,8 @@ def pool() -> ProcessPoolExecutor | None:
     global _pool
     with _lock:
         if _pool is None and not _broken and worker_count() > 0:
-            _pool = ProcessPoolExecutor(worker_count(), mp_context=multiprocessing.get_context("spawn"))
+            _pool = ProcessPoolExecutor(worker_count(), mp_context=multiprocessing.get_context("spawn"),
+                                        initializer=_one_thread)
             atexit.register(_pool.shutdown, wait=False, cancel_futures=True)
         return _pool
 
@@ -156,6 +157,13 @@ TASK_RAYS = 1 << 18
 # ---- in the workers ---------------------------------------------------------------------------------
 _attached: dict[str, tuple] = {}
 """The gather a worker last attached to: {block name: (block, arrays, caster)}."""
+
+
+def _one_thread() -> None:
+    """A worker's compiled loops (Embree's rays among them) run on one thread: the pool has a worker a core."""
+    import numba
+
+    numba.set_num_threads(1)
 
 
 def _warm() -> None:

@@ -1,14 +1,16 @@
 """Closest hits of many rays against a scene's triangles: which face each ray meets first, where on it
 (the barycentrics u, v of the point v0 + u (v1 - v0) + v (v2 - v0)), how far, and from which side.
 
-Two backends answer alike. Embree (the `embreex` package) traverses a bounding-volume hierarchy and
-costs about log(faces) a ray; the project's numba DDA (viewer/rays/dda.py) marches a fixed grid of
-cells and tests every triangle listed in each cell it crosses, so on a detailed mesh, where one cell of a
-32^3 grid lists a couple of hundred of a bunny's triangles, each ray costs hundreds of triangle tests.
-Measured on the final gather's rays (docs/PERFORMANCE.md): the same rays 1.5-2.7x faster through
-Embree in a Cornell box and 7x faster with a 28k-triangle bunny in it, on one core (embreex holds
-Python's lock while it traces) against the DDA's two. The DDA stays the fallback where embreex is not
-installed, and the caster of the stages that need a cell's voxel rather than a face.
+Two backends answer alike. Embree (shipped by the `embreex` package) traverses a bounding-volume
+hierarchy and costs about log(faces) a ray; the project's numba DDA (viewer/rays/dda.py) marches a fixed
+grid of cells and tests every triangle listed in each cell it crosses, so on a detailed mesh, where one
+cell of a 32^3 grid lists a couple of hundred of a bunny's triangles, each ray costs hundreds of triangle
+tests. Embree is called from compiled loops (viewer/rays/embree.py), on every core and without Python's
+lock, or through embreex's own binding where that cannot load. Measured on the final gather's rays on 2
+cores (docs/PERFORMANCE.md, `python -m viewer.bench.rays`): 14.3 M rays a second in a Cornell box
+(embreex's binding 5.9, the DDA 4.6), 6.0 M with a 68k-triangle scan (3.7 and 0.5). The DDA stays the
+fallback where embreex is not installed, and the caster of the stages that need a cell's voxel rather
+than a face.
 
 A hit's side comes from the face's own normal (e1 x e2, counter-clockwise front) against the ray's
 direction, as the DDA's BACKFACE does: light reflected by the back of a face is the back side's.
@@ -21,7 +23,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
-from viewer.rays import dda
+from viewer.rays import dda, embree
 
 try:   # optional at run time: the DDA answers the same questions without it, slower on detailed meshes
     from embreex import rtcore_scene
@@ -58,6 +60,22 @@ class Hits:
     """(R,) bool: the ray met the face's front (the side its counter-clockwise normal points to)."""
 
 
+def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(distinct rows, each row's index among them), as np.unique(rows, axis=0, return_inverse=True) but
+    in no set order: rows are told apart by their dot product with an irrational direction (one sort of
+    numbers, where np.unique sorts the rows themselves: 0.98 s against 0.03 s for 280k normals), and the
+    answer is checked row for row; the rare rows that share a key without being equal go through np.unique."""
+    rows = np.asarray(rows)
+    key = rows @ np.array([1.0, np.sqrt(2.0), np.pi])[:rows.shape[1]] if rows.ndim == 2 and rows.shape[1] <= 3 \
+        else None
+    if key is not None and np.all(np.isfinite(key)):
+        _, first, which = np.unique(key, return_index=True, return_inverse=True)
+        if np.array_equal(rows[first][which], rows):
+            return rows[first], which.ravel()
+    distinct, which = np.unique(rows, axis=0, return_inverse=True)
+    return distinct, which.ravel()
+
+
 def usable_faces(scene) -> np.ndarray:
     """The faces rays can meet: those of area above 1e-12 of the largest (as the DDA lists them)."""
     areas = scene.face_areas
@@ -71,16 +89,19 @@ class TriangleCaster:
     """The scene faces Embree holds (`usable_faces`); None for the DDA, whose cells hold them all."""
     _hull: np.ndarray | None = None
     """`_hull_corners`, once asked."""
+    _direct: "embree.Scene | None" = None
+    """Embree called from compiled loops (viewer.rays.embree); None where only embreex's binding works."""
 
     def __init__(self, scene, cells: dda.Cells | None = None, backend: str | None = None):
         """`cells`: the scene's dda.Cells (any grid, Cells.blocking will do) when the caller has them, for
-        the DDA backend; `backend`: "embree", "dda", or None for Embree where it is installed."""
+        the DDA backend; `backend`: "embree", "dda", or None for Embree where it is installed ("embreex":
+        Embree through embreex's own binding, which holds Python's lock: for comparisons)."""
         backend = backend or ("embree" if embree_available() else "dda")
-        if backend == "embree" and not embree_available():
+        if backend in ("embree", "embreex") and not embree_available():
             raise ValueError("the embree backend needs the embreex package")
-        if backend not in ("embree", "dda"):
+        if backend not in ("embree", "embreex", "dda"):
             raise ValueError(f"unknown ray-casting backend {backend!r}")
-        self.backend = backend
+        self.backend = "embree" if backend == "embreex" else backend
         if backend == "dda":
             if cells is None:
                 from viewer.rays.voxels import grid_frame
@@ -90,7 +111,7 @@ class TriangleCaster:
         triangles = np.asarray(scene.triangles, np.float64)
         faces = usable_faces(scene)
         self._embrace(np.ascontiguousarray(triangles[faces], np.float32), faces, triangles[:, 0],
-                      triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+                      triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0], backend == "embree")
 
     @staticmethod
     def of_triangles(mesh: np.ndarray, faces: np.ndarray, v0: np.ndarray, e1: np.ndarray,
@@ -102,13 +123,21 @@ class TriangleCaster:
         caster._embrace(mesh, faces, v0, e1, e2)
         return caster
 
-    def _embrace(self, mesh, faces, v0, e1, e2) -> None:
+    def _embrace(self, mesh, faces, v0, e1, e2, direct: bool = True) -> None:
         self.mesh = np.ascontiguousarray(mesh, np.float32)
         """(usable faces, 3, 3) float32: the corners Embree holds."""
         self._faces = np.asarray(faces)
         self.v0, self.e1, self.e2 = (np.ascontiguousarray(a, np.float64) for a in (v0, e1, e2))
-        self._embree = rtcore_scene.EmbreeScene()
-        TriangleMesh(self._embree, self.mesh)
+        if direct and embree.available():   # called from compiled loops: all cores, without Python's lock
+            self._direct = embree.Scene(self.mesh)
+        else:
+            self._embree = rtcore_scene.EmbreeScene()
+            TriangleMesh(self._embree, self.mesh)
+
+    @property
+    def direct(self) -> "embree.Scene | None":
+        """Embree for compiled loops to call (viewer.rays.embree), None where it is not used."""
+        return self._direct
 
     @property
     def faces(self) -> np.ndarray | None:
@@ -124,7 +153,7 @@ class TriangleCaster:
         p = np.asarray(points, np.float64).reshape(-1, 3)
         if len(p) == 0:
             return np.zeros(0, bool)
-        normal, which = np.unique(np.asarray(normals, np.float64).reshape(-1, 3), axis=0, return_inverse=True)
+        normal, which = distinct_rows(np.asarray(normals, np.float64).reshape(-1, 3))
         support = np.empty(len(normal))
         corners = self._hull_corners()
         for start in range(0, len(normal), 4096):   # (normals x corners) a block at a time
@@ -168,6 +197,8 @@ class TriangleCaster:
         length = np.ascontiguousarray(np.broadcast_to(lengths, (len(o),)), np.float64)
         if self.backend == "dda":
             return _marched_blocked(o, d, length, self._marched[0])
+        if self._direct is not None:
+            return self._direct.occluded(o, d, length)
         out = np.empty(len(o), bool)
         o32, d32, far = o.astype(np.float32), d.astype(np.float32), length.astype(np.float32)
         for start in range(0, len(o), EMBREE_CHUNK):
@@ -182,6 +213,10 @@ class TriangleCaster:
         if self.backend == "dda":
             face, t, u, v, front = _marched_hits(o, d, float(t_max), *self._marched)
             return Hits(face, t, u, v, front)
+        if self._direct is not None:
+            primitive, t, u, v = self._direct.closest(o, d, min(float(t_max), 1e37))
+            face = np.where(primitive >= 0, self._faces[np.maximum(primitive, 0)], NO_FACE)
+            return Hits(face, t, u, v, _front(d, face, self.e1, self.e2))
         face = np.empty(len(o), np.int64)
         t, u, v = np.empty(len(o)), np.empty(len(o)), np.empty(len(o))
         o32, d32 = o.astype(np.float32), d.astype(np.float32)

@@ -1,0 +1,108 @@
+"""Embree called from compiled loops (viewer/rays/embree.py) gives embreex's own answers, bit for bit, on
+every core and without Python's lock; where it cannot load, the caster uses embreex's binding."""
+
+import threading
+
+import numpy as np
+import pytest
+import trimesh
+
+from viewer.rays import cast, embree
+from viewer.scene import load
+
+pytestmark = pytest.mark.skipif(not embree.available(), reason="Embree cannot be called directly here")
+
+
+def cornell_with_sphere() -> np.ndarray:
+    """The Cornell box's triangles and a 1,280-face sphere's: many shared edges for rays to slip through."""
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.3)
+    return np.concatenate([np.asarray(load("cornell").triangles, np.float32),
+                           np.asarray(sphere.triangles + [0.2, 0.4, 0.1], np.float32)])
+
+
+def rays(triangles: np.ndarray, count: int, seed: int = 5):
+    rng = np.random.default_rng(seed)
+    corners = triangles.reshape(-1, 3)
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    origins = lo + (hi - lo) * rng.uniform(0.01, 0.99, (count, 3))
+    directions = rng.normal(size=(count, 3))
+    return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)
+
+
+def embreex_scene(triangles):
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    scene = rtcore_scene.EmbreeScene()
+    TriangleMesh(scene, np.ascontiguousarray(triangles))
+    return scene
+
+
+def test_closest_hits_are_embreex_own_bit_for_bit():
+    """The same face, distance and barycentrics as embreex's `run` for every ray that meets a face, and
+    the same misses, on rays through a sphere's 1,280 faces and the box around it."""
+    triangles = cornell_with_sphere()
+    origins, directions = rays(triangles, 200_000)
+    primitive, t, u, v = embree.Scene(triangles).closest(origins, directions, 1e37)
+    theirs = embreex_scene(triangles).run(origins.astype(np.float32), directions.astype(np.float32),
+                                          dists=np.float32(1e37), output=1)
+    hit = theirs["primID"].astype(np.int64) >= 0
+    assert 0.5 < hit.mean() < 1.0                    # both outcomes are tested
+    np.testing.assert_array_equal(np.where(hit, theirs["primID"].astype(np.int64), -1), primitive)
+    for ours, name in ((t, "tfar"), (u, "u"), (v, "v")):
+        np.testing.assert_array_equal(ours[hit].astype(np.float32), theirs[name][hit])
+    assert np.all(np.isinf(t[~hit]))
+
+
+def test_a_segment_is_blocked_where_embreex_says_so():
+    triangles = cornell_with_sphere()
+    origins, directions = rays(triangles, 100_000, seed=6)
+    lengths = np.random.default_rng(7).uniform(0.0, 2.0, len(origins))
+    ours = embree.Scene(triangles).occluded(origins, directions, lengths)
+    theirs = embreex_scene(triangles).run(origins.astype(np.float32), directions.astype(np.float32),
+                                          dists=lengths.astype(np.float32), query="OCCLUDED") >= 0
+    assert 0.2 < ours.mean() < 0.8
+    np.testing.assert_array_equal(ours, theirs)
+
+
+def test_two_threads_tracing_at_once_get_what_each_gets_alone():
+    """Queries on one scene from two threads (the GI source's trace beside the final gather) answer as
+    each does alone."""
+    triangles = cornell_with_sphere()
+    scene = embree.Scene(triangles)
+    sets = [rays(triangles, 50_000, seed) for seed in (8, 9)]
+    alone = [scene.closest(o, d, 1e37)[0] for o, d in sets]
+    together = [None, None]
+
+    def trace(k):
+        for _ in range(3):
+            together[k] = scene.closest(*sets[k], 1e37)[0]
+
+    threads = [threading.Thread(target=trace, args=(k,)) for k in (0, 1)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    for a, b in zip(alone, together):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_the_caster_falls_back_to_embreex_with_the_same_hits(monkeypatch):
+    """Where the library cannot be called directly the caster uses embreex's binding: the same hits."""
+    scene = load("cornell")
+    origins, directions = rays(np.asarray(scene.triangles, np.float32), 20_000, seed=10)
+    direct = cast.TriangleCaster(scene)
+    assert direct.direct is not None
+    assert cast.TriangleCaster(scene, backend="embreex").direct is None    # asked for: embreex's binding
+    monkeypatch.setattr(embree, "available", lambda: False)
+    bound = cast.TriangleCaster(scene)
+    assert bound.backend == "embree" and bound.direct is None
+    a, b = direct.closest_hits(origins, directions), bound.closest_hits(origins, directions)
+    np.testing.assert_array_equal(a.face, b.face)
+    hit = a.face >= 0
+    for name in ("t", "u", "v"):
+        np.testing.assert_array_equal(getattr(a, name)[hit], getattr(b, name)[hit])
+    np.testing.assert_array_equal(a.front, b.front)
+    lengths = np.full(len(origins), 0.7)
+    np.testing.assert_array_equal(direct.blocked(origins, directions, lengths),
+                                  bound.blocked(origins, directions, lengths))
