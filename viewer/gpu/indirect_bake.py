@@ -25,7 +25,7 @@ import numpy as np
 
 from viewer.rays import dda
 from viewer.gpu import gather_workers
-from viewer.rays.cast import TriangleCaster
+from viewer.rays.cast import TriangleCaster, embree_available
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.gpu.texel_samples import (SAMPLE_STRIDE, gather_records, gather_texels, reflectance, strided_samples,
@@ -50,6 +50,14 @@ def lattice_key(probes: ProbeGrid) -> tuple:
     """What the weights depend on, of a probe grid: its box, resolution and validity."""
     return (tuple(np.round(probes.lo, 9)), tuple(np.round(probes.hi, 9)), probes.resolution,
             hash(np.asarray(probes.valid, bool).tobytes()))
+
+
+def caster_of(scene: Scene) -> TriangleCaster:
+    """The rays' caster of a geometry, for the gather and the weights: Embree where it is installed (no
+    cells to list: 20-125 ms of a new Cornell box), else the DDA over a VISIBILITY_VOXELS grid of cells."""
+    if embree_available():
+        return TriangleCaster(scene)
+    return TriangleCaster(scene, dda.Cells.blocking(scene, *grid_frame(scene, VISIBILITY_VOXELS), VISIBILITY_VOXELS))
 
 
 class BakedIndirectLight:
@@ -77,7 +85,8 @@ class BakedIndirectLight:
         self._between = (np.concatenate([pixels, pixels + width]), np.concatenate([sources, sources + width]),
                          np.concatenate([weights, weights]))
         """(pixels, their samples' pixels, weights) of every texel, both sides."""
-        self._cells: dda.Cells | None = None
+        self._caster: TriangleCaster | None = None
+        """The rays' caster of the installed geometry (Embree where installed, else the DDA's cells)."""
         self.gather_rays = gather_rays
         """Final-gather rays per sample (viewer/gpu/final_gather.py); 0: the probes' light alone."""
         self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None   # rays, `tent_neighbours`
@@ -102,8 +111,8 @@ class BakedIndirectLight:
         self._prefetching: Future | None = None   # the geometry's work started by `prefetch`, while it runs
         self._geometry = 0
         """Counts `moved` calls: work started for an earlier geometry is dropped."""
-        self._made: tuple[int, dda.Cells, tuple | None] | None = None
-        """(geometry, cells, gather or None) the last weights were made with: what the next job reuses."""
+        self._made: tuple[int, TriangleCaster, tuple | None] | None = None
+        """(geometry, caster, gather or None) the last weights were made with: what the next job reuses."""
         self._points: tuple[BakedDirectLight, tuple] | None = None   # `_sample_points`' lightmap and answer
         self._traced: tuple[Scene, BakedDirectLight, GatherRays] | None = None
         """The scene and lightmap the last gather rays were traced for, and the rays (a moved lamp's job
@@ -113,7 +122,6 @@ class BakedIndirectLight:
         moved faces covered before would stay dark: the old rays met the lamp's back there), but the
         rays are what the worker traces the move's changes from."""
         self._last_key: tuple[ProbeGrid, tuple] | None = None
-        self._caster: tuple[dda.Cells, TriangleCaster] | None = None
         self._kept: dict[tuple, SurfaceBake] = {}
         """The weights of the last KEPT_LATTICES lattices, newest last."""
 
@@ -156,7 +164,7 @@ class BakedIndirectLight:
         fragment, as for a new scene."""
         self.lightmap, self.scene = lightmap, scene
         self._geometry += 1
-        self._cells, self._direct, self._reflectance = None, None, None
+        self._caster, self._direct, self._reflectance = None, None, None
         self._kept = {}
         self.stale = self._bake is not None
 
@@ -183,45 +191,37 @@ class BakedIndirectLight:
 
     def weights_of(self, probes: ProbeGrid, geometry: int | None = None, scene: Scene | None = None,
                    lightmap: BakedDirectLight | None = None, rays: bool | None = None,
-                   ) -> tuple[SurfaceBake, dda.Cells, tuple | None]:
+                   ) -> tuple[SurfaceBake, TriangleCaster, tuple | None]:
         """Every texel's probe weights for both sides (the back sides with their normals negated), the
-        scene's triangle cells, and the final gather's rays and neighbours when the geometry has none yet
+        scene's ray caster, and the final gather's rays and neighbours when the geometry has none yet
         (else None)."""
         if scene is None:
             geometry, scene, lightmap, rays = self._geometry_now()
-        cells, gather = self._geometry_work(geometry, scene, lightmap, rays)
+        caster, gather = self._geometry_work(geometry, scene, lightmap, rays)
         points, normals, normal_id = self._sample_points(lightmap)
-        weights = SurfaceWeights.of(points, normals[normal_id], probes, self._caster_of(scene, cells))
-        return SurfaceBake.of(weights, normal_id, normals), cells, gather
+        weights = SurfaceWeights.of(points, normals[normal_id], probes, caster)
+        return SurfaceBake.of(weights, normal_id, normals), caster, gather
 
     def _geometry_work(self, geometry: int, scene: Scene, lightmap: BakedDirectLight,
-                       rays: bool) -> tuple[dda.Cells, tuple | None]:
-        """(cells, (rays, neighbours) or None) of a geometry, made once on the worker: a second lattice's
+                       rays: bool) -> tuple[TriangleCaster, tuple | None]:
+        """(caster, (rays, neighbours) or None) of a geometry, made once on the worker: a second lattice's
         weights (the network's validity changes with the scene) and the weights after a prefetch reuse
         them."""
         made = self._made
         if made is not None and made[0] == geometry:
             return made[1], made[2]
-        cells = self._cells if self._cells is not None and not rays else \
-            dda.Cells.blocking(scene, *grid_frame(scene, VISIBILITY_VOXELS), VISIBILITY_VOXELS)
+        caster = self._caster if self._caster is not None and not rays else caster_of(scene)
         gather = None
         if self.gather_rays and rays:
             points, normals, normal_id = self._sample_points(lightmap)
             if self._records is None:   # the same across moves (the same layout): the old rays stay theirs
                 self._records = gather_records(lightmap, self._samples)
             records = np.concatenate([self._records[0], len(self._samples) + self._records[0]])
-            traced = self._gather_rays(scene, lightmap, cells, points[records], normals[normal_id[records]])
+            traced = self._gather_rays(scene, lightmap, caster, points[records], normals[normal_id[records]])
             gather = (traced, tent_neighbours(lightmap, self._samples, *self._records, traced))
             self._traced = (scene, lightmap, traced)
-        self._made = (geometry, cells, gather)
-        return cells, gather
-
-    def _caster_of(self, scene: Scene, cells: dda.Cells) -> TriangleCaster:
-        """The rays' caster of the geometry whose cells these are (Embree where installed, else these cells'
-        DDA), made once for the gather and the weights."""
-        if self._caster is None or self._caster[0] is not cells:
-            self._caster = (cells, TriangleCaster(scene, cells))
-        return self._caster[1]
+        self._made = (geometry, caster, gather)
+        return caster, gather
 
     def _sample_points(self, lightmap: BakedDirectLight) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(points (S, 3), normals (N, 3), normal_id (S,)): the samples of both sides, the distinct normals
@@ -240,7 +240,7 @@ class BakedIndirectLight:
         self._points = (lightmap, points)
         return points
 
-    def _gather_rays(self, scene: Scene, lightmap: BakedDirectLight, cells: dda.Cells, points: np.ndarray,
+    def _gather_rays(self, scene: Scene, lightmap: BakedDirectLight, caster: TriangleCaster, points: np.ndarray,
                      normals: np.ndarray) -> GatherRays:
         """The final gather's rays: traced again only where a move can have changed them when the last
         rays were traced for the same faces laid out alike (a lamp dragged), else all of them. They start
@@ -250,7 +250,7 @@ class BakedIndirectLight:
         face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
         width = lightmap.covered.shape[1]
         lo, hi = scene.bounds
-        layout = (self._caster_of(scene, cells), face_tile, lightmap.tile_origin, lightmap.tile_n, width,
+        layout = (caster, face_tile, lightmap.tile_origin, lightmap.tile_n, width,
                   4e-6 * float(np.min(hi - lo)))
         moved = self._moved_tiles(scene, lightmap)
         if moved is None:
@@ -281,10 +281,10 @@ class BakedIndirectLight:
         moved = np.flatnonzero(np.any(old_scene.triangles[keep] != scene.triangles[keep], axis=(1, 2)))
         return moved if len(moved) <= MAX_MOVED * keep.sum() else None
 
-    def _install(self, key: tuple, bake: SurfaceBake, cells: dda.Cells | None = None,
+    def _install(self, key: tuple, bake: SurfaceBake, caster: TriangleCaster | None = None,
                  gather: tuple | None = None) -> None:
-        if cells is not None:
-            self._cells = cells
+        if caster is not None:
+            self._caster = caster
         if gather is not None:
             self._gather = gather
         self.stale = False
