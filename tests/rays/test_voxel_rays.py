@@ -82,3 +82,28 @@ def test_a_ray_inside_a_closed_room_lands_on_the_wall_ahead_and_a_cube_shows_its
     clear = solid.segments_clear(np.array([[0.0, 0.0, -2.0], [0.0, 0.0, -2.0]]),
                                  np.array([[0.0, 0.0, -0.6], [0.0, 0.0, 0.0]]))
     np.testing.assert_array_equal(clear, [True, False])
+
+
+@needs_embree
+def test_a_bundle_traced_in_one_loop_lands_where_its_rays_one_by_one_do():
+    """`bundle_hits` traces and looks up in one compiled loop (Embree called directly); its voxels are
+    those of the same rays cast one by one (`first_hits`: the caster's hits, then the lookup), bit for bit,
+    for shared directions and for one set per origin."""
+    from viewer.rays.voxels import voxelize_with_faces
+
+    scene = load("cornell")
+    cells = dda.Cells.of(voxelize_with_faces(scene, 24), scene)
+    rays = VoxelRays(scene, cells, "embree")
+    assert rays.caster.direct is not None
+    rng = np.random.default_rng(11)
+    origins = rng.uniform(-0.9, 0.9, (300, 3))
+    shared = rng.normal(size=(40, 3))
+    shared /= np.linalg.norm(shared, axis=1, keepdims=True)
+    own = rng.normal(size=(300, 40, 3))
+    own /= np.linalg.norm(own, axis=2, keepdims=True)
+    for directions in (shared, own):
+        bundle = rays.bundle_hits(origins, directions)
+        each = np.broadcast_to(directions[None] if directions.ndim == 2 else directions, (300, 40, 3))
+        one_by_one = rays.first_hits(np.repeat(origins, 40, axis=0), each.reshape(-1, 3)).reshape(300, 40)
+        assert len(np.unique(bundle)) > 20 and (bundle == dda.MISS).any()   # both outcomes are tested
+        np.testing.assert_array_equal(bundle, one_by_one)

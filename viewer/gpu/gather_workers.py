@@ -1,9 +1,11 @@
-"""The final gather's rays cast in worker processes.
+"""The final gather's rays cast in worker processes, on machines of 4 cores and more.
 
-Embree (embreex) holds Python's lock while it traces, so rays cast on a thread take turns with every
-other thread of the process: a new scene's gather rays (6 M for the Cornell box, 7 M for a 68k-triangle
-scan) and the GI source's own probe rays shared one core, and the frames drawn meanwhile waited for the
-lock. Cast in other processes they run beside both, on as many cores as the machine has to spare.
+In-process, a gather's rays are made, traced and landed in one compiled loop on every core, Embree
+called without Python's lock (viewer/rays/embree.py). The workers date from when Embree was reached
+through embreex's binding, which holds the lock, so that rays cast on a thread took turns with every
+other thread of the process: a new scene's gather rays and the GI source's own probe rays shared one
+core. On a 16-core machine they settled a new Cornell box 1.3-1.9x sooner then (docs/PERFORMANCE.md);
+each worker's loops run on one thread.
 
 A gather hands its arrays (the scene's triangles, the samples' ray frames, the lightmap's layout) to the
 workers once, in one block of shared memory; each task names a run of samples and which of their rays

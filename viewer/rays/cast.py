@@ -34,9 +34,10 @@ except ImportError:   # pragma: no cover - depends on the installation
 NO_FACE = -1
 """Hits.face of a ray that meets nothing within its length."""
 EMBREE_CHUNK = 1 << 14
-"""Rays per call into embreex, which holds Python's lock while it traces: about 5 ms at a time (Python's
-own switch interval), so that a frame on the render thread waits no longer while the final gather is
-cast on the worker; the calls cost the same rays a second as 4x larger ones."""
+"""Rays per call into embreex's binding (where viewer.rays.embree cannot load), which holds Python's lock
+while it traces: about 5 ms at a time (Python's own switch interval), so that a frame on the render
+thread waits no longer while the final gather is cast on the worker; the calls cost the same rays a
+second as 4x larger ones."""
 
 
 def embree_available() -> bool:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from viewer.rays import dda
+from viewer.rays import dda, embree
 from viewer.rays.cast import NO_FACE, TriangleCaster, embree_available
 
 FAR = 1e37
@@ -68,6 +68,13 @@ class VoxelRays:
         if self.caster is None:
             return dda.bundle_hits(self.cells, o, d)
         count = d.shape[-2]
+        if self.caster.direct is not None:   # traced and looked up in one compiled loop
+            out = np.empty((len(o), count), np.int32)
+            c, caster = self.cells, self.caster
+            _bundle(o, np.ascontiguousarray(d[None] if d.ndim == 2 else d), *caster.direct.handle,
+                    np.ascontiguousarray(caster.faces, np.int64), caster.e1, caster.e2, c.lo, c.h, c.n, c.first,
+                    c.triangle, c.voxel, out)
+            return out
         d = np.broadcast_to(d[None] if d.ndim == 2 else d, (len(o), count, 3))
         out = np.empty((len(o), count), np.int32)
         rows = max(1, RAYS_PER_CALL // max(count, 1))
@@ -112,37 +119,67 @@ class VoxelRays:
 
 @numba.njit(cache=True, nogil=True)
 def _landing(o, d, face, t, front, lo, h, n, first, triangle, voxel):
-    """The voxel of each hit: the listing's entry for the hit's face in the cell a hair before the hit
+    """`_voxel_of` each hit."""
+    out = np.empty(face.shape[0], np.int64)
+    for r in range(face.shape[0]):   # one thread: a few lookups a ray, beside Embree's traversal
+        out[r] = _voxel_of(o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2], face[r], t[r], front[r], lo, h, n,
+                           first, triangle, voxel)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _bundle(o, d, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, voxel, out):
+    """out[p, k]: the voxel that ray k of origin p meets first (d (P, D, 3), or (1, D, 3) shared), traced
+    through Embree as it is made (viewer.rays.embree) and looked up at once, on every core."""
+    step = 0 if d.shape[0] == 1 else 1
+    for p in numba.prange(o.shape[0]):
+        record = embree.record()
+        ray, bits, at, address = record
+        for k in range(d.shape[1]):
+            q = p * step
+            dx, dy, dz = d[q, k, 0], d[q, k, 1], d[q, k, 2]
+            primitive, t, _, _ = embree.closest(intersect, scene, ray, bits, at, address, o[p, 0], o[p, 1], o[p, 2],
+                                                dx, dy, dz, FAR)
+            if primitive < 0:
+                out[p, k] = dda.MISS
+                continue
+            f = faces[primitive]
+            # the side: d . (e1 x e2) < 0 is the front (viewer.rays.cast)
+            nx = e1[f, 1] * e2[f, 2] - e1[f, 2] * e2[f, 1]
+            ny = e1[f, 2] * e2[f, 0] - e1[f, 0] * e2[f, 2]
+            nz = e1[f, 0] * e2[f, 1] - e1[f, 1] * e2[f, 0]
+            front = dx * nx + dy * ny + dz * nz < 0.0
+            out[p, k] = _voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _voxel_of(ox, oy, oz, dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel):
+    """The voxel of a hit: the listing's entry for the hit's face in the cell a hair before the hit
     point, else in the cell of the point itself or a neighbour (a hit on the listing's edge); a face met
     from behind is BACKFACE, and one the listing lacks near the hit too (it cannot be lit)."""
-    out = np.empty(face.shape[0], np.int64)
+    if f == NO_FACE:
+        return dda.MISS
+    if not front:
+        return dda.BACKFACE
+    found = dda.BACKFACE
     back = STEP_BACK * h
-    for r in range(face.shape[0]):   # one thread: a few lookups a ray, beside Embree's traversal
-        f = face[r]
-        if f == NO_FACE:
-            out[r] = dda.MISS
-            continue
-        if not front[r]:
-            out[r] = dda.BACKFACE
-            continue
-        found = dda.BACKFACE
-        for attempt in range(2):
-            s = t[r] - back if attempt == 0 else t[r]
-            cx = min(max(int(np.floor((o[r, 0] + s * d[r, 0] - lo[0]) / h)), 0), n - 1)
-            cy = min(max(int(np.floor((o[r, 1] + s * d[r, 1] - lo[1]) / h)), 0), n - 1)
-            cz = min(max(int(np.floor((o[r, 2] + s * d[r, 2] - lo[2]) / h)), 0), n - 1)
-            found = _entry(cx, cy, cz, f, n, first, triangle, voxel)
-            if found != dda.MISS:
-                break
-        if found == dda.MISS:
-            for k in range(27):
-                x, y, z = cx + k % 3 - 1, cy + (k // 3) % 3 - 1, cz + k // 9 - 1
-                if 0 <= x < n and 0 <= y < n and 0 <= z < n:
-                    found = _entry(x, y, z, f, n, first, triangle, voxel)
-                    if found != dda.MISS:
-                        break
-        out[r] = dda.BACKFACE if found == dda.MISS else found
-    return out
+    cx = cy = cz = 0
+    for attempt in range(2):
+        s = t - back if attempt == 0 else t
+        cx = min(max(int(np.floor((ox + s * dx - lo[0]) / h)), 0), n - 1)
+        cy = min(max(int(np.floor((oy + s * dy - lo[1]) / h)), 0), n - 1)
+        cz = min(max(int(np.floor((oz + s * dz - lo[2]) / h)), 0), n - 1)
+        found = _entry(cx, cy, cz, f, n, first, triangle, voxel)
+        if found != dda.MISS:
+            break
+    if found == dda.MISS:
+        for k in range(27):
+            x, y, z = cx + k % 3 - 1, cy + (k // 3) % 3 - 1, cz + k // 9 - 1
+            if 0 <= x < n and 0 <= y < n and 0 <= z < n:
+                found = _entry(x, y, z, f, n, first, triangle, voxel)
+                if found != dda.MISS:
+                    break
+    return dda.BACKFACE if found == dda.MISS else found
 
 
 @numba.njit(cache=True, nogil=True)
