@@ -28,8 +28,8 @@ from viewer.gpu import gather_workers
 from viewer.rays.cast import TriangleCaster, embree_available
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
-from viewer.gpu.texel_samples import (SAMPLE_STRIDE, gather_records, gather_texels, reflectance, strided_samples,
-                                      tent_neighbours, texture_ratio)
+from viewer.gpu.texel_samples import (SAMPLE_STRIDE, gather_records, gather_reflected, gather_texels, reflectance,
+                                      strided_samples, tent_neighbours, texture_ratio)
 from viewer.probes.weights import SurfaceBake, SurfaceWeights
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
@@ -98,6 +98,7 @@ class BakedIndirectLight:
         self._covered_pixels: tuple[np.ndarray, np.ndarray] | None = None
         self._texture_ratio: tuple[tuple, np.ndarray | None] | None = None   # (textures, texture_ratio)
         self._scratch: np.ndarray | None = None   # albedo x (direct + indirect) of every pixel: the rays read it
+        self._reflecting: list[np.ndarray] | None = None   # `_reflectance`'s arrays, kept
         self._bake: SurfaceBake | None = None
         self.weights_key = None
         """lattice_key of the probe grid whose weights are installed (None: none yet)."""
@@ -333,14 +334,12 @@ class BakedIndirectLight:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
         rows, weights = self._texel_rows
         values = self._bake.irradiance(probes.coefficients)
-        gather_texels(values, rows, weights, self._texel_pixels, self._image)
         if self._gather is not None:
             rays, (near, tent) = self._gather
             albedo, reflected = self._reflected()
-            np.multiply(albedo, self._image, out=self._scratch)
-            self._scratch += reflected
+            gather_reflected(values, rows, weights, self._texel_pixels, albedo, reflected, self._scratch)
             gather_texels(rays.irradiance(self._scratch), near, tent, self._sample_rows, values)
-            gather_texels(values, rows, weights, self._texel_pixels, self._image)
+        gather_texels(values, rows, weights, self._texel_pixels, self._image)
         self.texture.write(self._image)
 
     def _reflected(self) -> tuple[np.ndarray, np.ndarray]:
@@ -353,7 +352,9 @@ class BakedIndirectLight:
             self._reflectance = None
         if self._reflectance is None:
             pixels, faces = self._covered
-            albedo, reflected = np.zeros_like(self._direct), np.zeros_like(self._direct)
+            if self._scratch is None or self._scratch.shape != self._direct.shape:   # the uncovered pixels stay 0
+                self._scratch, *self._reflecting = (np.zeros_like(self._direct) for _ in range(3))
+            albedo, reflected = self._reflecting
             textures = tuple(map(id, self.scene.textures or ()))    # the same across colour edits
             if self._texture_ratio is None or self._texture_ratio[0] != textures:
                 ratio = texture_ratio(self.scene, self.lightmap, faces)   # a textured face reflects its texture
@@ -361,7 +362,6 @@ class BakedIndirectLight:
             face_albedo = np.ascontiguousarray(self.scene.albedo[self.scene.face_areas > 0], np.float32)
             reflectance(pixels, faces, face_albedo, self._texture_ratio[1], self._direct, albedo, reflected)
             self._reflectance = (albedo, reflected)
-            self._scratch = np.empty_like(albedo)
         return self._reflectance
 
     @property
