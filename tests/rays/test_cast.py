@@ -88,3 +88,18 @@ def test_a_segment_is_blocked_where_the_closest_hit_lies_within_it(backend):
     blocked = caster.blocked(origins, directions, lengths)
     np.testing.assert_array_equal(blocked[clear_of_ends], (t <= lengths)[clear_of_ends])
     assert 0.2 < blocked.mean() < 0.8
+
+
+def test_distinct_rows_group_rows_as_numpys_unique_does():
+    """The same groups and first occurrences as np.unique(axis=0), for float normals, integer keys, and
+    rows whose keys collide without being equal (which go through np.unique)."""
+    rng = np.random.default_rng(8)
+    normals = unit(rng.normal(size=(40, 3)))[rng.integers(0, 40, 5000)]
+    keys = rng.integers(-50, 50, (6000, 6))[rng.integers(0, 300, 6000)]
+    colliding = np.array([[np.sqrt(3.0), 0.0], [0.0, np.sqrt(2.0)], [np.sqrt(3.0), 0.0]])  # equal dot products
+    for rows in (normals, keys, colliding):
+        first, inverse = cast.distinct_rows(rows)
+        _, their_first, theirs = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+        np.testing.assert_array_equal(np.sort(first), np.sort(their_first))
+        np.testing.assert_array_equal(rows[first][inverse], rows)        # each row's group holds it
+        assert len(first) == len(their_first)

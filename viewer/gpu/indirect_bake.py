@@ -25,7 +25,7 @@ import numpy as np
 
 from viewer.rays import dda
 from viewer.gpu import gather_workers
-from viewer.rays.cast import TriangleCaster, embree_available
+from viewer.rays.cast import TriangleCaster, distinct_rows, embree_available
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.gpu.texel_samples import (SAMPLE_STRIDE, gather_records, gather_reflected, gather_texels, reflectance,
@@ -233,11 +233,11 @@ class BakedIndirectLight:
         faces = lightmap.texel_faces
         face_normal = np.zeros((int(faces.max()) + 1 if len(faces) else 0, 3))
         face_normal[faces] = lightmap.texel_normals
-        normals, ids = np.unique(np.round(np.concatenate([face_normal, -face_normal]), 6), axis=0,
-                                 return_inverse=True)
+        rounded = np.round(np.concatenate([face_normal, -face_normal]), 6)
+        first, ids = distinct_rows(rounded)   # a sort of numbers, not of rows: 0.3 s of a 68k-triangle scan
         faces = faces[self._samples]
         normal_id = np.concatenate([ids[faces], ids[len(face_normal) + faces]])
-        points = (np.concatenate([lightmap.texel_points[self._samples]] * 2), normals, normal_id)
+        points = (np.concatenate([lightmap.texel_points[self._samples]] * 2), rounded[first], normal_id)
         self._points = (lightmap, points)
         return points
 

@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 
 from viewer.gpu.direct_bake import BakedDirectLight
 from viewer.gpu.final_gather import GatherRays
+from viewer.rays.cast import distinct_rows
 from viewer.scene.textures import relative_at
 
 SAMPLE_STRIDE = 2   # the texels at odd local coordinates: strided_samples is written for 2
@@ -122,8 +123,8 @@ def gather_records(lightmap: BakedDirectLight, samples: np.ndarray) -> tuple[np.
         cell = RECORD_CELL * SAMPLE_STRIDE * lightmap.texel
         keys = np.column_stack([np.floor(lightmap.texel_points[samples[small]] / cell),
                                 np.round(RECORD_NORMAL * lightmap.texel_normals[samples[small]])]).astype(np.int64)
-        _, first, cell = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-        own[small] = small[first][cell.ravel()]
+        first, cell = distinct_rows(keys)
+        own[small] = small[first][cell]
     records, own = np.unique(own, return_inverse=True)
     return records, own.ravel()
 
