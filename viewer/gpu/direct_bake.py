@@ -17,6 +17,7 @@ longest side apart (RenderSettings.lightmap_texel: 0.02 units in the Cornell box
 from __future__ import annotations
 
 import moderngl
+import numba
 import numpy as np
 
 from viewer.gpu.mesh import TriangleBuffer, face_uv, vertex_albedo
@@ -84,16 +85,24 @@ def lightmap_layout(scene: Scene, texel: float):
     legs = np.linalg.norm(corners[:, 1:] - corners[:, :1], axis=2).max(axis=1)
     n = np.maximum(np.ceil(legs / texel - 1e-6), 1).astype(int)
     tile = n + 2
-    origin = np.zeros((len(n), 2), int)
-    x = y = shelf = 0
     width = max(ATLAS_WIDTH, int(tile.max()))
-    for f in np.argsort(-tile, kind="stable"):
+    origin, height = _shelves(tile, np.argsort(-tile, kind="stable"), width)
+    return origin, n, (int(width), int(height))
+
+
+@numba.njit(cache=True, nogil=True)
+def _shelves(tile, order, width):
+    """Each tile's lower-left texel, packed in `order` along shelves `width` wide, and the atlas's height
+    (compiled: 0.2 s of a 68k-triangle scan's layout as a Python loop)."""
+    origin = np.zeros((tile.shape[0], 2), np.int64)
+    x = y = shelf = 0
+    for f in order:
         if x + tile[f] > width:
             x, y, shelf = 0, y + shelf, 0
-        origin[f] = (x, y)
+        origin[f, 0], origin[f, 1] = x, y
         x += tile[f]
         shelf = max(shelf, tile[f])
-    return origin, n, (int(width), int(y + shelf))
+    return origin, y + shelf
 
 
 def lightmap_texels(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple[int, int], inset: float = 0.25):
