@@ -285,8 +285,31 @@ def test_garbage_bytes(tmp_path, suffix):
 
 @pytest.mark.parametrize("case", BAD_OBJ)
 def test_malformed_obj(tmp_path, case):
+    """A clear one-line error, naming the line where the file is wrong."""
     (tmp_path / f"{case}.obj").write_text(BAD_OBJ[case])
-    assert_scene_error(tmp_path / f"{case}.obj")
+    message = assert_scene_error(tmp_path / f"{case}.obj")
+    if case != "no-faces":
+        assert f"{case}.obj:" in message and any(f".obj:{n}:" in message for n in range(1, 6)), message
+
+
+def test_an_obj_read_in_bulk_is_the_obj_read_line_by_line(tmp_path):
+    """Polygons fanned from their first corner, relative indices beside absolute ones, v/vt/vn corners,
+    materials switched between faces, comments and a fourth (w) coordinate: the bulk reader gives the
+    line reader's scene, bit for bit."""
+    from viewer.scene import obj
+
+    (tmp_path / "m.mtl").write_text("newmtl red\nKd 0.8 0.1 0.1\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n")
+    text = ("mtllib m.mtl\n# a comment\nv 0 0 0\nv 1 0 0 1.0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
+            "usemtl red\nf 1/1/1 2/1/1 3/1/1 4/1/1\nv 0 0 1\nv 1 0 1\nv 1 1 1\n"
+            "usemtl lamp\nf -3 -2 -1 # relative\nusemtl red\nf 5//1 6//1 7//1 3 2\nf 1 2 -1\n")
+    path = tmp_path / "mixed.obj"
+    path.write_text(text)
+    lines = obj._lines(path)
+    bulk, each = obj._read_bulk(path, lines), obj._read_lines(path, lines)
+    assert bulk is not None and len(bulk.faces) == 2 + 1 + 3 + 1
+    for name in ("vertices", "faces", "albedo", "emission", "face_group"):
+        np.testing.assert_array_equal(getattr(bulk, name), getattr(each, name), err_msg=name)
+    assert bulk.groups == each.groups == ("red", "lamp")
 
 
 def test_malformed_mtl_colour(tmp_path):
