@@ -4,6 +4,8 @@ boxes' faces, no steps along silhouettes."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -184,7 +186,7 @@ def test_a_colour_edit_keeps_the_geometry_work_and_draws_what_a_fresh_renderer_d
     edits = [cornell.with_albedo(wall, (0.9, 0.3, 0.2))]
     emission = cornell.emission.copy()
     emission[lamp] *= np.array([0.4, 0.8, 1.6])
-    edits.append(type(cornell)(**{**cornell.__dict__, "emission": emission}))
+    edits.append(replace(cornell, emission=emission))
 
     fresh = [render(gl_context, edited, cornell_probes, (64, 64))["final"] for edited in edits]
     made, shadows = [], []
@@ -231,7 +233,7 @@ def lamp_moved(scene, by=-0.05):
     lamp = np.unique(scene.faces[scene.emission.max(axis=1) > 0])
     vertices = scene.vertices.copy()
     vertices[lamp, 2] += by
-    return type(scene)(**{**scene.__dict__, "vertices": vertices})
+    return replace(scene, vertices=vertices)
 
 
 def test_a_moved_lamp_retraces_only_what_changed_and_shows_the_probes_meanwhile(gl_context, cornell, cornell_probes,

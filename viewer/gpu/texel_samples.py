@@ -33,28 +33,44 @@ def strided_samples(lightmap: BakedDirectLight, rows: np.ndarray, columns: np.nd
     texels at odd local coordinates of its tile; a tile whose triangle spans at most 2 texels has its
     centre texel (1, 1) alone), and the samples it interpolates, bilinearly within its tile: (T, 4)
     pixels of the (front | back) image's front half and (T, 4) weights (a sample: itself, weight 1)."""
-    face = lightmap.texel_faces
-    x0, y0 = lightmap.tile_origin[face, 0], lightmap.tile_origin[face, 1]
-    span = lightmap.tile_n[face] + 1                       # the largest local coordinate
-    last = np.where(span % 2 == 1, span, span - 1)         # the last odd one
-    tiny = lightmap.tile_n[face] <= SAMPLE_STRIDE
-    local_x, local_y = columns - x0, rows - y0
+    count = len(rows)
+    sample, sources, weights = np.empty(count, np.bool_), np.empty((count, 4), np.int64), np.empty((count, 4), np.float32)
+    _strided(np.ascontiguousarray(lightmap.texel_faces, np.int64), np.ascontiguousarray(lightmap.tile_origin, np.int64),
+             np.ascontiguousarray(lightmap.tile_n, np.int64), np.asarray(rows, np.int64), np.asarray(columns, np.int64),
+             lightmap.covered.shape[1], sample, sources, weights)
+    return sample, sources, weights
 
-    def between(local):
-        """The samples on either side along one axis, and the weight of the first."""
-        odd = local % 2 == 1
-        low = np.where(tiny, 1, np.where(odd, local, np.clip(local - 1, 1, last)))
-        high = np.where(tiny, 1, np.where(odd, local, np.clip(local + 1, 1, last)))
-        return low, high, np.where(low == high, 1.0, 0.5)
 
-    lx, hx, wx = between(local_x)
-    ly, hy, wy = between(local_y)
-    width = lightmap.covered.shape[1]
-    pixel = lambda sx, sy: (y0 + sy) * 2 * width + x0 + sx                      # noqa: E731
-    sources = np.stack([pixel(lx, ly), pixel(hx, ly), pixel(lx, hy), pixel(hx, hy)], axis=1)
-    weights = np.stack([wx * wy, (1 - wx) * wy, wx * (1 - wy), (1 - wx) * (1 - wy)], axis=1)
-    sample = (lx == local_x) & (hx == local_x) & (ly == local_y) & (hy == local_y)
-    return sample, sources, weights.astype(np.float32)
+@numba.njit(cache=True, nogil=True, inline="always")
+def _between(local, tiny, last):
+    """The samples on either side of a local coordinate along one axis, and the weight of the first."""
+    if tiny:
+        return 1, 1, 1.0
+    if local % 2 == 1:
+        return local, local, 1.0
+    low, high = min(max(local - 1, 1), last), min(max(local + 1, 1), last)
+    return low, high, 1.0 if low == high else 0.5
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _strided(face, origin, tile_n, rows, columns, width, sample, sources, weights):
+    """`strided_samples` texel by texel, on every core (35 ms of a new Cornell box's first frame as numpy,
+    before the final gather can start)."""
+    for t in numba.prange(face.shape[0]):
+        f = face[t]
+        x0, y0, span = origin[f, 0], origin[f, 1], tile_n[f] + 1   # span: the largest local coordinate
+        last = span if span % 2 == 1 else span - 1                  # the last odd one
+        tiny = tile_n[f] <= SAMPLE_STRIDE
+        local_x, local_y = columns[t] - x0, rows[t] - y0
+        lx, hx, wx = _between(local_x, tiny, last)
+        ly, hy, wy = _between(local_y, tiny, last)
+        sources[t, 0] = (y0 + ly) * 2 * width + x0 + lx
+        sources[t, 1] = (y0 + ly) * 2 * width + x0 + hx
+        sources[t, 2] = (y0 + hy) * 2 * width + x0 + lx
+        sources[t, 3] = (y0 + hy) * 2 * width + x0 + hx
+        weights[t, 0], weights[t, 1] = wx * wy, (1 - wx) * wy
+        weights[t, 2], weights[t, 3] = wx * (1 - wy), (1 - wx) * (1 - wy)
+        sample[t] = lx == local_x and hx == local_x and ly == local_y and hy == local_y
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
