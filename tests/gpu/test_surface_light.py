@@ -323,7 +323,6 @@ def test_a_finely_cut_box_is_gathered_from_records_that_follow_its_area(gl_conte
     gather casts its rays from one record per cell of a sample spacing and normal among those
     (`gather_records`): 1.26 times as many as the box had before, and the box's indirect light on screen
     is the same within the gather's noise."""
-    from dataclasses import replace
 
     from viewer.bench.scans import refine
     from viewer.gpu.texel_samples import SAMPLE_STRIDE
@@ -365,7 +364,6 @@ def test_after_a_colour_edit_the_indirect_light_waits_for_the_probes_the_gi_sour
     """A colour edit re-gathers the indirect lightmap once, with the probes computed for it, not first with
     the old ones as well (`probes_pending`, set by the viewer while its GI source works); without pending
     probes, or past AWAIT_PROBES, it is gathered at once."""
-    from dataclasses import replace
 
     from viewer.gpu import lightmaps
     from viewer.gpu.indirect_bake import BakedIndirectLight

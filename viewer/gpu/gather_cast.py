@@ -8,6 +8,7 @@ import numba
 import numpy as np
 
 from viewer.rays import embree
+from viewer.rays.cast import first_face
 
 ESCAPED = -1
 """GatherRays.hits of a ray that leaves the scene (or lands on a face without a tile)."""
@@ -74,18 +75,9 @@ def land(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift
          e1, e2, face_tile, tile_origin, tile_n, width):
     """The pixel that ray k of sample s lands on, traced through Embree as it is made (viewer.rays.embree)."""
     dx, dy, dz = direction(s, k, normals, tangents, bitangents, rows, columns, shift)
-    ray, bits, at, address = record
-    primitive, _, u, v = embree.closest(intersect, scene, ray, bits, at, address, points[s, 0] + lift * normals[s, 0],
-                                        points[s, 1] + lift * normals[s, 1], points[s, 2] + lift * normals[s, 2],
-                                        dx, dy, dz, np.inf)
-    if primitive < 0:
-        return ESCAPED
-    f = faces[primitive]
-    # the side: d . (e1 x e2) < 0 is the front, the DDA's test (viewer.rays.cast)
-    nx = e1[f, 1] * e2[f, 2] - e1[f, 2] * e2[f, 1]
-    ny = e1[f, 2] * e2[f, 0] - e1[f, 0] * e2[f, 2]
-    nz = e1[f, 0] * e2[f, 1] - e1[f, 1] * e2[f, 0]
-    front = dx * nx + dy * ny + dz * nz < 0.0
+    f, _, u, v, front = first_face(intersect, scene, record, faces, e1, e2, points[s, 0] + lift * normals[s, 0],
+                                   points[s, 1] + lift * normals[s, 1], points[s, 2] + lift * normals[s, 2], dx, dy, dz,
+                                   np.inf)
     return pixel_of(f, u, v, front, face_tile, tile_origin, tile_n, width)
 
 
@@ -116,10 +108,9 @@ def land_listed(points, normals, tangents, bitangents, rows, columns, shift, lif
 def direct_args(caster, face_tile, tile_origin, tile_n, width: int) -> tuple | None:
     """The arguments after the rays of `land_grid` and `land_listed` for a caster that calls Embree from
     compiled loops (None for another: the DDA, embreex's binding)."""
-    if getattr(caster, "direct", None) is None:
+    if caster.direct is None:
         return None
-    intersect, scene = caster.direct.handle
-    return (intersect, scene, np.ascontiguousarray(caster.faces, np.int64), caster.e1, caster.e2,
+    return (*caster.direct.handle, caster.faces, caster.e1, caster.e2,
             np.ascontiguousarray(face_tile, np.int64), np.ascontiguousarray(tile_origin, np.int64),
             np.ascontiguousarray(tile_n, np.int64), int(width))
 

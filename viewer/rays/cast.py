@@ -129,7 +129,7 @@ class TriangleCaster:
     def _embrace(self, mesh, faces, v0, e1, e2, direct: bool = True) -> None:
         self.mesh = np.ascontiguousarray(mesh, np.float32)
         """(usable faces, 3, 3) float32: the corners Embree holds."""
-        self._faces = np.asarray(faces)
+        self._faces = np.ascontiguousarray(faces, np.int64)
         self.v0, self.e1, self.e2 = (np.ascontiguousarray(a, np.float64) for a in (v0, e1, e2))
         if direct and embree.available():   # called from compiled loops: all cores, without Python's lock
             self._direct = embree.Scene(self.mesh)
@@ -245,18 +245,35 @@ def closest_hits(scene, origins: np.ndarray, directions: np.ndarray, t_max: floa
 
 @numba.njit(cache=True, nogil=True)
 def _front(d, face, e1, e2):
-    """Whether each ray met its face from the front: d . (e1 x e2) < 0, the DDA's test. One thread: a
-    few nanoseconds a ray, and a parallel loop would add seconds to a first run's compile."""
+    """Whether each ray met its face from the front (`front_of`). One thread: a few nanoseconds a ray, and
+    a parallel loop would add seconds to a first run's compile."""
     out = np.zeros(face.shape[0], np.bool_)
     for r in range(face.shape[0]):
-        f = face[r]
-        if f < 0:
-            continue
-        nx = e1[f, 1] * e2[f, 2] - e1[f, 2] * e2[f, 1]
-        ny = e1[f, 2] * e2[f, 0] - e1[f, 0] * e2[f, 2]
-        nz = e1[f, 0] * e2[f, 1] - e1[f, 1] * e2[f, 0]
-        out[r] = d[r, 0] * nx + d[r, 1] * ny + d[r, 2] * nz < 0.0
+        if face[r] >= 0:
+            out[r] = front_of(face[r], d[r, 0], d[r, 1], d[r, 2], e1, e2)
     return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def front_of(f, dx, dy, dz, e1, e2):
+    """Whether a ray along d meets face f from the front: d . (e1 x e2) < 0, the DDA's test."""
+    nx = e1[f, 1] * e2[f, 2] - e1[f, 2] * e2[f, 1]
+    ny = e1[f, 2] * e2[f, 0] - e1[f, 0] * e2[f, 2]
+    nz = e1[f, 0] * e2[f, 1] - e1[f, 1] * e2[f, 0]
+    return dx * nx + dy * ny + dz * nz < 0.0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def first_face(intersect, scene, record, faces, e1, e2, ox, oy, oz, dx, dy, dz, far):
+    """(face, t, u, v, front) of the first face a ray meets, as `TriangleCaster.closest_hits` names it
+    (face NO_FACE for none), traced through Embree from a compiled loop that makes its rays as it goes:
+    `intersect`, `scene` of `TriangleCaster.direct.handle`, `record` an `embree.record()`, `faces`, `e1`,
+    `e2` the caster's."""
+    primitive, t, u, v = embree.closest(intersect, scene, record, ox, oy, oz, dx, dy, dz, far)
+    if primitive < 0:
+        return NO_FACE, t, u, v, False
+    f = faces[primitive]
+    return f, t, u, v, front_of(f, dx, dy, dz, e1, e2)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

@@ -193,9 +193,10 @@ def _ray(ray, bits, at, ox, oy, oz, dx, dy, dz, far):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def closest(intersect, scene, ray, bits, at, address, ox, oy, oz, dx, dy, dz, far):
+def closest(intersect, scene, record, ox, oy, oz, dx, dy, dz, far):
     """(primitive, t, u, v) of the first face the ray meets within `far` (primitive -1 for none), through
-    a `record`: for compiled loops that make their rays as they go (viewer/gpu/gather_cast.py)."""
+    a `record`: for compiled loops that make their rays as they go (viewer.rays.cast.first_face)."""
+    ray, bits, at, address = record
     _ray(ray, bits, at, ox, oy, oz, dx, dy, dz, far)
     bits[at + 18] = INVALID   # hit.geomID
     _call(intersect, scene, address, 0)
@@ -208,10 +209,10 @@ def closest(intersect, scene, ray, bits, at, address, ox, oy, oz, dx, dy, dz, fa
 def _closest(intersect, scene, o, d, far, primitive, t, u, v):
     count = o.shape[0]
     for block in numba.prange((count + BLOCK - 1) // BLOCK):
-        ray, bits, at, address = record()
+        ray = record()
         for i in range(block * BLOCK, min(count, (block + 1) * BLOCK)):
-            primitive[i], t[i], u[i], v[i] = closest(intersect, scene, ray, bits, at, address, o[i, 0], o[i, 1],
-                                                     o[i, 2], d[i, 0], d[i, 1], d[i, 2], far)
+            primitive[i], t[i], u[i], v[i] = closest(intersect, scene, ray, o[i, 0], o[i, 1], o[i, 2], d[i, 0],
+                                                     d[i, 1], d[i, 2], far)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

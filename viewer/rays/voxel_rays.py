@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from viewer.rays import dda, embree
-from viewer.rays.cast import NO_FACE, TriangleCaster, embree_available
+from viewer.rays.cast import NO_FACE, TriangleCaster, embree_available, first_face
 
 FAR = 1e37
 """The length of a ray that goes on until it meets something (Embree's own default)."""
@@ -71,9 +71,8 @@ class VoxelRays:
         if self.caster.direct is not None:   # traced and looked up in one compiled loop
             out = np.empty((len(o), count), np.int32)
             c, caster = self.cells, self.caster
-            _bundle(o, np.ascontiguousarray(d[None] if d.ndim == 2 else d), *caster.direct.handle,
-                    np.ascontiguousarray(caster.faces, np.int64), caster.e1, caster.e2, c.lo, c.h, c.n, c.first,
-                    c.triangle, c.voxel, out)
+            _bundle(o, np.ascontiguousarray(d[None] if d.ndim == 2 else d), *caster.direct.handle, caster.faces,
+                    caster.e1, caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out)
             return out
         d = np.broadcast_to(d[None] if d.ndim == 2 else d, (len(o), count, 3))
         out = np.empty((len(o), count), np.int32)
@@ -133,22 +132,11 @@ def _bundle(o, d, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, vo
     through Embree as it is made (viewer.rays.embree) and looked up at once, on every core."""
     step = 0 if d.shape[0] == 1 else 1
     for p in numba.prange(o.shape[0]):
-        record = embree.record()
-        ray, bits, at, address = record
+        record, q = embree.record(), p * step
         for k in range(d.shape[1]):
-            q = p * step
             dx, dy, dz = d[q, k, 0], d[q, k, 1], d[q, k, 2]
-            primitive, t, _, _ = embree.closest(intersect, scene, ray, bits, at, address, o[p, 0], o[p, 1], o[p, 2],
-                                                dx, dy, dz, FAR)
-            if primitive < 0:
-                out[p, k] = dda.MISS
-                continue
-            f = faces[primitive]
-            # the side: d . (e1 x e2) < 0 is the front (viewer.rays.cast)
-            nx = e1[f, 1] * e2[f, 2] - e1[f, 2] * e2[f, 1]
-            ny = e1[f, 2] * e2[f, 0] - e1[f, 0] * e2[f, 2]
-            nz = e1[f, 0] * e2[f, 1] - e1[f, 1] * e2[f, 0]
-            front = dx * nx + dy * ny + dz * nz < 0.0
+            f, t, _, _, front = first_face(intersect, scene, record, faces, e1, e2, o[p, 0], o[p, 1], o[p, 2], dx, dy,
+                                           dz, FAR)
             out[p, k] = _voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel)
 
 
