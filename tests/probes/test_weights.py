@@ -8,6 +8,7 @@ import pytest
 from scenes import box, lit_room
 
 from viewer.rays import dda
+from viewer.rays.cast import TriangleCaster, embree_available
 from viewer.probes import weights as probe_weights
 from viewer.physical.geometry import voxelize_with_faces
 from viewer.probes.weights import CORNERS, SurfaceBake, SurfaceWeights
@@ -86,12 +87,9 @@ def test_weights_are_trilinear_in_open_space_facing_all_probes():
     np.testing.assert_allclose(w.weights[0], expected / expected.sum(), rtol=1e-5)
 
 
-@pytest.mark.parametrize("dense", [True, False])
-def test_the_bake_sums_the_same_light_as_the_weights(monkeypatch, dense):
+def test_the_bake_sums_the_same_light_as_the_weights():
     """SurfaceBake (per (probe, normal) pair, then 8 pairs a point) equals the direct sum over the 8
-    probes' SH, with the pair table and with the sorted keys that replace it for many normals."""
-    if not dense:
-        monkeypatch.setattr(probe_weights, "DENSE_PAIRS", 0)
+    probes' SH; each pair is numbered once."""
     scene = lit_room(box(0.3, (0.2, -0.7, 0.1), name="crate"))
     probes = random_probes(scene, 10, valid_fraction=0.8)
     faces = np.flatnonzero(scene.face_areas > 0)
@@ -107,3 +105,36 @@ def test_the_bake_sums_the_same_light_as_the_weights(monkeypatch, dense):
     bake = SurfaceBake.of(weights, normal_id, normals)
     np.testing.assert_allclose(bake.irradiance(probes.coefficients), weights.irradiance(probes, normals[normal_id]),
                                rtol=1e-4, atol=1e-5)
+    pairs = np.column_stack([bake.pair_probe, bake.pair_normal])
+    assert len(np.unique(pairs, axis=0)) == len(pairs)
+
+
+@pytest.mark.skipif(not embree_available(), reason="needs Embree")
+def test_weights_in_one_compiled_pass_are_those_of_the_segment_arrays():
+    """With Embree called from compiled loops the weights are made point by point, their segments queried
+    as they are made (`_weighed`); the casters that take arrays of segments get the same weights, bit for
+    bit: here the same Embree scene through its array query."""
+    scene = lit_room(box(0.3, (0.2, -0.7, 0.1), name="crate"), partitioned_room())
+    probes = random_probes(scene, 7, valid_fraction=0.8)
+    faces = np.flatnonzero(scene.face_areas > 0)
+    rng = np.random.default_rng(5)
+    face = rng.choice(faces, 20000)
+    u, v = rng.random(20000), rng.random(20000)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    tri = scene.triangles[face]
+    points = tri[:, 0] + u[:, None] * (tri[:, 1] - tri[:, 0]) + v[:, None] * (tri[:, 2] - tri[:, 0])
+    normals = scene.face_normals[face] * np.where(rng.random(20000) < 0.5, 1.0, -1.0)[:, None]   # both sides
+    caster = TriangleCaster(scene)
+    assert caster.direct is not None
+
+    class Segments(TriangleCaster):   # the same scene, queried through arrays of segments
+        direct = None
+
+    arrays = Segments.__new__(Segments)
+    arrays.__dict__.update(caster.__dict__)
+    one_pass = SurfaceWeights.of(points, normals, probes, caster)
+    by_arrays = SurfaceWeights.of(points, normals, probes, arrays)
+    np.testing.assert_array_equal(one_pass.base, by_arrays.base)
+    np.testing.assert_array_equal(one_pass.weights, by_arrays.weights)
+    assert 0 < (one_pass.weights == 0).mean() < 0.9   # the walls hide some probes, not all

@@ -139,6 +139,8 @@ class Scene:
         self._scene = scene
         self.handle = (self._intersect, scene)
         """(rtcIntersect1's address, the scene's): what a compiled loop passes to `closest`."""
+        self.occlusion = (self._occluded, scene)
+        """(rtcOccluded1's address, the scene's): what a compiled loop passes to `occluded`."""
         self._release = weakref.finalize(self, lib.rtcReleaseScene, scene)
 
     def closest(self, origins: np.ndarray, directions: np.ndarray, far: float):
@@ -205,6 +207,16 @@ def closest(intersect, scene, record, ox, oy, oz, dx, dy, dz, far):
     return np.int64(bits[at + 17]), np.float64(ray[at + 8]), np.float64(ray[at + 15]), np.float64(ray[at + 16])
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def occluded(occluded_query, scene, record, ox, oy, oz, dx, dy, dz, length):
+    """Whether the segment o + t d, 0 <= t <= length, meets a face (the first found), through a `record`:
+    for compiled loops that make their segments as they go (viewer.probes.weights)."""
+    ray, bits, at, address = record
+    _ray(ray, bits, at, ox, oy, oz, dx, dy, dz, np.float32(length))
+    _call(occluded_query, scene, address, 0)
+    return ray[at + 8] < 0.0   # Embree sets tfar to -inf when the segment is blocked
+
+
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _closest(intersect, scene, o, d, far, primitive, t, u, v):
     count = o.shape[0]
@@ -216,11 +228,9 @@ def _closest(intersect, scene, o, d, far, primitive, t, u, v):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _occluded(occluded, scene, o, d, length, out):
+def _occluded(query, scene, o, d, length, out):
     count = o.shape[0]
     for block in numba.prange((count + BLOCK - 1) // BLOCK):
-        ray, bits, at, address = record()
+        ray = record()
         for i in range(block * BLOCK, min(count, (block + 1) * BLOCK)):
-            _ray(ray, bits, at, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], np.float32(length[i]))
-            _call(occluded, scene, address, 0)
-            out[i] = ray[at + 8] < 0.0   # Embree sets tfar to -inf when the segment is blocked
+            out[i] = occluded(query, scene, ray, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], length[i])
