@@ -178,7 +178,6 @@ def test_samples_that_look_out_of_the_room_are_not_cast_and_land_as_if_they_were
     """The backs of a room's walls look out of the scene: their rays are not cast (`nothing_ahead`), and
     the hits are those that casting every ray gives, on the Cornell box's walls, floor and boxes alike."""
     from viewer.gpu import final_gather
-    from viewer.gpu import gather_workers as workers
 
     scene = load("cornell")
     rng = np.random.default_rng(4)
@@ -198,7 +197,6 @@ def test_samples_that_look_out_of_the_room_are_not_cast_and_land_as_if_they_were
     on_bounds = (np.abs(points - lo) < 1e-6) | (np.abs(points - hi) < 1e-6)
     assert 0.1 < outward.mean() < 0.5                 # the walls' backs, none of their fronts or the boxes'
     assert on_bounds[outward].any(axis=1).all()
-    monkeypatch.setattr(workers, "pool", lambda: None)   # the rays counted here, not in worker processes
     sent = []
     counting = caster.closest_hits
     monkeypatch.setattr(caster, "closest_hits", lambda o, d, t=np.inf: sent.append(len(o)) or counting(o, d, t))
@@ -228,50 +226,3 @@ def gather_with(caster: TriangleCaster, scene: Scene, points, normals, rays: int
     keep = scene.face_areas > 0
     face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
     return GatherRays.of(points, normals, caster, face_tile, origin, n, size[0], 1e-5, rays), size
-
-
-@pytest.mark.skipif(not embree_available(), reason="no embreex")
-def test_the_worker_processes_land_the_rays_where_this_process_does(monkeypatch):
-    """The final gather's rays cast in the worker processes (viewer/gpu/gather_workers.py: Embree holds Python's
-    lock, so a new scene's gather rays run there, beside the GI source's) land on the same pixels as the
-    same rays cast here, bit for bit, scouts and the enclosed samples' repeats included; and with the
-    workers off, or broken, the rays are cast here."""
-    from viewer.gpu import gather_workers as workers
-
-    scene = load("cornell")
-    points, normals = texel_samples(scene, 3000, seed=4)
-    monkeypatch.setattr(workers, "TASK_RAYS", 4096)        # many tasks, so that both halves run in several
-    monkeypatch.setenv(workers.ENV, "2")
-    workers.shutdown()                                      # a pool of this test's own, stopped after
-    executor, tasks = workers.pool(), []
-    assert executor is not None
-
-    class Counting:
-        def submit(self, *args):
-            tasks.append(args[0])
-            return executor.submit(*args)
-
-    with monkeypatch.context() as patch:
-        patch.setattr(workers, "pool", Counting)
-        pooled = gather(scene, points, normals, backend="embree")[0].hits
-    assert len(tasks) > 4 and set(tasks) == {workers.cast_task}
-    workers.shutdown()
-    monkeypatch.setenv(workers.ENV, "0")
-    assert workers.pool() is None
-    here = gather(scene, points, normals, backend="embree")[0].hits
-    np.testing.assert_array_equal(pooled, here)
-    assert (here >= 0).mean() > 0.5
-
-    from concurrent.futures import Future
-    from concurrent.futures.process import BrokenProcessPool
-
-    class Broken:                                           # a worker killed under the gather
-        def submit(self, *args):
-            future = Future()
-            future.set_exception(BrokenProcessPool("a worker died"))
-            return future
-
-    monkeypatch.setattr(workers, "_broken", False)
-    monkeypatch.setattr(workers, "pool", Broken)
-    np.testing.assert_array_equal(gather(scene, points, normals, backend="embree")[0].hits, here)
-    assert workers._broken

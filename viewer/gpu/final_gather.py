@@ -22,14 +22,12 @@ lightmap holds the lamps' light. A ray that leaves the scene brings nothing (the
 
 from __future__ import annotations
 
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from functools import cached_property
 
 import numba
 import numpy as np
 
-from viewer.gpu import gather_workers as workers
 from viewer.gpu.gather_cast import (CHUNK, ESCAPED, cast_rays, direct_args, direction,  # noqa: F401 (ESCAPED)
                                    land_grid)
 from viewer.rays.cast import TriangleCaster
@@ -179,30 +177,18 @@ def _cast_samples(frame: "_Frame", lift: float, samples: np.ndarray, rays: int, 
     hits[samples[outward]] = ESCAPED
     samples = samples[~outward]
     scouts = scout_rays(rays)
-    pooled, shared = workers.pooled_cast(frame, lift, layout) if len(samples) else (None, None)
     direct = direct_args(*layout)
 
     def cast(which: np.ndarray, these: np.ndarray) -> None:
-        nonlocal pooled
-        if pooled is not None:
-            try:
-                return pooled(which, these, hits)
-            except (BrokenProcessPool, OSError):   # a worker died: the rest here, from now on
-                workers.broke()
-                pooled = None
-        if direct is not None:   # the rays made, traced and landed in one compiled loop
+        if direct is not None:   # the rays made, traced and landed in one compiled loop, on every core
             return land_grid(*frame.args(lift), np.ascontiguousarray(which, np.int64),
                              np.ascontiguousarray(these, np.int64), *direct, hits)
         for todo in _rays_of(which, these):
             _cast(frame, lift, todo, *layout, hits)
 
-    try:
-        cast(samples, scouts)
-        enclosed = _all_backs(hits[samples[:, None], scouts], int(layout[-1]))
-        cast(samples[~enclosed], np.setdiff1d(np.arange(rays), scouts))
-    finally:
-        if shared is not None:
-            shared.release()
+    cast(samples, scouts)
+    enclosed = _all_backs(hits[samples[:, None], scouts], int(layout[-1]))
+    cast(samples[~enclosed], np.setdiff1d(np.arange(rays), scouts))
     _repeat_scouts(hits, samples[enclosed], scouts)
 
 

@@ -1,6 +1,6 @@
 """The final gather's rays themselves (viewer/gpu/final_gather.py): each ray's origin and direction from
-its sample's frame and stratum, and the lightmap pixel it lands on, cast here or in a worker process
-(viewer/gpu/gather_workers.py), which imports this and not the gather."""
+its sample's frame and stratum, and the lightmap pixel it lands on: with Embree, made, traced and landed
+in compiled loops on every core, without Python's lock."""
 
 from __future__ import annotations
 
@@ -118,7 +118,7 @@ def direct_args(caster, face_tile, tile_origin, tile_n, width: int) -> tuple | N
 def cast_rays(frame_args: tuple, todo: np.ndarray, caster, face_tile, tile_origin, tile_n,
               width: int, out: np.ndarray) -> None:
     """out[i]: the pixel that ray todo[i] = (sample, ray) of the frame (`_Frame.args`) lands on, CHUNK
-    rays at a time (here, or in a worker process: viewer/gpu/gather_workers.py)."""
+    rays at a time."""
     direct = direct_args(caster, face_tile, tile_origin, tile_n, width)
     if direct is not None:   # made and traced in one compiled loop
         land_listed(*frame_args, np.ascontiguousarray(todo, np.int64), *direct, out)

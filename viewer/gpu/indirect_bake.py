@@ -24,7 +24,6 @@ import moderngl
 import numpy as np
 
 from viewer.rays import dda
-from viewer.gpu import gather_workers
 from viewer.rays.cast import TriangleCaster, distinct_rows, embree_available
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
@@ -105,8 +104,6 @@ class BakedIndirectLight:
         self.installs = 0
         """Counts the weights installed (a new lattice's, or a moved geometry's)."""
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="indirect-weights") if background else None
-        if background and gather_rays:
-            gather_workers.warm()   # the gather's rays are cast in worker processes: started before they are needed
         self._job: tuple[tuple, int, Future] | None = None
         """(lattice key, geometry, future) of the weights under way on the worker."""
         self._prefetching: Future | None = None   # the geometry's work started by `prefetch`, while it runs

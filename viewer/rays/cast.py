@@ -116,16 +116,6 @@ class TriangleCaster:
         self._embrace(np.ascontiguousarray(triangles[faces], np.float32), faces, triangles[:, 0],
                       triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0], backend == "embree")
 
-    @staticmethod
-    def of_triangles(mesh: np.ndarray, faces: np.ndarray, v0: np.ndarray, e1: np.ndarray,
-                     e2: np.ndarray) -> "TriangleCaster":
-        """The Embree caster of another one's `mesh`, `faces`, `v0`, `e1`, `e2` (a worker process's copy:
-        viewer/gpu/gather_workers.py), the same hits."""
-        caster = TriangleCaster.__new__(TriangleCaster)
-        caster.backend = "embree"
-        caster._embrace(mesh, faces, v0, e1, e2)
-        return caster
-
     def _embrace(self, mesh, faces, v0, e1, e2, direct: bool = True) -> None:
         self.mesh = np.ascontiguousarray(mesh, np.float32)
         """(usable faces, 3, 3) float32: the corners Embree holds."""
