@@ -28,6 +28,17 @@ def random_probes(scene: Scene, m: int, seed: int = 0, valid_fraction: float = 1
     return ProbeGrid(lo, hi, c, rng.random((m, m, m)) < valid_fraction)
 
 
+def surface_points(scene: Scene, count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """`count` points spread uniformly over random faces of `scene` (of an area), and their faces."""
+    rng = np.random.default_rng(seed)
+    face = rng.choice(np.flatnonzero(scene.face_areas > 0), count)
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    tri = scene.triangles[face]
+    return tri[:, 0] + u[:, None] * (tri[:, 1] - tri[:, 0]) + v[:, None] * (tri[:, 2] - tri[:, 0]), face
+
+
 def partitioned_room() -> Scene:
     """A closed room (half size 1) split at x = 0.02 by a thin two-sided wall that reaches every side."""
     wall = np.array([[0.02, -1, -1], [0.02, 1, -1], [0.02, 1, 1], [0.02, -1, 1]], np.float64)
@@ -92,14 +103,7 @@ def test_the_bake_sums_the_same_light_as_the_weights():
     probes' SH; each pair is numbered once."""
     scene = lit_room(box(0.3, (0.2, -0.7, 0.1), name="crate"))
     probes = random_probes(scene, 10, valid_fraction=0.8)
-    faces = np.flatnonzero(scene.face_areas > 0)
-    rng = np.random.default_rng(4)
-    face = rng.choice(faces, 500)
-    u, v = rng.random(500), rng.random(500)
-    flip = u + v > 1
-    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-    tri = scene.triangles[face]
-    points = tri[:, 0] + u[:, None] * (tri[:, 1] - tri[:, 0]) + v[:, None] * (tri[:, 2] - tri[:, 0])
+    points, face = surface_points(scene, 500, seed=4)
     normals, normal_id = np.unique(scene.face_normals[face], axis=0, return_inverse=True)
     weights = SurfaceWeights.of(points, normals[normal_id], probes, cells_of(scene))
     bake = SurfaceBake.of(weights, normal_id, normals)
@@ -116,15 +120,9 @@ def test_weights_in_one_compiled_pass_are_those_of_the_segment_arrays():
     bit: here the same Embree scene through its array query."""
     scene = lit_room(box(0.3, (0.2, -0.7, 0.1), name="crate"), partitioned_room())
     probes = random_probes(scene, 7, valid_fraction=0.8)
-    faces = np.flatnonzero(scene.face_areas > 0)
-    rng = np.random.default_rng(5)
-    face = rng.choice(faces, 20000)
-    u, v = rng.random(20000), rng.random(20000)
-    flip = u + v > 1
-    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-    tri = scene.triangles[face]
-    points = tri[:, 0] + u[:, None] * (tri[:, 1] - tri[:, 0]) + v[:, None] * (tri[:, 2] - tri[:, 0])
-    normals = scene.face_normals[face] * np.where(rng.random(20000) < 0.5, 1.0, -1.0)[:, None]   # both sides
+    points, face = surface_points(scene, 20000, seed=5)
+    sides = np.where(np.random.default_rng(6).random(20000) < 0.5, 1.0, -1.0)
+    normals = scene.face_normals[face] * sides[:, None]   # both sides
     caster = TriangleCaster(scene)
     assert caster.direct is not None
 
