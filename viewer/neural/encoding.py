@@ -56,7 +56,7 @@ from viewer.neural.direct import (NEAR_FIELD, SHADOW_OFFSET, VISIBILITY_CELLS, e
                                   emitter_sh_rows, emitting_patches, facings, patch_visibility,
                                   shadow_targets, splat, sun_sh, sun_visibility)
 
-VERSION = 5
+VERSION = 6
 """Bump when the features change: a model card records the version its network was trained on, and
 `viewer.neural.field` refuses a model of a version it cannot feed (`VERSION_CHANNELS`)."""
 FEATURES = (
@@ -71,7 +71,7 @@ FEATURES = (
     *(f"seen_{k}" for k in range(sh.SH_COUNT)),  # two bounces gathered by SEEN_RAYS rays a probe, / scale
 )
 CHANNELS = len(FEATURES)
-VERSION_CHANNELS = {4: 30, 5: CHANNELS}
+VERSION_CHANNELS = {4: 30, 6: CHANNELS}
 """The features a network of each encoding version reads: the first this many of FEATURES (version 4
 had no seen features)."""
 DIRECT = slice(6, 6 + sh.SH_COUNT)
