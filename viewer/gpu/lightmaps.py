@@ -141,6 +141,7 @@ class LightmapUpkeep:
             self._lit_key = lit
             if self._indirect is not None:    # what its gather reflects changed with the direct light
                 self._indirect.relit(self._draw_scene)
+                self._indirect.read_direct()
                 self._stale_indirect(awaiting=True)
         return self._baked
 
