@@ -83,7 +83,7 @@ def test_rays_out_of_an_open_side_bring_nothing_and_the_rest_is_the_form_factor(
 def texel_samples(scene: Scene, count: int, seed: int):
     """Points and normals of `count` lightmap texels picked at random over the scene's surfaces."""
     origin, n, size = lightmap_layout(scene, TEXEL)
-    texels, normals, _ = lightmap_texels(scene, origin, n, size)
+    texels, normals, *_ = lightmap_texels(scene, origin, n, size)
     covered = texels[..., 3] > 0
     pick = np.random.default_rng(seed).choice(int(covered.sum()), count, replace=False)
     return texels[covered][pick, :3].astype(np.float64), normals[covered][pick, :3].astype(np.float64)

@@ -106,21 +106,24 @@ def _shelves(tile, order, width):
 
 
 def lightmap_texels(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple[int, int], inset: float = 0.25):
-    """(H, W, 4) world positions (w = 1 where a tile covers the texel), (H, W, 4) front normals and (H, W)
-    tile (the index among the non-degenerate faces, -1 where none) of the atlas texels: a tile texel's
-    position is the nearest point of its triangle, `inset` texels inside."""
+    """(H, W, 4) world positions (w = 1 where a tile covers the texel), (H, W, 4) front normals, (H, W)
+    tile (the index among the non-degenerate faces, -1 where none) and (H, W) inside of the atlas texels:
+    a tile texel's position is the nearest point of its triangle, `inset` texels inside; `inside` where
+    the texel's own point lies in the triangle (the others, half of a tile beyond its triangle's long
+    side, are pulled onto its edges: there only for the bilinear filter at the edge)."""
     keep = scene.face_areas > 0
     position = np.zeros((size[1], size[0], 4), np.float32)
     normal = np.zeros((size[1], size[0], 4), np.float32)
     tile = np.full((size[1], size[0]), -1, np.int64)
+    inside = np.zeros((size[1], size[0]), np.bool_)
     _fill_tiles(np.ascontiguousarray(scene.triangles[keep], np.float64), np.ascontiguousarray(scene.face_normals[keep]),
                 np.ascontiguousarray(origin, np.int64), np.ascontiguousarray(n, np.int64), float(inset), position,
-                normal, tile)
-    return position, normal, tile
+                normal, tile, inside)
+    return position, normal, tile, inside
 
 
 @numba.njit(cache=True, nogil=True)
-def _fill_tiles(corners, normals, origin, n, inset, position, normal, tile):
+def _fill_tiles(corners, normals, origin, n, inset, position, normal, tile, inside):
     """Each tile's texels, texel (row r, column c) at u = (c - 0.5) / m, v = (r - 0.5) / m pulled `inset`
     texels inside its triangle (compiled: 79 ms of a new Cornell box's first frame as numpy, where the
     final gather waits for the texels)."""
@@ -131,6 +134,7 @@ def _fill_tiles(corners, normals, origin, n, inset, position, normal, tile):
             for c in range(m + 2):
                 u, v = max((c - 0.5) / m, lo), max((r - 0.5) / m, lo)
                 over = (u + v) / (1.0 - lo)
+                inside[origin[f, 1] + r, origin[f, 0] + c] = over <= 1.0 and c > 0 and r > 0
                 if over > 1.0:
                     scale = 1.0 / max(over, 1e-9)
                     u, v = u * scale, v * scale
@@ -179,13 +183,15 @@ class BakedDirectLight(TriangleBuffer):
         vertices = lightmap_vertices(scene, origin, n, self.size)
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(vertices.tobytes())
-        position, normal, tile = lightmap_texels(scene, origin, n, self.size)
+        position, normal, tile, inside = lightmap_texels(scene, origin, n, self.size)
         self.covered = position[..., 3] > 0
         """(H, W) the atlas texels a tile covers."""
         self.texel_points, self.texel_normals = position[self.covered, :3], normal[self.covered, :3]
         """(T, 3) each covered texel's world position and front normal (row-major order)."""
         self.texel_faces = tile[self.covered]
         """(T,) each covered texel's face, as an index into the non-degenerate faces."""
+        self.texel_inside = inside[self.covered]
+        """(T,) the covered texels whose point lies in their triangle (`lightmap_texels`)."""
         self._inputs = [ctx.texture(self.size, 4, position.tobytes(), dtype="f4"),
                         ctx.texture(self.size, 4, normal.tobytes(), dtype="f4")]
         for texture in self._inputs:

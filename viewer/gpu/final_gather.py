@@ -292,11 +292,11 @@ def _bounding_sphere(v0: np.ndarray, e1: np.ndarray, e2: np.ndarray) -> tuple[fl
     return float(centre[0]), float(centre[1]), float(centre[2]), 1.01 * radius + 1e-12
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _inside(hits, width):
     count, rays = hits.shape
     out = np.zeros(count, np.bool_)
-    for s in range(count):   # once a geometry, a read a ray: one thread
+    for s in numba.prange(count):
         back = 0
         for k in range(rays):
             p = hits[s, k]
