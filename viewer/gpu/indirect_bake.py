@@ -8,12 +8,10 @@ gather (viewer/gpu/final_gather.py): each sample sums what the texels its rays l
 then light only the second bounce on, and light they cannot resolve (a face looking out of an open
 side, contacts) comes from the surfaces themselves.
 
-The weights depend on the scene and the probe lattice only: they are computed once (a few tenths of a
-second for the Cornell box, numba) with each texel's (probe, normal) pairs (`SurfaceBake`). Each new
-probe grid (a relight, a network update) is then evaluated on the CPU, about 24 multiply-adds a texel,
-and uploaded. On llvmpipe that is about 10x cheaper than the same weighted sum in a fragment shader
-(8 probes x 7 texel fetches a texel: ~300 ms for the Cornell box's 0.77 M atlas texels). The surface
-pass needs no screen-space upsampling: each face reads its own texels, `lightmap_texel` of the scene apart.
+The weights depend on the scene and the probe lattice only: made once (`SurfaceBake`), then each new
+probe grid is evaluated on the CPU, about 24 multiply-adds a texel, and uploaded: on llvmpipe about 10x
+cheaper than the same sum in a fragment shader (8 probes x 7 fetches a texel: ~300 ms for the Cornell
+box's 0.77 M texels). Each face reads its own texels, `lightmap_texel` of the scene apart.
 """
 
 from __future__ import annotations
@@ -39,8 +37,7 @@ VISIBILITY_VOXELS = 32
 MAX_SAMPLES = 3_000_000
 """Above this many samples (both sides) the probes stay per fragment: their weights would take minutes
 and gigabytes (a detailed mesh of 82k triangles has 0.3 M)."""
-MAX_MOVED = 0.1
-"""A move of at most this share of the faces traces again only the gather rays it can change."""
+MAX_MOVED = 0.1   # a move of at most this share of the faces traces again only the gather rays it can change
 KEPT_LATTICES = 2
 """Weights kept per scene: the GI sources' lattices (the network's and the solver's) when they differ."""
 
