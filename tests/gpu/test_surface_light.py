@@ -87,10 +87,9 @@ def test_no_dark_streaks_on_the_boxes_against_mitsuba(gl_context, cornell, corne
     face camera-side in vertical streaks (its worst blocks at 0.80 of Mitsuba, RMS 3.6% off over all
     blocks). With the per-texel weights:
     worst box block 0.92, RMS 1.9% (near the box's top edge, where the face looks out of the box's open
-    side: the probes' SH cannot say that half the hemisphere is dark). With the final gather the blocks
-    are within the gather's noise and Mitsuba's: over four seeds of the gather's strata, RMS 1.1-1.5%
-    and the worst block 1.05-1.10 (the rays cast from the texels inside each triangle alone; 1.04-1.07
-    when the texels pulled onto its edges cast their own too)."""
+    side: the probes' SH cannot say that half the hemisphere is dark). With the final gather, over four
+    seeds of its strata: RMS 1.1-1.5%, worst block 1.05-1.10 (rays from the texels inside each triangle
+    alone; 1.04-1.07 when those pulled onto its edges cast their own too)."""
     reference = pytest.importorskip("viewer.reference.mitsuba")
     pytest.importorskip("mitsuba")
     truth = reference.render(cornell, cornell.camera, 256, 256, 256)
