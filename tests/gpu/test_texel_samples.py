@@ -3,23 +3,53 @@ the fused pass gives what its parts give."""
 
 import numpy as np
 
-from viewer.gpu.texel_samples import gather_reflected, gather_texels
+from viewer.gpu.final_gather import ESCAPED, GatherRays
+from viewer.gpu.texel_samples import Landing, gather_reflected, gather_texels
 
 
 def test_the_fused_pass_gives_what_its_parts_give():
-    """`gather_reflected` is albedo x `gather_texels` + reflected, and leaves the other pixels alone."""
+    """`gather_reflected` is albedo x `gather_texels` + reflected, pixel by pixel of the landing ones."""
     rng = np.random.default_rng(4)
-    samples, pixels_count = 500, 3000
+    samples, landing = 500, 2000
     values = rng.uniform(0, 5, (samples, 3)).astype(np.float32)
-    rows = rng.integers(0, samples, (2000, 4))
-    weights = rng.uniform(0, 1, (2000, 4)).astype(np.float32)
-    weights[rng.random((2000, 4)) < 0.3] = 0.0
-    pixels = rng.choice(pixels_count, 2000, replace=False)
-    albedo = rng.uniform(0, 1, (pixels_count, 3)).astype(np.float32)
-    reflected = rng.uniform(0, 1, (pixels_count, 3)).astype(np.float32)
-    image = np.zeros((pixels_count, 3), np.float32)
-    gather_texels(values, rows, weights, pixels, image)
-    fused = np.zeros((pixels_count, 3), np.float32)
-    gather_reflected(values, rows, weights, pixels, albedo, reflected, fused)
-    np.testing.assert_allclose(fused[pixels], albedo[pixels] * image[pixels] + reflected[pixels], rtol=1e-6)
-    assert not fused[np.setdiff1d(np.arange(pixels_count), pixels)].any()   # the others untouched
+    rows = rng.integers(0, samples, (landing, 4))
+    weights = rng.uniform(0, 1, (landing, 4)).astype(np.float32)
+    weights[rng.random((landing, 4)) < 0.3] = 0.0
+    albedo = rng.uniform(0, 1, (landing, 3)).astype(np.float32)
+    reflected = rng.uniform(0, 1, (landing, 3)).astype(np.float32)
+    image = np.zeros((landing, 3), np.float32)
+    gather_texels(values, rows, weights, np.arange(landing), image)
+    fused = np.empty((landing, 3), np.float32)
+    gather_reflected(values, rows, weights, albedo, reflected, fused)
+    np.testing.assert_allclose(fused, albedo * image + reflected, rtol=1e-6)
+
+
+def test_the_rays_land_on_their_pixels_rows():
+    """`GatherRays.landing` numbers the distinct pixels hit, in image order; each sample's rows name its
+    rays' pixels (in memory order), a ray that escaped stays escaped. `Landing.of` gives each landing pixel the rows and weights its
+    texel interpolates, its face and texel, and nothing for a pixel no texel covers."""
+    rng = np.random.default_rng(5)
+    size = 400
+    hits = rng.integers(0, size, (60, 8)).astype(np.int32)
+    hits[rng.random(hits.shape) < 0.4] = ESCAPED
+    pixels, rows = GatherRays(hits).landing
+    np.testing.assert_array_equal(pixels, np.unique(hits[hits >= 0]))
+    for sample, landed in zip(hits, rows):
+        np.testing.assert_array_equal(pixels[landed[landed >= 0]], np.sort(sample[sample >= 0]))
+        assert (landed < 0).sum() == (sample < 0).sum() and (landed[landed < 0] == ESCAPED).all()
+
+    covered = rng.choice(size, 300, replace=False)       # front texels, then back: 150 texels a side
+    covered_faces = rng.integers(0, 20, 300)
+    texel_pixels = covered
+    texel_rows = rng.integers(0, 99, (300, 4)), rng.uniform(0, 1, (300, 4)).astype(np.float32)
+    landing = Landing.of(pixels, texel_pixels, texel_rows, (covered, covered_faces), size)
+    where = {p: i for i, p in enumerate(covered)}
+    for k, p in enumerate(pixels):
+        if p in where:
+            i = where[p]
+            np.testing.assert_array_equal(landing.rows[k], texel_rows[0][i])
+            np.testing.assert_array_equal(landing.weights[k], texel_rows[1][i])
+            assert landing.faces[k] == covered_faces[i] and landing.texels[k] == i % 150
+        else:
+            assert not landing.weights[k].any() and landing.faces[k] == -1 and landing.texels[k] == -1
+    np.testing.assert_array_equal(landing.samples, np.unique(landing.rows[landing.weights > 0]))

@@ -143,14 +143,21 @@ def test_the_final_gather_reads_the_texture_where_its_rays_land(gl_context, tmp_
     (over the texture's mean), not the face's mean colour: the checker's red quarter reflects red."""
     from viewer.gpu.direct_bake import BakedDirectLight
     from viewer.gpu.indirect_bake import BakedIndirectLight
+    from viewer.gpu.texel_samples import reflectance, texture_ratio
 
     scene = load(checker_quad(tmp_path / "quad.gltf"))
     lightmap = BakedDirectLight(gl_context, scene, 0.05)
     bake = BakedIndirectLight(gl_context, lightmap, scene)
     try:
-        albedo, _ = bake._reflected()
-        pixels, _ = bake._covered
-        front = albedo[pixels[:len(lightmap.texel_points)]]
+        pixels, faces = bake._covered            # as if a ray landed on every covered pixel
+        texels = np.arange(len(pixels)) % len(lightmap.texel_points)
+        ratio = texture_ratio(scene, lightmap, faces, texels)
+        face_albedo = np.ascontiguousarray(scene.albedo[scene.face_areas > 0], np.float32)
+        albedo, reflected = (np.empty((len(pixels), 3), np.float32) for _ in range(2))
+        direct = np.ones((pixels.max() + 1, 3), np.float32)
+        reflectance(pixels, faces, face_albedo, ratio, direct, albedo, reflected)
+        np.testing.assert_array_equal(reflected, albedo)
+        front = albedo[:len(lightmap.texel_points)]
         x, y = lightmap.texel_points[:, 0], lightmap.texel_points[:, 1]
         inner = (np.abs(np.abs(x) - 0.5) < 0.1) & (np.abs(np.abs(y) - 0.5) < 0.1)   # the texels' centres
         quarters = [inner & (x * sx > 0) & (y * sy > 0) for sx, sy in ((-1, 1), (1, 1), (-1, -1), (1, -1))]

@@ -42,8 +42,10 @@ class HeadlessViewer:
         session.update("final")
         preview = self.gi.previewing
         self.frames += 1
-        return self.viewport.frame(session.camera.camera(), "final", session.content_key(), self.screen,
-                                   preview=preview)
+        drawn = self.viewport.frame(session.camera.camera(), "final", session.content_key(), self.screen,
+                                    preview=preview)
+        self.ctx.finish()   # the window's buffer swap waits for the picture; so does a frame here
+        return drawn
 
     @property
     def settled(self) -> bool:

@@ -25,8 +25,8 @@ from viewer.rays import dda
 from viewer.rays.cast import TriangleCaster, distinct_rows, embree_available
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
-from viewer.gpu.texel_samples import (SAMPLE_STRIDE, gather_records, gather_reflected, gather_texels, reflectance,
-                                      strided_samples, tent_neighbours, texture_ratio)
+from viewer.gpu.texel_samples import (Landing, dark_fill, gather_records, gather_reflected, gather_texels,
+                                      reflectance, strided_samples, tent_neighbours, texture_ratio)
 from viewer.probes.weights import SurfaceBake, SurfaceWeights
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
@@ -90,11 +90,12 @@ class BakedIndirectLight:
         self._sample_rows = np.arange(len(self._pixels))
         self._direct: np.ndarray | None = None   # each pixel's direct irradiance, read back once per bake
         self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
-        """(albedo, albedo x direct irradiance) of every pixel, once per bake or colour edit (`_reflected`)."""
+        """(albedo, albedo x direct irradiance) of the pixels the rays land on, once per bake or colour edit."""
         self._covered_pixels: tuple[np.ndarray, np.ndarray] | None = None
         self._texture_ratio: tuple[tuple, np.ndarray | None] | None = None   # (textures, texture_ratio)
-        self._scratch: np.ndarray | None = None   # albedo x (direct + indirect) of every pixel: the rays read it
-        self._reflecting: list[np.ndarray] | None = None   # `_reflectance`'s arrays, kept
+        self._landing: Landing | None = None   # the pixels the rays land on, once per install
+        self._scratch: np.ndarray | None = None   # albedo x (direct + indirect) there: the rays read it
+        self._values: np.ndarray | None = None    # the samples' light
         self._bake: SurfaceBake | None = None
         self.weights_key = None
         """lattice_key of the probe grid whose weights are installed (None: none yet)."""
@@ -213,6 +214,7 @@ class BakedIndirectLight:
                 self._records = gather_records(lightmap, self._samples)
             records = np.concatenate([self._records[0], len(self._samples) + self._records[0]])
             traced = self._gather_rays(scene, lightmap, caster, points[records], normals[normal_id[records]])
+            traced.landing   # noqa: B018 (made here, on the worker, not in the first update)
             gather = (traced, tent_neighbours(lightmap, self._samples, *self._records, traced))
             self._traced = (scene, lightmap, traced)
         self._made = (geometry, caster, gather)
@@ -290,73 +292,64 @@ class BakedIndirectLight:
         while len(self._kept) > KEPT_LATTICES:
             del self._kept[next(iter(self._kept))]
         self._texel_pixels, self._texel_rows = self._sources(bake)
+        self._landing = None
 
     def _sources(self, bake: SurfaceBake) -> tuple[np.ndarray, np.ndarray]:
         """(pixels, (rows, weights)): every covered pixel of the (front | back) image and the rows of
         `bake.irradiance` it interpolates (its samples'); a sample that sees no probe (a face's strip under
         the floor, the ceiling above a lamp) next to one of its tile that does shows that one's light, so
         that the bilinear fetch of a visible pixel near the edge never mixes in their darkness."""
-        pixels, sources = self._dark_fill(bake)
+        pixels, sources = dark_fill(self.lightmap, self._samples, self._pixels, bake.weights.sum(axis=1) == 0.0)
         row_of = np.full(len(self._image), -1, np.int64)
         row_of[self._pixels] = np.arange(len(self._pixels))
         row_of[pixels] = row_of[sources]                      # dark samples show a lit neighbour's light
         all_pixels, their_samples, weights = self._between
         return all_pixels, (row_of[their_samples], weights)
 
-    def _dark_fill(self, bake: SurfaceBake) -> tuple[np.ndarray, np.ndarray]:
-        """(pixels, sources): the samples that see no probe next to a lit sample of their tile."""
-        height, width = self.lightmap.covered.shape
-        dark = bake.weights.sum(axis=1) == 0.0
-        tile = np.full(height * 2 * width, -1, np.int64)
-        faces = self.lightmap.texel_faces[self._samples]
-        tile[self._pixels] = np.concatenate([2 * faces, 2 * faces + 1])
-        lit = np.zeros(height * 2 * width, bool)
-        lit[self._pixels[~dark]] = True
-        pixels, sources = [], []
-        for step in (SAMPLE_STRIDE, -SAMPLE_STRIDE, 2 * width * SAMPLE_STRIDE, -2 * width * SAMPLE_STRIDE):
-            candidate = self._pixels[dark] + step
-            inside = (candidate >= 0) & (candidate < len(tile))
-            candidate = np.where(inside, candidate, 0)
-            ok = inside & lit[candidate] & (tile[candidate] == tile[self._pixels[dark]])
-            pixels.append(self._pixels[dark][ok])
-            sources.append(candidate[ok])
-        pixels, sources = np.concatenate(pixels), np.concatenate(sources)
-        first = np.unique(pixels, return_index=True)[1]
-        return pixels[first], sources[first]
-
     def update(self, probes: ProbeGrid) -> None:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
         rows, weights = self._texel_rows
-        values = self._bake.irradiance(probes.coefficients)
-        if self._gather is not None:
+        if self._gather is None:
+            values = self._bake.irradiance(probes.coefficients)
+        else:
             rays, (near, tent) = self._gather
-            albedo, reflected = self._reflected()
-            gather_reflected(values, rows, weights, self._texel_pixels, albedo, reflected, self._scratch)
+            landing, albedo, reflected = self._reflected()
+            values = self._bake.irradiance(probes.coefficients, self._values, landing.samples)
+            gather_reflected(values, landing.rows, landing.weights, albedo, reflected, self._scratch)
             gather_texels(rays.irradiance(self._scratch), near, tent, self._sample_rows, values)
         gather_texels(values, rows, weights, self._texel_pixels, self._image)
         self.texture.write(self._image)
 
-    def _reflected(self) -> tuple[np.ndarray, np.ndarray]:
-        """(albedo, albedo x direct irradiance) of every pixel of the (front | back) image."""
+    def _reflected(self) -> tuple[Landing, np.ndarray, np.ndarray]:
+        """(landing, albedo, albedo x direct irradiance) of the pixels the gather's rays land on."""
+        self._read_direct()
+        if self._landing is None:
+            rays = self._gather[0]
+            self._landing = Landing.of(rays.landing[0], self._texel_pixels, self._texel_rows, self._covered,
+                                       len(self._image))
+            self._reflectance = self._texture_ratio = None
+            self._scratch = np.empty((len(rays.landing[0]), 3), np.float32)
+            self._values = np.empty((len(self._bake.weights), 3), np.float32)
+        if self._reflectance is None:
+            landing = self._landing
+            textures = tuple(map(id, self.scene.textures or ()))    # the same across colour edits
+            if self._texture_ratio is None or self._texture_ratio[0] != textures:   # a textured face reflects it
+                ratio = texture_ratio(self.scene, self.lightmap, landing.faces, landing.texels)
+                self._texture_ratio = (textures, np.zeros((0, 3), np.float32) if ratio is None else ratio)
+            face_albedo = np.ascontiguousarray(self.scene.albedo[self.scene.face_areas > 0], np.float32)
+            albedo, reflected = (np.empty((len(landing.pixels), 3), np.float32) for _ in range(2))
+            reflectance(landing.pixels, landing.faces, face_albedo, self._texture_ratio[1], self._direct,
+                        albedo, reflected)
+            self._reflectance = (albedo, reflected)
+        return (self._landing, *self._reflectance)
+
+    def _read_direct(self) -> None:
         if self._direct is None:
             lightmap = self.lightmap
             height, width = lightmap.covered.shape
             texels = np.frombuffer(lightmap.texture.read(), np.float16).reshape(height * 2 * width, 4)
             self._direct = texels[:, :3].astype(np.float32) * lightmap.scale   # a lamp recoloured since the bake
             self._reflectance = None
-        if self._reflectance is None:
-            pixels, faces = self._covered
-            if self._scratch is None or self._scratch.shape != self._direct.shape:   # the uncovered pixels stay 0
-                self._scratch, *self._reflecting = (np.zeros_like(self._direct) for _ in range(3))
-            albedo, reflected = self._reflecting
-            textures = tuple(map(id, self.scene.textures or ()))    # the same across colour edits
-            if self._texture_ratio is None or self._texture_ratio[0] != textures:
-                ratio = texture_ratio(self.scene, self.lightmap, faces)   # a textured face reflects its texture
-                self._texture_ratio = (textures, np.zeros((0, 3), np.float32) if ratio is None else ratio)
-            face_albedo = np.ascontiguousarray(self.scene.albedo[self.scene.face_areas > 0], np.float32)
-            reflectance(pixels, faces, face_albedo, self._texture_ratio[1], self._direct, albedo, reflected)
-            self._reflectance = (albedo, reflected)
-        return self._reflectance
 
     @property
     def _covered(self) -> tuple[np.ndarray, np.ndarray]:
@@ -383,12 +376,14 @@ class BakedIndirectLight:
         """Read the direct light just baked back now (on the render thread, while the GI source works), not in
         the first update after the probes come, where it delayed the settled frame by 40-110 ms."""
         if self.gather_rays:
-            self._reflected()
+            self._reflected() if self._gather is not None and not self.stale else self._read_direct()
 
     def recolour(self, scene: Scene) -> None:
-        """`scene` has other albedos: what each pixel reflects is computed again on the next update."""
+        """`scene` has other albedos: what each pixel reflects is computed again, now (on the render thread,
+        while the GI source computes the new probes) where the gather's rays are in."""
         self.scene = scene
         self._reflectance = None
+        self.read_direct()
 
     def use(self, unit: int) -> dict:   # the surface shader's uniforms, the indirect lightmap bound
         self.texture.use(location=unit)

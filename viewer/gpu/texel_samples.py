@@ -7,6 +7,8 @@ Apart from the bake's life cycle (viewer/gpu/indirect_bake.py): the layout of th
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 
@@ -72,6 +74,30 @@ def _strided(face, origin, tile_n, rows, columns, width, sample, sources, weight
         sample[t] = lx == local_x and hx == local_x and ly == local_y and hy == local_y
 
 
+def dark_fill(lightmap: BakedDirectLight, samples: np.ndarray, pixels: np.ndarray,
+              dark: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(pixels, sources): the samples that see no probe (`dark` (S,): a face's strip under the floor, the
+    ceiling above a lamp) next to a lit sample of their tile, and that sample's pixel. samples (S / 2,):
+    the sampled texels; pixels (S,): each sample's pixel in the (front | back) image."""
+    height, width = lightmap.covered.shape
+    tile = np.full(height * 2 * width, -1, np.int64)
+    faces = lightmap.texel_faces[samples]
+    tile[pixels] = np.concatenate([2 * faces, 2 * faces + 1])
+    lit = np.zeros(height * 2 * width, bool)
+    lit[pixels[~dark]] = True
+    found, sources = [], []
+    for step in (SAMPLE_STRIDE, -SAMPLE_STRIDE, 2 * width * SAMPLE_STRIDE, -2 * width * SAMPLE_STRIDE):
+        candidate = pixels[dark] + step
+        inside = (candidate >= 0) & (candidate < len(tile))
+        candidate = np.where(inside, candidate, 0)
+        ok = inside & lit[candidate] & (tile[candidate] == tile[pixels[dark]])
+        found.append(pixels[dark][ok])
+        sources.append(candidate[ok])
+    found, sources = np.concatenate(found), np.concatenate(sources)
+    first = np.unique(found, return_index=True)[1]
+    return found[first], sources[first]
+
+
 @numba.njit(cache=True, nogil=True, parallel=True)
 def gather_texels(values, rows, weights, pixels, image):
     """image[pixels[i]] = sum_k weights[i, k] values[rows[i, k]]: each texel shows its samples' light."""
@@ -82,15 +108,56 @@ def gather_texels(values, rows, weights, pixels, image):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def gather_reflected(values, rows, weights, pixels, albedo, reflected, out):
-    """out[pixels[i]] = albedo x (sum_k weights[i, k] values[rows[i, k]]) + reflected there: what each
-    texel reflects, its samples' light taken as `gather_texels` takes it, in one pass."""
-    for i in numba.prange(pixels.shape[0]):
+def gather_reflected(values, rows, weights, albedo, reflected, out):
+    """out[i] = albedo[i] x (sum_k weights[i, k] values[rows[i, k]]) + reflected[i]: what each pixel that
+    the gather's rays land on reflects (`Landing`), its samples' light taken as `gather_texels` takes it."""
+    for i in numba.prange(rows.shape[0]):
         r, g, b = _texel(values, rows, weights, i)
-        p = pixels[i]
-        out[p, 0] = albedo[p, 0] * r + reflected[p, 0]
-        out[p, 1] = albedo[p, 1] * g + reflected[p, 1]
-        out[p, 2] = albedo[p, 2] * b + reflected[p, 2]
+        out[i, 0] = albedo[i, 0] * r + reflected[i, 0]
+        out[i, 1] = albedo[i, 1] * g + reflected[i, 1]
+        out[i, 2] = albedo[i, 2] * b + reflected[i, 2]
+
+
+@dataclass(frozen=True)
+class Landing:
+    """The pixels of the (front | back) image that the final gather's rays land on (`GatherRays.landing`),
+    and what an update reads for each: the samples it interpolates, its face and its texel. Made once per
+    geometry and lattice (the rows follow the probes' weights: `BakedIndirectLight._sources`)."""
+
+    pixels: np.ndarray
+    """(L,) int64, in image order."""
+    rows: np.ndarray
+    """(L, 4) the rows of the update's sample values each pixel interpolates ..."""
+    weights: np.ndarray
+    """... (L, 4) float32 with these weights (0 for a pixel that is no covered texel: it reflects nothing)."""
+    faces: np.ndarray
+    """(L,) each pixel's face among the scene's non-degenerate ones, -1 for none."""
+    texels: np.ndarray
+    """(L,) each pixel's texel (a row of lightmap.texel_points), -1 for none."""
+    samples: np.ndarray
+    """The rows of the update's sample values that `rows` reads (with a weight): the probes' light is
+    needed there alone (on the Cornell box 54k of the 140k samples, both sides), the final gather's
+    filter writes every sample afterwards."""
+
+    @staticmethod
+    def of(pixels: np.ndarray, texel_pixels: np.ndarray, texel_rows: tuple[np.ndarray, np.ndarray],
+           covered: tuple[np.ndarray, np.ndarray], size: int) -> "Landing":
+        """texel_pixels (N,) and texel_rows ((N, 4), (N, 4)): every pixel the samples' light is spread to and
+        how; covered (pixels, faces): the covered pixels (front texels, then back) and their faces; `size`:
+        the image's pixels."""
+        at = np.full(size, -1, np.int64)
+        at[texel_pixels] = np.arange(len(texel_pixels))
+        row = at[pixels]
+        rows, weights = texel_rows
+        rows = np.where(row[:, None] >= 0, rows[row], 0)
+        weights = np.where(row[:, None] >= 0, weights[row], 0).astype(np.float32)
+        at[:] = -1
+        at[covered[0]] = np.arange(len(covered[0]))
+        texel = at[pixels]
+        faces = np.where(texel >= 0, covered[1][texel], -1)
+        texels = np.where(texel >= 0, texel % max(len(covered[0]) // 2, 1), -1)
+        samples = np.unique(rows[weights > 0])
+        return Landing(pixels, np.ascontiguousarray(rows), np.ascontiguousarray(weights), faces, texels, samples)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -166,19 +233,20 @@ def borrowing(lightmap: BakedDirectLight, samples: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def reflectance(pixels, faces, face_albedo, ratio, direct, albedo, reflected):
-    """albedo[pixels[i]] = face_albedo[faces[i]] (times ratio[i], the texture where a scene has one, at most
-    0.999) and reflected = albedo x direct there: what each covered pixel of the (front | back) image
-    reflects, once per colour edit or bake, in one pass (4 ms for the Cornell box's 1.2 M pixels on one
-    core, where numpy's fancy indexing took 30 ms)."""
+    """albedo[i] = face_albedo[faces[i]] (times ratio[i], the texture where a scene has one, at most 0.999)
+    and reflected[i] = albedo[i] x direct[pixels[i]]: what each pixel that the gather's rays land on
+    reflects (0 off the covered texels: faces[i] = -1), once per colour edit or bake, in one pass."""
     textured = ratio.shape[0] > 0
     for i in numba.prange(pixels.shape[0]):
         p, f = pixels[i], faces[i]
         for c in range(3):
-            a = face_albedo[f, c]
-            if textured:
-                a = min(a * ratio[i, c], np.float32(0.999))
-            albedo[p, c] = a
-            reflected[p, c] = a * direct[p, c]
+            a = np.float32(0.0)
+            if f >= 0:
+                a = face_albedo[f, c]
+                if textured:
+                    a = min(a * ratio[i, c], np.float32(0.999))
+            albedo[i, c] = a
+            reflected[i, c] = a * direct[p, c]
 
 
 def tent_neighbours(lightmap: BakedDirectLight, samples: np.ndarray, records: np.ndarray, own: np.ndarray,
@@ -304,12 +372,14 @@ def _pairwise16(a, row):
     return ((p[0] + p[1]) + (p[2] + p[3])) + ((p[4] + p[5]) + (p[6] + p[7]))
 
 
-def texture_ratio(scene, lightmap: BakedDirectLight, faces: np.ndarray) -> np.ndarray | None:
-    """(pixels, 3) float32 texture(uv) / its mean at the point of each covered pixel of the (front | back)
-    image (1 on plain faces), whose faces among the non-degenerate ones are `faces`: what a pixel's albedo
-    is its face's times. None for a scene without textures."""
+def texture_ratio(scene, lightmap: BakedDirectLight, faces: np.ndarray, texels: np.ndarray) -> np.ndarray | None:
+    """(N, 3) float32 texture(uv) / its mean at texels (rows of lightmap.texel_points; -1 for none: 1)
+    whose faces among the non-degenerate ones are `faces` (1 on plain faces): what a pixel's albedo is
+    its face's times. None for a scene without textures."""
     if not scene.textured:
         return None
     kept = np.flatnonzero(scene.face_areas > 0)
-    points = np.concatenate([lightmap.texel_points] * 2)
-    return relative_at(scene, kept[faces], points).astype(np.float32)
+    on = texels >= 0
+    out = np.ones((len(texels), 3), np.float32)
+    out[on] = relative_at(scene, kept[faces[on]], lightmap.texel_points[texels[on]])
+    return out

@@ -104,9 +104,17 @@ def solve(geometry: Geometry, lights: LightPaths, sun: SunPaths, mat: Materials,
     # sweep already updated; 10 sweeps instead of Jacobi's 17 on the Cornell box (one core, but a sweep is
     # memory-bound: 0.74 ms on one core against 0.66 on two). The paper's truncated chain needs Jacobi's
     # bounce-by-bounce sums.
-    sweep = _jacobi_sweep if settings.bounces is not None else _gauss_seidel_sweep
-    reflected, sweeps = iterate(first, lambda r: sweep(t.indptr, t.indices, t.data, first, rho, r), settings,
-                                previous)
+    if settings.bounces is not None:
+        reflected, sweeps = iterate(first, lambda r: _jacobi_sweep(t.indptr, t.indices, t.data, first, rho, r),
+                                    settings, previous)
+        return Lighting(reflected, direct, sweeps)
+    # `iterate` over Gauss-Seidel sweeps, compiled whole: the window's render thread holds Python's lock
+    # while it draws, and the few numpy steps between sweeps waited for it (a colour edit's relight took
+    # 30-40 ms beside the frames, where it takes 15-17 ms alone)
+    warm = previous is not None and previous.reflected.shape == first.shape
+    start = (previous.reflected if warm else first).astype(np.float32)
+    reflected, sweeps = _converge(t.indptr, t.indices, t.data, first, rho, start, np.float32(settings.tolerance),
+                                  settings.max_sweeps)
     return Lighting(reflected, direct, sweeps)
 
 
@@ -218,8 +226,9 @@ def _dense_times(matrix, values):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _row(indptr, indices, data, values, i):
-    """Row i of a CSR matrix times (K, 3) values: what receiver i's gather rays find."""
-    a = b = c = 0.0
+    """Row i of a CSR matrix times (K, 3) values: what receiver i's gather rays find (summed in float32,
+    as the values are stored, so that the compiler may vectorize the sum)."""
+    a = b = c = np.float32(0.0)
     for e in range(indptr[i], indptr[i + 1]):
         j, w = indices[e], data[e]
         a += w * values[j, 0]
@@ -235,19 +244,48 @@ on paper-train-5 and 13 / 11 / 10 / 14 / 16 on cornell, each closer to the exact
 Gauss-Seidel."""
 
 
-@numba.njit(cache=True, nogil=True)
-def _gauss_seidel_sweep(indptr, indices, data, first, albedo, values):
-    """One sweep of R = R_0 + albedo * T R in voxel order, each row reading the rows before it as they
-    are after this sweep, over-relaxed by OVER_RELAXATION (a new array: the caller keeps the old one to
-    measure the change)."""
-    out = values.copy()
-    w = OVER_RELAXATION
-    for i in range(len(indptr) - 1):
-        a, b, c = _row(indptr, indices, data, out, i)
-        out[i, 0] = (1.0 - w) * out[i, 0] + w * (first[i, 0] + albedo[i, 0] * a)
-        out[i, 1] = (1.0 - w) * out[i, 1] + w * (first[i, 1] + albedo[i, 1] * b)
-        out[i, 2] = (1.0 - w) * out[i, 2] + w * (first[i, 2] + albedo[i, 2] * c)
-    return out
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def _converge(indptr, indices, data, first, albedo, reflected, tolerance, max_sweeps):
+    """`iterate` over Gauss-Seidel sweeps of R = R_0 + albedo * T R (the same steps: the tolerance, the
+    Aitken tail), in place on `reflected`: each row in voxel order reads the rows before it as they are
+    after this sweep, and moves OVER_RELAXATION past its Gauss-Seidel update. Returns (reflected, sweeps)."""
+    count = reflected.shape[0]
+    change = np.zeros((count, 3), np.float32)
+    before = np.zeros(3)
+    ratio_before = np.zeros(3)
+    have_before = have_ratio = False
+    sweeps = 0
+    w = np.float32(OVER_RELAXATION)
+    for sweeps in range(1, max_sweeps + 1):
+        largest_change = largest = 0.0
+        total = np.zeros(3)
+        for i in range(count):
+            a, b, c = _row(indptr, indices, data, reflected, i)
+            old = (reflected[i, 0], reflected[i, 1], reflected[i, 2])
+            reflected[i, 0] = (1 - w) * old[0] + w * (first[i, 0] + albedo[i, 0] * a)
+            reflected[i, 1] = (1 - w) * old[1] + w * (first[i, 1] + albedo[i, 1] * b)
+            reflected[i, 2] = (1 - w) * old[2] + w * (first[i, 2] + albedo[i, 2] * c)
+            for k in range(3):
+                change[i, k] = reflected[i, k] - old[k]
+                largest_change = max(largest_change, abs(change[i, k]))
+                largest = max(largest, abs(reflected[i, k]))
+                total[k] += abs(change[i, k])
+        if largest_change <= tolerance * max(largest, 1e-30):
+            break
+        if have_before:
+            ratio = total / np.maximum(before, 1e-30)
+            if have_ratio and np.all(np.abs(ratio - ratio_before) < 1e-3 * ratio) and np.all(ratio < 0.999):
+                tail = (ratio / (1.0 - ratio)).astype(np.float32)
+                for i in range(count):
+                    for k in range(3):
+                        reflected[i, k] += change[i, k] * tail[k]
+                have_before = have_ratio = False
+                continue
+            ratio_before[:] = ratio
+            have_ratio = True
+        before[:] = total
+        have_before = True
+    return reflected, sweeps
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -274,8 +312,9 @@ def _csr_times(indptr, indices, data, values):
 @numba.njit(cache=True, nogil=True, parallel=True, fastmath=True)
 def _project(hits, basis_t, radiance):
     """(P, 9, 3): sum over each probe's directions of basis x the radiance of the voxel it sees. The
-    radiance seen is gathered first, so that each of the 27 sums is a dot product over the directions
-    that the compiler vectorizes (4x faster than accumulating direction by direction, measured)."""
+    radiance seen is gathered first, so that each sum is a dot product over the directions that the
+    compiler vectorizes (4x faster than accumulating direction by direction, measured), a coefficient's
+    three channels in one pass over them."""
     count, directions = hits.shape
     out = np.empty((count, 9, 3), np.float32)
     for p in numba.prange(count):
@@ -284,11 +323,13 @@ def _project(hits, basis_t, radiance):
             j = hits[p, r]
             seen[0, r], seen[1, r], seen[2, r] = radiance[j, 0], radiance[j, 1], radiance[j, 2]
         for k in range(9):
-            for c in range(3):
-                total = np.float32(0.0)
-                for r in range(directions):
-                    total += basis_t[k, r] * seen[c, r]
-                out[p, k, c] = total
+            red = green = blue = np.float32(0.0)
+            for r in range(directions):
+                w = basis_t[k, r]
+                red += w * seen[0, r]
+                green += w * seen[1, r]
+                blue += w * seen[2, r]
+            out[p, k, 0], out[p, k, 1], out[p, k, 2] = red, green, blue
     return out
 
 

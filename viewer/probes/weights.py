@@ -229,14 +229,16 @@ class SurfaceBake:
         return SurfaceBake(pair_probe, pair_normals, texel_pairs, weights.weights, lobe)
 
     def irradiance(self, coefficients: np.ndarray, out: np.ndarray | None = None,
-                   rows: np.ndarray | None = None) -> np.ndarray:
-        """(T, 3) float32 irradiance from the probes' SH (M, M, M, 9, 3); or, given `out` (N, 3) float32
-        and `rows` (T,), written into out[rows] (an image's pixels), which is returned."""
+                   points: np.ndarray | None = None) -> np.ndarray:
+        """(T, 3) float32 irradiance from the probes' SH (M, M, M, 9, 3); given `points` (indices), only
+        those rows of `out` (T, 3) float32 are written, and it is returned."""
         flat = np.ascontiguousarray(np.asarray(coefficients, np.float32).reshape(-1, sh.SH_COUNT, 3))
         pair = _pair_irradiance(flat, self.pair_probe, self.lobe)
         if out is None:
-            out, rows = np.empty((len(self.weights), 3), np.float32), np.arange(len(self.weights))
-        _mix(pair, self.texel_pairs, self.weights, out, rows)
+            out = np.empty((len(self.weights), 3), np.float32)
+        if points is None:
+            points = np.arange(len(self.weights))
+        _mix(pair, self.texel_pairs, self.weights, out, points)
         return out
 
 
@@ -288,8 +290,9 @@ def _pair_irradiance(coefficients, pair_probe, lobe):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _mix(pair, texel_pairs, weights, out, rows):
-    for t in numba.prange(texel_pairs.shape[0]):
+def _mix(pair, texel_pairs, weights, out, points):
+    for i in numba.prange(points.shape[0]):
+        t = points[i]
         r = g = b = np.float32(0.0)
         for k in range(8):
             q = texel_pairs[t, k]
@@ -297,5 +300,4 @@ def _mix(pair, texel_pairs, weights, out, rows):
             r += w * pair[q, 0]
             g += w * pair[q, 1]
             b += w * pair[q, 2]
-        row = rows[t]
-        out[row, 0], out[row, 1], out[row, 2] = max(r, 0.0), max(g, 0.0), max(b, 0.0)
+        out[t, 0], out[t, 1], out[t, 2] = max(r, 0.0), max(g, 0.0), max(b, 0.0)
