@@ -27,7 +27,7 @@ from viewer.cli_parsing import gi_settings, parse_size, tool_parser
 from viewer.errors import exit_status
 from viewer.progress import announce_compiles
 from viewer.ui.options import add_arguments, options_from
-from viewer.ui.pacing import Pacing
+from viewer.ui.pacing import Pacing, Rests
 
 
 def log(message: str) -> None:
@@ -193,12 +193,14 @@ class ViewerApp(mglw.WindowConfig):
         self._screenshot_requested: str | None = None   # "view" (S) or "window" (shift+S)
         self.frames = 0
         self._frame_started = time.perf_counter()
+        self.rests = Rests(self.pacing, glfw.wait_events_timeout, glfw.post_empty_event)
         self.unattended = UnattendedRun(options, self.ctx, self.session, self.viewport, self.times, self.view, log)
         self._drop_callback = glfw.set_drop_callback(self.wnd._window, self._glfw_drop)
         self._x11_window = glfw.get_x11_window(self.wnd._window) if sys.platform.startswith("linux") else 0
 
     # ---- the frame ------------------------------------------------------------------------------------
     def on_render(self, time_now: float, frame_time: float) -> None:
+        self.rests.take()
         self._frame_started = time.perf_counter()
         self.times.begin()
         session = self.session
@@ -235,7 +237,7 @@ class ViewerApp(mglw.WindowConfig):
                 f"scene {session.name!r}")
         if self.unattended.after_frame(self.frames, settled_shot):
             self.wnd.close()
-        self._throttle(drew)
+        self._plan_rest(drew)
 
     def _view_rect(self) -> tuple[int, int, int, int]:
         """The part of the window the scene is drawn in: left of the panel while the panel is shown."""
@@ -254,20 +256,15 @@ class ViewerApp(mglw.WindowConfig):
         gi = self.session.gi
         return self.controls.moving or imgui.is_any_item_active() or gi.previewing
 
-    def _throttle(self, drew: bool) -> None:
-        """Rest between frames as `pacing` says (input ends an idle rest at once)."""
-        import glfw
+    def _plan_rest(self, drew: bool) -> None:
+        """The rest before the next frame, as `pacing` says (taken at its start: viewer/ui/pacing.py Rests)."""
         from imgui_bundle import imgui
 
         if self.view.redraw_always:
-            return
+            return self.rests.skip()
         now = time.perf_counter()
-        rest, idle = self.pacing.rest(now - self._frame_started, drew or self.session.busy,
-                                      self.controls.moving or imgui.is_any_item_active(), now - self.controls.last_input)
-        if rest > 0 and idle:
-            glfw.wait_events_timeout(rest)   # returns at once on input or a drop
-        elif rest > 0:
-            time.sleep(rest)
+        self.rests.plan(now - self._frame_started, drew or self.session.busy,
+                        self.controls.moving or imgui.is_any_item_active(), now - self.controls.last_input)
 
     def _draw_ui(self, frame_time: float) -> None:
         from imgui_bundle import imgui
@@ -369,6 +366,7 @@ class ViewerApp(mglw.WindowConfig):
     # ---- the end --------------------------------------------------------------------------------------
     def close(self) -> None:
         """After the window closed (no GL calls here: the context is gone): stop the solver, report."""
+        self.rests.close()
         self.session.close()
         redraws, every = self.times.summary(redrawn_only=True), self.times.summary()
         nan = float("nan")

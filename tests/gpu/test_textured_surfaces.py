@@ -143,7 +143,7 @@ def test_the_final_gather_reads_the_texture_where_its_rays_land(gl_context, tmp_
     (over the texture's mean), not the face's mean colour: the checker's red quarter reflects red."""
     from viewer.gpu.direct_bake import BakedDirectLight
     from viewer.gpu.indirect_bake import BakedIndirectLight
-    from viewer.gpu.texel_samples import reflectance, texture_ratio
+    from viewer.gpu.lightmap_update import reflectance, texture_ratio
 
     scene = load(checker_quad(tmp_path / "quad.gltf"))
     lightmap = BakedDirectLight(gl_context, scene, 0.05)

@@ -1,9 +1,13 @@
 """The window's frame pacing (viewer/ui/pacing.py): full rate while the user interacts, frames that leave
 the cores to the work while it runs unattended, and an idle loop that input wakes."""
 
+import threading
+import time
+
 import pytest
 
-from viewer.ui.pacing import Pacing
+from viewer import wake
+from viewer.ui.pacing import Pacing, Rests
 
 
 def test_while_the_user_interacts_frames_come_at_the_active_rate_whatever_runs():
@@ -39,3 +43,30 @@ def test_when_nothing_runs_the_loop_goes_idle_after_a_while():
     assert not idle and rest == pytest.approx(1 / 60 - 0.01)
     rest, idle = pacing.rest(0.01, busy=False, user_active=False, since_input=2.0)
     assert idle and rest == pytest.approx(0.25 - 0.01)
+
+
+def test_a_result_handed_over_ends_the_rest_and_an_idle_rest_waits_on_the_windows_events():
+    """A rest is taken before the next frame and ends when a worker hands a result over (viewer.wake):
+    new probes are drawn at once, not a quarter of a second later. An idle rest waits on the window's
+    events (input ends it), and a result posts one."""
+    waits, posted = [], []
+    rests = Rests(Pacing(active_fps=0.1, idle_fps=0.1), waits.append, lambda: posted.append(True))   # 10 s rests
+    try:
+        rests.plan(0.0, busy=False, user_active=False, since_input=60.0)    # idle: a 10 s rest
+        rests.take()
+        assert len(waits) == 1 and 9.0 < waits[0] <= 10.0
+        rests.plan(0.0, busy=True, user_active=False, since_input=60.0)     # work runs: not idle, 10 s
+        threading.Timer(0.05, wake.notify).start()
+        started = time.perf_counter()
+        rests.take()
+        assert time.perf_counter() - started < 5.0 and posted     # ended by the result, not the clock
+        rests.plan(0.0, busy=True, user_active=False, since_input=60.0)
+        wake.notify()                                             # a result during the frame ...
+        started = time.perf_counter()
+        rests.take()                                              # ... and the next one starts at once
+        assert time.perf_counter() - started < 5.0
+    finally:
+        rests.close()
+    posted.clear()
+    wake.notify()
+    assert not posted                                             # closed: no longer listening

@@ -114,6 +114,7 @@ class _ScreenEdit:
             self.field = solve(scene, DEFAULT, include_emitted=True)
 
     def _edit(self, away: bool) -> None:
+        self.viewer.edited()
         edits = self.viewer.session.edits
         if self.kind == "colour":
             base = edits.base

@@ -46,6 +46,7 @@ def largest_group(viewer) -> str:
 
 def make_edit(viewer, edit: str, step: int, other_scene: Path) -> None:
     """Make edit number `step` of its kind (alternating between two states, so each one changes the scene)."""
+    viewer.edited()
     session = viewer.session
     if edit == "albedo":
         session.edits.set_albedo(largest_group(viewer), (0.8, 0.5, 0.3) if step % 2 else (0.5, 0.7, 0.8))
@@ -66,7 +67,7 @@ def settle(viewer, start: float) -> tuple[float, float]:
     """Frames until the viewer has settled: (seconds to the first full-resolution frame with the GI
     source done, seconds to settled), both from `start`."""
     first = None
-    viewer.frame()
+    viewer.step()
     while True:
         now = time.perf_counter()
         if first is None and not viewer.session.busy and viewer.viewport.drawn:
@@ -75,8 +76,7 @@ def settle(viewer, start: float) -> tuple[float, float]:
             return first, now - start
         if now - start > viewer.timeout:
             raise TimeoutError(f"not settled after {viewer.timeout:.0f} s")
-        time.sleep(0.002)
-        viewer.frame()
+        viewer.step()
 
 
 def time_edits(source: str, scene: str, other: str, repeats: int, edits=EDITS) -> dict[str, list[tuple]]:

@@ -1,7 +1,9 @@
 """The viewer without its window: the pieces ViewerApp puts together (Renderer, GIController, Session,
 Viewport) on a headless EGL context, stepped a frame at a time as `ViewerApp.on_render` steps them
-(`Session.update`, then `Viewport.frame`). For the soak (viewer/bench/soak.py) and the tests that load,
-solve and edit scene after scene in one process, as a user does in the window."""
+(`Session.update`, then `Viewport.frame`, the picture finished as the window's buffer swap finishes it),
+with the window's rests between frames (`step`: viewer/ui/pacing.py, ended early by a worker's result).
+For the benchmarks of edits (viewer/bench/edits.py), the soak (viewer/bench/soak.py) and the tests that
+load, solve and edit scene after scene in one process, as a user does in the window."""
 
 from __future__ import annotations
 
@@ -9,12 +11,13 @@ import time
 from pathlib import Path
 
 from viewer.physical.gi import GISettings
-from viewer.gpu.context import create_context
+from viewer.gpu.context import create_context, finish
 from viewer.gpu.gl_objects import watch
 from viewer.gpu.renderer import RenderSettings, Renderer
 from viewer.memory import Usage
 from viewer.scene import Scene, load
 from viewer.ui.gi_sources import GIController
+from viewer.ui.pacing import Pacing, Rests
 from viewer.ui.session import Session
 from viewer.ui.viewport import Viewport
 
@@ -35,6 +38,8 @@ class HeadlessViewer:
         self.viewport = Viewport(self.ctx, self.renderer)
         self.screen = self.ctx.framebuffer(color_attachments=[self.ctx.texture(size, 4)])
         self.frames = 0
+        self.rests = Rests(Pacing())
+        self.edited_at = time.perf_counter()
 
     def frame(self) -> bool:
         """One frame as the window runs it; True if the scene was drawn."""
@@ -44,8 +49,25 @@ class HeadlessViewer:
         self.frames += 1
         drawn = self.viewport.frame(session.camera.camera(), "final", session.content_key(), self.screen,
                                     preview=preview)
-        self.ctx.finish()   # the window's buffer swap waits for the picture; so does a frame here
+        finish(self.ctx)   # the window's buffer swap waits for the picture (letting go of Python's lock)
         return drawn
+
+    def step(self) -> bool:
+        """One frame after the rest the window's loop takes before it (viewer/ui/pacing.py): at most 60
+        frames a second within `Pacing.linger` of the last edit (`edited`), fewer while work runs, and at
+        once when a worker hands a result over (viewer.wake). True if the scene was drawn."""
+        self.rests.take()
+        started = time.perf_counter()
+        drew = self.frame()
+        now = time.perf_counter()
+        self.rests.plan(now - started, drew or self.session.busy, False, now - self.edited_at)
+        return drew
+
+    def edited(self) -> None:
+        """The user just edited something (input): the next frame comes at once, and the ones after it at
+        the rate the window keeps while the user works."""
+        self.edited_at = time.perf_counter()
+        self.rests.skip()
 
     @property
     def settled(self) -> bool:
@@ -55,15 +77,15 @@ class HeadlessViewer:
     def settle(self) -> None:
         """Frames until settled (a load finished or failed, the GI converged, the picture redrawn)."""
         deadline = time.monotonic() + self.timeout
-        self.frame()
+        self.step()
         while not self.settled:
             if time.monotonic() > deadline:
                 raise TimeoutError(f"not settled after {self.timeout:.0f} s: {self.gi.status()[0]}")
-            time.sleep(0.002)
-            self.frame()
+            self.step()
 
     def load(self, path: str | Path) -> None:
         """Open a file as a drop does, and settle."""
+        self.edited()
         self.session.load_file(path)
         self.settle()
 
@@ -71,6 +93,7 @@ class HeadlessViewer:
         return Usage.measure(self.ctx, trim)
 
     def release(self) -> None:
+        self.rests.close()
         self.session.close()   # and the GI sources: the CPU solver's process, the compute solver's GL objects
         self.viewport.release()
         self.renderer.release()

@@ -7,6 +7,8 @@ these machines": without `backend="egl"` moderngl looks for an X display.
 
 from __future__ import annotations
 
+import ctypes
+
 import moderngl
 
 GL_REQUIRED = 430
@@ -48,3 +50,24 @@ def is_software(ctx: moderngl.Context) -> bool:
     it, and a query around a blit read 1 ns)."""
     renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
     return any(name in renderer for name in SOFTWARE_RENDERERS)
+
+
+def finish(ctx: moderngl.Context) -> None:
+    """Wait until the GL commands issued so far are done, as a window's buffer swap waits, without holding
+    Python's lock: `ctx.finish()` holds it, and a worker thread's Python steps (a colour edit's relight)
+    then wait for the rasterizer (5 ms of llvmpipe's frame). glFinish through ctypes, which lets go of it."""
+    global _gl_finish
+    if _gl_finish is None:
+        try:
+            _gl_finish = ctypes.CDLL("libGL.so.1").glFinish
+            _gl_finish.restype, _gl_finish.argtypes = None, []
+        except (OSError, AttributeError):
+            _gl_finish = False
+    if _gl_finish:
+        _gl_finish()
+    else:
+        ctx.finish()
+
+
+_gl_finish = None
+"""libGL's glFinish (dispatched to the current context), False where there is no libGL.so.1."""

@@ -111,7 +111,7 @@ class GatherRays:
         array: the rays land anywhere, and each further array read costs a cache miss)."""
         if out is None:
             out = np.empty((len(self.hits), 3), np.float32)
-        _sum(reflected, self.landing[1], self._landed, out)
+        _sum(reflected, self.landing[1], self.landed, out)
         return out
 
     @cached_property
@@ -124,7 +124,7 @@ class GatherRays:
         return _landing(self.hits)
 
     @cached_property
-    def _landed(self) -> np.ndarray:
+    def landed(self) -> np.ndarray:
         """The samples with a ray that landed (38% of the Cornell box's see nothing: the walls' backs)."""
         return np.flatnonzero((self.hits >= 0).any(axis=1))
 

@@ -21,12 +21,14 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import moderngl
 import numpy as np
 
+from viewer import wake
 from viewer.rays import dda
 from viewer.rays.cast import TriangleCaster, distinct_rows, embree_available
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
-from viewer.gpu.texel_samples import (Landing, dark_fill, gather_records, gather_reflected, gather_texels,
-                                      reflectance, strided_samples, tent_neighbours, texture_ratio)
+from viewer.gpu.lightmap_update import (Landing, Reached, gather_reflected, gather_texels, reflectance,
+                                        texture_ratio)
+from viewer.gpu.texel_samples import dark_fill, gather_records, strided_samples, tent_neighbours
 from viewer.probes.weights import SurfaceBake, SurfaceWeights
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
@@ -87,7 +89,6 @@ class BakedIndirectLight:
         """Final-gather rays per sample (viewer/gpu/final_gather.py); 0: the probes' light alone."""
         self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None   # rays, `tent_neighbours`
         self._records: tuple[np.ndarray, np.ndarray] | None = None   # `gather_records`, once per layout
-        self._sample_rows = np.arange(len(self._pixels))
         self._direct: np.ndarray | None = None   # each pixel's direct irradiance, read back once per bake
         self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
         """(albedo, albedo x direct irradiance) of the pixels the rays land on, once per bake or colour edit."""
@@ -96,6 +97,7 @@ class BakedIndirectLight:
         self._landing: Landing | None = None   # the pixels the rays land on, once per install
         self._scratch: np.ndarray | None = None   # albedo x (direct + indirect) there: the rays read it
         self._values: np.ndarray | None = None    # the samples' light
+        self._reached: Reached | None = None      # the samples and texels the gather's light reaches
         self._bake: SurfaceBake | None = None
         self.weights_key = None
         """lattice_key of the probe grid whose weights are installed (None: none yet)."""
@@ -139,6 +141,7 @@ class BakedIndirectLight:
                 self._install(key, *self.weights_of(probes))
                 return True
             self._job = (key, self._geometry, self._executor.submit(self.weights_of, probes, *self._geometry_now()))
+            self._job[2].add_done_callback(lambda _: wake.notify())   # the window draws them at once
         return self.poll()
 
     def poll(self) -> bool:
@@ -308,7 +311,7 @@ class BakedIndirectLight:
 
     def update(self, probes: ProbeGrid) -> None:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
-        rows, weights = self._texel_rows
+        pixels, (rows, weights) = self._texel_pixels, self._texel_rows
         if self._gather is None:
             values = self._bake.irradiance(probes.coefficients)
         else:
@@ -316,20 +319,23 @@ class BakedIndirectLight:
             landing, albedo, reflected = self._reflected()
             values = self._bake.irradiance(probes.coefficients, self._values, landing.samples)
             gather_reflected(values, landing.rows, landing.weights, albedo, reflected, self._scratch)
-            gather_texels(rays.irradiance(self._scratch), near, tent, self._sample_rows, values)
-        gather_texels(values, rows, weights, self._texel_pixels, self._image)
+            reached = self._reached
+            gather_texels(rays.irradiance(self._scratch), reached.near, reached.tent, reached.samples, values)
+            pixels, rows, weights = reached.pixels, reached.rows, reached.weights
+        gather_texels(values, rows, weights, pixels, self._image)
         self.texture.write(self._image)
 
     def _reflected(self) -> tuple[Landing, np.ndarray, np.ndarray]:
         """(landing, albedo, albedo x direct irradiance) of the pixels the gather's rays land on."""
         self._read_direct()
-        if self._landing is None:
-            rays = self._gather[0]
+        if self._landing is None:   # once per install
+            rays, (near, tent) = self._gather
             self._landing = Landing.of(rays.landing[0], self._texel_pixels, self._texel_rows, self._covered,
                                        len(self._image))
+            self._reached = Reached.of(rays.landed, near, tent, self._texel_pixels, *self._texel_rows)
+            self._scratch, self._values = (np.empty((n, 3), np.float32) for n in (len(rays.landing[0]), len(near)))
             self._reflectance = self._texture_ratio = None
-            self._scratch = np.empty((len(rays.landing[0]), 3), np.float32)
-            self._values = np.empty((len(self._bake.weights), 3), np.float32)
+            self._image[:] = 0.0   # the texels no light reaches stay 0
         if self._reflectance is None:
             landing = self._landing
             textures = tuple(map(id, self.scene.textures or ()))    # the same across colour edits
@@ -355,11 +361,10 @@ class BakedIndirectLight:
     def _covered(self) -> tuple[np.ndarray, np.ndarray]:
         """(pixels, faces): the (front | back) image's pixels that a tile covers, and their faces."""
         if self._covered_pixels is None:
-            lightmap = self.lightmap
-            width = lightmap.covered.shape[1]
-            rows, columns = np.nonzero(lightmap.covered)
+            width = self.lightmap.covered.shape[1]
+            rows, columns = np.nonzero(self.lightmap.covered)
             front = rows * 2 * width + columns
-            self._covered_pixels = (np.concatenate([front, front + width]), np.concatenate([lightmap.texel_faces] * 2))
+            self._covered_pixels = (np.concatenate([front, front + width]), np.concatenate([self.lightmap.texel_faces] * 2))
         return self._covered_pixels
 
     def relit(self, scene: Scene, ratio: np.ndarray | None = None) -> None:

@@ -16,6 +16,8 @@ import time
 import traceback
 from typing import Any, Callable
 
+from viewer import wake
+
 SOLVER_STAGES = ("voxelize", "geometry", "relight")
 """The stages of the physical kernel's solve (viewer.physical.gi.PhysicalGI), in order (its Timings keys); an edit
 that needs no tracing runs only the last."""
@@ -43,6 +45,7 @@ class BackgroundTask:
                 traceback.print_exc()
         finally:
             self.finished = time.perf_counter()
+            wake.notify()
 
     @property
     def done(self) -> bool:

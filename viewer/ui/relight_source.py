@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import time
 
+from viewer import wake
 from viewer.physical.gi import GISettings, PhysicalGI, Timings
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
@@ -144,6 +145,7 @@ class RelightSource:
             if "geometry" in prepared.ran and first_bounce:
                 gi.relight(scene, timings, bounces=1)
                 self._ready.append((gi.probe_grid(include_emitted=False), False, request))
+                wake.notify()
             lighting = gi.relight(scene, timings)
             self._ready.append((gi.probe_grid(include_emitted=False, timings=timings), True, request))
             self.sweeps = lighting.sweeps

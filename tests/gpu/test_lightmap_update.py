@@ -1,10 +1,10 @@
-"""The compiled loops that spread the samples' light onto the lightmap's texels (viewer/gpu/texel_samples.py):
+"""The passes of an indirect lightmap update (viewer/gpu/lightmap_update.py):
 the fused pass gives what its parts give."""
 
 import numpy as np
 
 from viewer.gpu.final_gather import ESCAPED, GatherRays
-from viewer.gpu.texel_samples import Landing, gather_reflected, gather_texels
+from viewer.gpu.lightmap_update import Landing, Reached, gather_reflected, gather_texels
 
 
 def test_the_fused_pass_gives_what_its_parts_give():
@@ -53,3 +53,35 @@ def test_the_rays_land_on_their_pixels_rows():
         else:
             assert not landing.weights[k].any() and landing.faces[k] == -1 and landing.texels[k] == -1
     np.testing.assert_array_equal(landing.samples, np.unique(landing.rows[landing.weights > 0]))
+
+
+def test_the_texels_no_light_reaches_are_left_at_the_zero_they_would_get():
+    """Filtering and spreading only the samples and texels that `Reached` names gives the image that
+    filtering and spreading them all gives: the others read only records none of whose rays landed."""
+    rng = np.random.default_rng(6)
+    records, samples, texels = 300, 400, 1500
+    landed = np.flatnonzero(rng.random(records) < 0.5)
+    irradiance = np.zeros((records, 3), np.float32)
+    irradiance[landed] = rng.uniform(0.1, 2.0, (len(landed), 3))     # what `GatherRays.irradiance` gives
+    near = rng.integers(0, records, (samples, 16))
+    near[:120] = rng.choice(np.setdiff1d(np.arange(records), landed), (120, 16))   # in the dark
+    tent = rng.uniform(0, 1, (samples, 16)).astype(np.float32)
+    tent[rng.random(tent.shape) < 0.3] = 0.0
+    pixels = rng.choice(3000, texels, replace=False)
+    rows = rng.integers(120, samples, (texels, 4))
+    rows[:500] = rng.integers(0, 120, (500, 4))                       # texels that read dark samples alone
+    rows[500:520, 0] = rng.integers(0, 120, 20)                       # and some that read both
+    weights = rng.uniform(0, 1, (texels, 4)).astype(np.float32)
+
+    values = rng.uniform(0, 1, (samples, 3)).astype(np.float32)       # the probes' light, before the filter
+    whole = np.zeros((3000, 3), np.float32)
+    everything = values.copy()
+    gather_texels(irradiance, near, tent, np.arange(samples), everything)
+    gather_texels(everything, rows, weights, pixels, whole)
+
+    reached = Reached.of(landed, near, tent, pixels, rows, weights)
+    assert 0 < len(reached.pixels) < texels and len(reached.samples) < samples
+    part = np.zeros((3000, 3), np.float32)
+    gather_texels(irradiance, reached.near, reached.tent, reached.samples, values)
+    gather_texels(values, reached.rows, reached.weights, reached.pixels, part)
+    np.testing.assert_array_equal(part, whole)

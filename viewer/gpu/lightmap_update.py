@@ -1,0 +1,156 @@
+"""One update of the indirect lightmap, pass by pass (viewer/gpu/indirect_bake.py `update`): what the
+pixels the final gather's rays land on reflect (`Landing`, `reflectance`, `gather_reflected`), and the
+samples' light spread onto the texels that the gather's light reaches (`Reached`, `gather_texels`). The
+parts are made once per geometry and lattice; the compiled passes run on every GI update.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from viewer.gpu.direct_bake import BakedDirectLight
+from viewer.scene.textures import relative_at
+
+
+@dataclass(frozen=True)
+class Reached:
+    """The samples and texels that the final gather's light reaches: a sample whose filter averages no
+    record with a ray that landed gets 0 on every update, and so does a texel that reads only such
+    samples (the backs of a room's walls: 38% of the Cornell box's samples). An update filters and spreads
+    the others alone; the texels left out keep the 0 they were given once."""
+
+    samples: np.ndarray
+    """The samples the filter is evaluated at: those the texels below read (with a weight) ..."""
+    near: np.ndarray
+    tent: np.ndarray
+    """... and their rows of `tent_neighbours`' (near, tent)."""
+    pixels: np.ndarray
+    """The texels (image pixels) that read a sample some light reaches ..."""
+    rows: np.ndarray
+    weights: np.ndarray
+    """... and the samples each interpolates, with their weights."""
+
+    @staticmethod
+    def of(landed: np.ndarray, near: np.ndarray, tent: np.ndarray, pixels: np.ndarray,
+           rows: np.ndarray, weights: np.ndarray) -> "Reached":
+        """landed: the records with a ray that landed (`GatherRays.landed`); (near, tent) (S, K): each
+        sample's records and weights; pixels (N,), rows and weights (N, 4): every texel and the samples it
+        interpolates."""
+        has_landed = np.zeros(max(int(near.max(initial=-1)), int(landed.max(initial=-1))) + 1, bool)
+        has_landed[landed] = True
+        lit = ((tent > 0) & has_landed[near]).any(axis=1)
+        reads = (weights > 0) & lit[rows]
+        texels = np.flatnonzero(reads.any(axis=1))
+        read = weights[texels] > 0
+        samples = np.unique(rows[texels][read])
+        return Reached(samples, np.ascontiguousarray(near[samples]), np.ascontiguousarray(tent[samples]),
+                       pixels[texels], np.ascontiguousarray(rows[texels]), np.ascontiguousarray(weights[texels]))
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def gather_texels(values, rows, weights, pixels, image):
+    """image[pixels[i]] = sum_k weights[i, k] values[rows[i, k]]: each texel shows its samples' light."""
+    for i in numba.prange(pixels.shape[0]):
+        r, g, b = _texel(values, rows, weights, i)
+        p = pixels[i]
+        image[p, 0], image[p, 1], image[p, 2] = r, g, b
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def gather_reflected(values, rows, weights, albedo, reflected, out):
+    """out[i] = albedo[i] x (sum_k weights[i, k] values[rows[i, k]]) + reflected[i]: what each pixel that
+    the gather's rays land on reflects (`Landing`), its samples' light taken as `gather_texels` takes it."""
+    for i in numba.prange(rows.shape[0]):
+        r, g, b = _texel(values, rows, weights, i)
+        out[i, 0] = albedo[i, 0] * r + reflected[i, 0]
+        out[i, 1] = albedo[i, 1] * g + reflected[i, 1]
+        out[i, 2] = albedo[i, 2] * b + reflected[i, 2]
+
+
+@dataclass(frozen=True)
+class Landing:
+    """The pixels of the (front | back) image that the final gather's rays land on (`GatherRays.landing`),
+    and what an update reads for each: the samples it interpolates, its face and its texel. Made once per
+    geometry and lattice (the rows follow the probes' weights: `BakedIndirectLight._sources`)."""
+
+    pixels: np.ndarray
+    """(L,) int64, in image order."""
+    rows: np.ndarray
+    """(L, 4) the rows of the update's sample values each pixel interpolates ..."""
+    weights: np.ndarray
+    """... (L, 4) float32 with these weights (0 for a pixel that is no covered texel: it reflects nothing)."""
+    faces: np.ndarray
+    """(L,) each pixel's face among the scene's non-degenerate ones, -1 for none."""
+    texels: np.ndarray
+    """(L,) each pixel's texel (a row of lightmap.texel_points), -1 for none."""
+    samples: np.ndarray
+    """The rows of the update's sample values that `rows` reads (with a weight): the probes' light is
+    needed there alone (on the Cornell box 54k of the 140k samples, both sides), the final gather's
+    filter writes every sample afterwards."""
+
+    @staticmethod
+    def of(pixels: np.ndarray, texel_pixels: np.ndarray, texel_rows: tuple[np.ndarray, np.ndarray],
+           covered: tuple[np.ndarray, np.ndarray], size: int) -> "Landing":
+        """texel_pixels (N,) and texel_rows ((N, 4), (N, 4)): every pixel the samples' light is spread to and
+        how; covered (pixels, faces): the covered pixels (front texels, then back) and their faces; `size`:
+        the image's pixels."""
+        at = np.full(size, -1, np.int64)
+        at[texel_pixels] = np.arange(len(texel_pixels))
+        row = at[pixels]
+        rows, weights = texel_rows
+        rows = np.where(row[:, None] >= 0, rows[row], 0)
+        weights = np.where(row[:, None] >= 0, weights[row], 0).astype(np.float32)
+        at[:] = -1
+        at[covered[0]] = np.arange(len(covered[0]))
+        texel = at[pixels]
+        faces = np.where(texel >= 0, covered[1][texel], -1)
+        texels = np.where(texel >= 0, texel % max(len(covered[0]) // 2, 1), -1)
+        samples = np.unique(rows[weights > 0])
+        return Landing(pixels, np.ascontiguousarray(rows), np.ascontiguousarray(weights), faces, texels, samples)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _texel(values, rows, weights, i):
+    r = g = b = np.float32(0.0)
+    for k in range(rows.shape[1]):
+        w = weights[i, k]
+        if w != 0.0:
+            q = rows[i, k]
+            r += w * values[q, 0]
+            g += w * values[q, 1]
+            b += w * values[q, 2]
+    return r, g, b
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def reflectance(pixels, faces, face_albedo, ratio, direct, albedo, reflected):
+    """albedo[i] = face_albedo[faces[i]] (times ratio[i], the texture where a scene has one, at most 0.999)
+    and reflected[i] = albedo[i] x direct[pixels[i]]: what each pixel that the gather's rays land on
+    reflects (0 off the covered texels: faces[i] = -1), once per colour edit or bake, in one pass."""
+    textured = ratio.shape[0] > 0
+    for i in numba.prange(pixels.shape[0]):
+        p, f = pixels[i], faces[i]
+        for c in range(3):
+            a = np.float32(0.0)
+            if f >= 0:
+                a = face_albedo[f, c]
+                if textured:
+                    a = min(a * ratio[i, c], np.float32(0.999))
+            albedo[i, c] = a
+            reflected[i, c] = a * direct[p, c]
+
+
+def texture_ratio(scene, lightmap: BakedDirectLight, faces: np.ndarray, texels: np.ndarray) -> np.ndarray | None:
+    """(N, 3) float32 texture(uv) / its mean at texels (rows of lightmap.texel_points; -1 for none: 1)
+    whose faces among the non-degenerate ones are `faces` (1 on plain faces): what a pixel's albedo is
+    its face's times. None for a scene without textures."""
+    if not scene.textured:
+        return None
+    kept = np.flatnonzero(scene.face_areas > 0)
+    on = texels >= 0
+    out = np.ones((len(texels), 3), np.float32)
+    out[on] = relative_at(scene, kept[faces[on]], lightmap.texel_points[texels[on]])
+    return out
