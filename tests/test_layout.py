@@ -23,6 +23,7 @@ MAX_LINES = 400
 RANKS = {
     # the package itself (viewer/__init__.py), where the data files are, the progress lines
     "viewer": 0, "resources": 0, "progress": 0,
+    "wake": 0,                        # a worker's result wakes the window's frame loop
     "output": 0,                      # files written whole, where the user said
     "scene": 1,                       # the Scene type and everything that makes one
     "rays": 2,                        # voxels and the compiled ray kernels

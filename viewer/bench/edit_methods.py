@@ -126,7 +126,7 @@ class _ScreenEdit:
             offset = np.zeros(3)
             offset[0] = 0.05 * float(hi[0] - lo[0]) if away else 0.0
             edits.set_light(offset=offset)
-        self.viewer.settle()
+        self.viewer.settle(paced=True)
 
     def before(self, scene: Scene) -> None:
         if self.scene_name != scene.name:
