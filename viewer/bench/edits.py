@@ -3,8 +3,9 @@
     python -m viewer.bench.edits [SCENE] [--sources compute neural] [--repeats 5] [--write]
 
 The viewer runs headless (viewer/bench/headless.py: Session, GIController, Renderer and Viewport stepped
-a frame at a time as the window steps them, the renderer's lightmap weights on their background worker
-as in the window). For each GI source, each edit is made the way the panels make it (SceneEdits) and
+a frame at a time as the window steps them, with the window's rests between frames, each frame finished
+as the window's buffer swap finishes it, the renderer's lightmap weights on their background worker as in
+the window). For each GI source, each edit is made the way the panels make it (SceneEdits) and
 timed until the viewer has settled: the GI source's probes are in, the renderer's indirect lightmap
 (its probe weights and final gather) is baked from them and the full-resolution frame is drawn; and
 until the first full-resolution frame with the source's final probes, which on new geometry shows them

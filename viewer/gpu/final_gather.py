@@ -117,8 +117,7 @@ class GatherRays:
     @cached_property
     def landing(self) -> tuple[np.ndarray, np.ndarray]:
         """(pixels (L,), hits (S, K) int32): the distinct pixels the rays land on, in image order, and each
-        sample's rays' rows among them, ascending (ESCAPED for none, first): which ray is which does not
-        matter to the sum. An update computes what those pixels reflect and nothing
+        ray's row among them (ESCAPED for none). An update computes what those pixels reflect and nothing
         else: on the Cornell box 169k of the 562k covered pixels (both sides) that it computed before, and
         the sum's reads stay within 2 MB instead of 9 MB."""
         return _landing(self.hits)
@@ -331,28 +330,24 @@ def _sum(reflected, hits, cast, out):
         out[s, 0], out[s, 1], out[s, 2] = r / rays, g / rays, b / rays
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _landing(hits):
     count, rays = hits.shape
-    size = 0
-    for s in range(count):
-        for k in range(rays):
-            size = max(size, hits[s, k] + 1)
-    row = np.full(size, -1, np.int32)
-    for s in range(count):
+    size = hits.max() + 1 if hits.size else 0
+    row = np.full(max(size, 0), -1, np.int32)
+    for s in numba.prange(count):
         for k in range(rays):
             if hits[s, k] >= 0:
                 row[hits[s, k]] = 0
-    pixels = np.empty(size, np.int64)
+    pixels = np.empty(max(size, 0), np.int64)
     used = 0
     for p in range(size):
         if row[p] == 0:
             row[p], pixels[used] = used, p
             used += 1
     compact = np.empty_like(hits)
-    for s in range(count):
+    for s in numba.prange(count):
         for k in range(rays):
             p = hits[s, k]
             compact[s, k] = row[p] if p >= 0 else p
-        compact[s] = np.sort(compact[s])   # each sample's reads in memory order: the sum 4.8 -> 3.5 ms
     return pixels[:used].copy(), compact
