@@ -18,7 +18,7 @@ def test_the_fused_pass_gives_what_its_parts_give():
     albedo = rng.uniform(0, 1, (landing, 3)).astype(np.float32)
     reflected = rng.uniform(0, 1, (landing, 3)).astype(np.float32)
     image = np.zeros((landing, 3), np.float32)
-    gather_texels(values, rows, weights, np.arange(landing), image)
+    gather_texels(values, rows, weights, np.arange(landing), image, np.arange(landing))
     fused = np.empty((landing, 3), np.float32)
     gather_reflected(values, rows, weights, albedo, reflected, fused)
     np.testing.assert_allclose(fused, albedo * image + reflected, rtol=1e-6)
@@ -75,12 +75,12 @@ def test_the_texels_no_light_reaches_are_left_at_the_zero_they_would_get():
     values = rng.uniform(0, 1, (samples, 3)).astype(np.float32)       # the probes' light, before the filter
     whole = np.zeros((3000, 3), np.float32)
     everything = values.copy()
-    gather_texels(irradiance, near, tent, np.arange(samples), everything)
-    gather_texels(everything, rows, weights, pixels, whole)
+    gather_texels(irradiance, near, tent, np.arange(samples), everything, np.arange(samples))
+    gather_texels(everything, rows, weights, pixels, whole, np.arange(texels))
 
-    reached = Reached.of(landed, near, tent, pixels, rows, weights)
-    assert 0 < len(reached.pixels) < texels and len(reached.samples) < samples
+    reached = Reached.of(landed, near, tent, rows, weights)
+    assert 0 < len(reached.texels) < texels and len(reached.samples) < samples
     part = np.zeros((3000, 3), np.float32)
-    gather_texels(irradiance, reached.near, reached.tent, reached.samples, values)
-    gather_texels(values, reached.rows, reached.weights, reached.pixels, part)
+    gather_texels(irradiance, near, tent, np.arange(samples), values, reached.samples)
+    gather_texels(values, rows, weights, pixels, part, reached.texels)
     np.testing.assert_array_equal(part, whole)

@@ -89,6 +89,7 @@ class BakedIndirectLight:
         """Final-gather rays per sample (viewer/gpu/final_gather.py); 0: the probes' light alone."""
         self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None   # rays, `tent_neighbours`
         self._records: tuple[np.ndarray, np.ndarray] | None = None   # `gather_records`, once per layout
+        self._sample_rows = np.arange(len(self._pixels))
         self._direct: np.ndarray | None = None   # each pixel's direct irradiance, read back once per bake
         self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
         """(albedo, albedo x direct irradiance) of the pixels the rays land on, once per bake or colour edit."""
@@ -311,18 +312,16 @@ class BakedIndirectLight:
 
     def update(self, probes: ProbeGrid) -> None:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
-        pixels, (rows, weights) = self._texel_pixels, self._texel_rows
         if self._gather is None:
-            values = self._bake.irradiance(probes.coefficients)
+            values, texels = self._bake.irradiance(probes.coefficients), np.arange(len(self._texel_pixels))
         else:
             rays, (near, tent) = self._gather
             landing, albedo, reflected = self._reflected()
             values = self._bake.irradiance(probes.coefficients, self._values, landing.samples)
             gather_reflected(values, landing.rows, landing.weights, albedo, reflected, self._scratch)
-            reached = self._reached
-            gather_texels(rays.irradiance(self._scratch), reached.near, reached.tent, reached.samples, values)
-            pixels, rows, weights = reached.pixels, reached.rows, reached.weights
-        gather_texels(values, rows, weights, pixels, self._image)
+            samples, texels = self._reached.samples, self._reached.texels
+            gather_texels(rays.irradiance(self._scratch), near, tent, self._sample_rows, values, samples)
+        gather_texels(values, *self._texel_rows, self._texel_pixels, self._image, texels)
         self.texture.write(self._image)
 
     def _reflected(self) -> tuple[Landing, np.ndarray, np.ndarray]:
@@ -332,7 +331,7 @@ class BakedIndirectLight:
             rays, (near, tent) = self._gather
             self._landing = Landing.of(rays.landing[0], self._texel_pixels, self._texel_rows, self._covered,
                                        len(self._image))
-            self._reached = Reached.of(rays.landed, near, tent, self._texel_pixels, *self._texel_rows)
+            self._reached = Reached.of(rays.landed, near, tent, *self._texel_rows)
             self._scratch, self._values = (np.empty((n, 3), np.float32) for n in (len(rays.landing[0]), len(near)))
             self._reflectance = self._texture_ratio = None
             self._image[:] = 0.0   # the texels no light reaches stay 0

@@ -23,24 +23,17 @@ class Reached:
     the others alone; the texels left out keep the 0 they were given once."""
 
     samples: np.ndarray
-    """The samples the filter is evaluated at: those the texels below read (with a weight) ..."""
-    near: np.ndarray
-    tent: np.ndarray
-    """... and their rows of `tent_neighbours`' (near, tent)."""
-    pixels: np.ndarray
-    """The texels (image pixels) that read a sample some light reaches ..."""
-    rows: np.ndarray
-    weights: np.ndarray
-    """... and the samples each interpolates, with their weights."""
+    """The samples the filter is evaluated at (rows of `tent_neighbours`' near and tent): those the
+    texels below read with a weight."""
+    texels: np.ndarray
+    """The texels (rows of the texels' pixels, rows and weights) that read a sample some light reaches."""
 
     @staticmethod
-    def of(landed: np.ndarray, near: np.ndarray, tent: np.ndarray, pixels: np.ndarray,
-           rows: np.ndarray, weights: np.ndarray) -> "Reached":
+    def of(landed: np.ndarray, near: np.ndarray, tent: np.ndarray, rows: np.ndarray,
+           weights: np.ndarray) -> "Reached":
         """landed: the records with a ray that landed (`GatherRays.landed`); (near, tent) (S, K): each
-        sample's records and weights; pixels (N,), rows and weights (N, 4): every texel and the samples it
-        interpolates."""
-        samples, texels = _reached(np.asarray(landed, np.int64), near, tent, rows, weights)
-        return Reached(samples, near[samples], tent[samples], pixels[texels], rows[texels], weights[texels])
+        sample's records and weights; rows and weights (N, 4): the samples every texel interpolates."""
+        return Reached(*_reached(np.asarray(landed, np.int64), near, tent, rows, weights))
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -72,11 +65,13 @@ def _reached(landed, near, tent, rows, weights):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def gather_texels(values, rows, weights, pixels, image):
-    """image[pixels[i]] = sum_k weights[i, k] values[rows[i, k]]: each texel shows its samples' light."""
-    for i in numba.prange(pixels.shape[0]):
-        r, g, b = _texel(values, rows, weights, i)
-        p = pixels[i]
+def gather_texels(values, rows, weights, pixels, image, which):
+    """image[pixels[t]] = sum_k weights[t, k] values[rows[t, k]] for each t of `which`: each texel shows its
+    samples' light (and the filter gives each sample its records')."""
+    for i in numba.prange(which.shape[0]):
+        t = which[i]
+        r, g, b = _texel(values, rows, weights, t)
+        p = pixels[t]
         image[p, 0], image[p, 1], image[p, 2] = r, g, b
 
 
