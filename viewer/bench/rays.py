@@ -53,7 +53,7 @@ def measure(ctx, name: str, rays: int, threads: list[int]) -> list[str]:
     from viewer.rays.voxels import grid_frame
     from viewer.scene import load
 
-    scene = in_draw_order(load(name))
+    scene = in_draw_order(load(name))[1]
     points, normals, *layout = gather_inputs(ctx, scene)
     backends = ["dda"] + (["embreex", "embree"] if embree_available() else [])
     lines = []

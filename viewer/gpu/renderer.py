@@ -70,6 +70,7 @@ class Renderer(LightmapUpkeep):
                      "direct_bake", "refine_background"):
             self.programs.get(name)  # compile everything now: a broken shader fails here, not mid-frame
         self.scene: Scene | None = None
+        self._draw_scene, self._draw_order = None, None   # the scene in draw order, and `in_draw_order`'s answer
         self.bounds: tuple[np.ndarray, np.ndarray] | None = None
         self.mesh: SceneMesh | None = None
         self._textures = SurfaceTextures(ctx)
@@ -120,7 +121,8 @@ class Renderer(LightmapUpkeep):
         depend on the geometry alone: its lightmap is baked again and the indirect light gathered again.
         The same faces moved (a lamp dragged) keep the old rays, for the worker to trace again only those
         the move can change (`_ensure_baked`). A scene past `lightmapped` is drawn per fragment, said once."""
-        draw_scene = in_draw_order(scene)   # the same faces, the room's walls last (early z)
+        self._draw_order = in_draw_order(scene, self._draw_order)   # the same faces, the room's walls last
+        draw_scene = self._draw_order[1]
         same = self.scene is not None and same_triangles(draw_scene, self._draw_scene)
         if not same:
             self._geometry += 1
@@ -140,10 +142,9 @@ class Renderer(LightmapUpkeep):
             if self._indirect is not None:
                 self._indirect.recolour(draw_scene)
                 self._stale_indirect(awaiting=True)
-        self.scene = scene
-        self.bounds = scene.bounds   # (lo, hi); Scene.bounds scans the faces, so not once per frame
-        self._draw_scene = draw_scene
-        self.mesh = SceneMesh.remade(self.mesh, self.ctx, self._draw_scene, same)   # a colour edit keeps its arrays
+        self.scene, self.bounds = scene, scene.bounds   # (lo, hi); Scene.bounds scans the faces: not per frame
+        previous, self._draw_scene = self._draw_scene, draw_scene
+        self.mesh = SceneMesh.remade(self.mesh, self.ctx, draw_scene, previous)   # a colour edit keeps its arrays
         self._textures.set_scene(self._draw_scene)
         self._scene_version += 1
 

@@ -68,7 +68,7 @@ def lamp_faces(scene: Scene) -> np.ndarray:
 def scene_key(scene: Scene, settings: GeometrySettings) -> str:
     """What a Geometry depends on: the triangles, the bounds and the settings (not colours or lights)."""
     digest = hashlib.blake2b(digest_size=16)
-    digest.update(np.ascontiguousarray(scene.triangles).tobytes())
+    digest.update(scene.geometry_digest)   # kept across colour edits (Scene._recoloured)
     if scene.textured:   # the voxels' texture shares (Geometry.tint) depend on the coordinates and images
         digest.update(np.ascontiguousarray(scene.uv).tobytes())
         for texture in scene.textures:
