@@ -43,25 +43,26 @@ def _reached(landed, near, tent, rows, weights):
     has_landed = np.zeros(max(near.max(), landed.max() if landed.size else -1) + 1, np.bool_)
     for r in landed:
         has_landed[r] = True
-    lit = np.zeros(near.shape[0], np.bool_)
-    for s in numba.prange(near.shape[0]):
-        for k in range(near.shape[1]):
-            if tent[s, k] > 0 and has_landed[near[s, k]]:
-                lit[s] = True
-                break
-    reads = np.zeros(rows.shape[0], np.bool_)
-    for t in numba.prange(rows.shape[0]):
-        for k in range(rows.shape[1]):
-            if weights[t, k] > 0 and lit[rows[t, k]]:
-                reads[t] = True
-                break
-    texels = np.flatnonzero(reads)
+    lit = _reads(near, tent, has_landed)                # the samples some landed ray's light reaches
+    texels = np.flatnonzero(_reads(rows, weights, lit))
     read = np.zeros(near.shape[0], np.bool_)
     for t in texels:
         for k in range(rows.shape[1]):
             if weights[t, k] > 0:
                 read[rows[t, k]] = True
     return np.flatnonzero(read), texels
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _reads(index, weights, flags):
+    """(N,) bool: the rows i with some k where weights[i, k] > 0 and flags[index[i, k]]."""
+    out = np.zeros(index.shape[0], np.bool_)
+    for i in numba.prange(index.shape[0]):
+        for k in range(index.shape[1]):
+            if weights[i, k] > 0 and flags[index[i, k]]:
+                out[i] = True
+                break
+    return out
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
