@@ -181,6 +181,7 @@ class BakedDirectLight(TriangleBuffer):
         self.tile_origin, self.tile_n = origin, n
         """Each face's tile: its lower-left atlas texel (F, 2) and its triangle's texels per side (F,)."""
         vertices = lightmap_vertices(scene, origin, n, self.size)
+        self._uv = scene.uv   # the texture coordinates the buffer holds
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(vertices.tobytes())
         position, normal, tile, inside = lightmap_texels(scene, origin, n, self.size)
@@ -208,10 +209,11 @@ class BakedDirectLight(TriangleBuffer):
         """Take the colours (albedo, emission) of `scene`, whose triangles are those this was made for;
         the lightmap must be baked again. Only the colours are written (0.1 s less on a 68k-triangle scan);
         where the texture coordinates differ too (a texture dropped), every attribute."""
-        if scene.uv is None:
+        if scene.uv is self._uv:   # the same array: `in_draw_order` keeps it across colour edits
             write_colours(self.buffer, scene, 64)
         else:
             self.buffer.write(lightmap_vertices(scene, self.tile_origin, self.tile_n, self.size).tobytes())
+        self._uv = scene.uv
 
     def bake(self, program: moderngl.Program, first_unit: int) -> None:
         """Fill the lightmaps; `program` is direct_bake.glsl with the light uniforms set. Leaves the

@@ -333,13 +333,13 @@ def _sum(reflected, hits, cast, out):
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _landing(hits):
     count, rays = hits.shape
-    size = hits.max() + 1 if hits.size else 0
-    row = np.full(max(size, 0), -1, np.int32)
+    size = hits.max() + 1 if hits.size else 0   # ESCAPED is -1: never below 0
+    row = np.full(size, -1, np.int32)
     for s in numba.prange(count):
         for k in range(rays):
             if hits[s, k] >= 0:
                 row[hits[s, k]] = 0
-    pixels = np.empty(max(size, 0), np.int64)
+    pixels = np.empty(size, np.int64)
     used = 0
     for p in range(size):
         if row[p] == 0:

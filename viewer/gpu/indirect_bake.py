@@ -89,7 +89,7 @@ class BakedIndirectLight:
         """Final-gather rays per sample (viewer/gpu/final_gather.py); 0: the probes' light alone."""
         self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None   # rays, `tent_neighbours`
         self._records: tuple[np.ndarray, np.ndarray] | None = None   # `gather_records`, once per layout
-        self._sample_rows = np.arange(len(self._pixels))
+        self._sample_rows, self._texel_rows_all = np.arange(len(self._pixels)), np.arange(len(self._between[0]))
         self._direct: np.ndarray | None = None   # each pixel's direct irradiance, read back once per bake
         self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
         """(albedo, albedo x direct irradiance) of the pixels the rays land on, once per bake or colour edit."""
@@ -313,7 +313,7 @@ class BakedIndirectLight:
     def update(self, probes: ProbeGrid) -> None:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
         if self._gather is None:
-            values, texels = self._bake.irradiance(probes.coefficients), np.arange(len(self._texel_pixels))
+            values, texels = self._bake.irradiance(probes.coefficients), self._texel_rows_all
         else:
             rays, (near, tent) = self._gather
             landing, albedo, reflected = self._reflected()
@@ -377,8 +377,9 @@ class BakedIndirectLight:
             self._direct = None
 
     def read_direct(self) -> None:
-        """Read the direct light just baked back now (on the render thread, while the GI source works), not in
-        the first update after the probes come, where it delayed the settled frame by 40-110 ms."""
+        """Read the direct light just baked back, and what the gather's landing pixels reflect of it, now (on
+        the render thread, while the GI source works), not in the first update after the probes come, where
+        it delayed the settled frame by 40-110 ms."""
         if self.gather_rays:
             self._reflected() if self._gather is not None and not self.stale else self._read_direct()
 

@@ -45,12 +45,18 @@ def _reached(landed, near, tent, rows, weights):
         has_landed[r] = True
     lit = _reads(near, tent, has_landed)                # the samples some landed ray's light reaches
     texels = np.flatnonzero(_reads(rows, weights, lit))
-    read = np.zeros(near.shape[0], np.bool_)
-    for t in texels:
+    return _weighted_rows(rows, weights, texels, near.shape[0]), texels
+
+
+@numba.njit(cache=True, nogil=True)
+def _weighted_rows(rows, weights, which, size):
+    """The distinct rows[i, k] (< size) with weights[i, k] > 0 over the i of `which`, ascending."""
+    read = np.zeros(size, np.bool_)
+    for i in which:
         for k in range(rows.shape[1]):
-            if weights[t, k] > 0:
-                read[rows[t, k]] = True
-    return np.flatnonzero(read), texels
+            if weights[i, k] > 0:
+                read[rows[i, k]] = True
+    return np.flatnonzero(read)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -141,12 +147,8 @@ def _landing_reads(pixels, texel_pixels, texel_rows, texel_weights, covered, cov
         c = where[pixels[i]]
         if c >= 0:
             faces[i], texels[i] = covered_faces[c], c % half
-    read = np.zeros(texel_rows.max() + 1 if texel_rows.size else 0, np.bool_)
-    for i in range(count):
-        for k in range(rows.shape[1]):
-            if weights[i, k] > 0:
-                read[rows[i, k]] = True
-    return rows, weights, faces, texels, np.flatnonzero(read)
+    samples = _weighted_rows(rows, weights, np.arange(count), texel_rows.max() + 1 if texel_rows.size else 0)
+    return rows, weights, faces, texels, samples
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

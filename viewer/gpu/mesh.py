@@ -60,10 +60,9 @@ def in_draw_order(scene: Scene, last: tuple[Scene, Scene, np.ndarray] | None = N
     `last`, this function's answer for an earlier scene: where `scene` has the same geometry arrays (a
     colour edit: Scene._recoloured), its colours are put in the same order on a copy of the reordered
     scene, which keeps its derived geometry (on a 68k-triangle scan, 0.1 s a colour edit less)."""
-    uv = None
     if last is not None and all(getattr(scene, n) is getattr(last[0], n) for n in ("vertices", "faces", "face_group")):
         order = last[2]
-        uv = scene.uv[order] if scene.uv is not None else None
+        uv = last[1].uv if scene.uv is last[0].uv else scene.uv[order] if scene.uv is not None else None
         reordered = last[1]._recoloured(albedo=scene.albedo[order], emission=scene.emission[order], uv=uv,
                                         textures=scene.textures, sun=scene.sun)
         return scene, reordered, order
@@ -148,8 +147,7 @@ class SceneMesh(TriangleBuffer):
         where the triangles are the same (a colour edit: its vertex arrays kept; only the colours where the
         texture coordinates are the same too), else a new one (`old` released)."""
         if old is not None and previous is not None and same_triangles(scene, previous):
-            if scene.uv is previous.uv or (scene.uv is not None and previous.uv is not None
-                                           and np.array_equal(scene.uv, previous.uv)):
+            if scene.uv is previous.uv:   # the same array: `in_draw_order` keeps it across colour edits
                 write_colours(old.buffer, scene, 56)
             else:
                 old.buffer.write(SceneMesh._vertices(scene).tobytes())

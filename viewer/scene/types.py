@@ -174,7 +174,10 @@ class Scene:
             raise SceneError(f"{self.name}: a group's texture is not a Texture")
         uv = self.uv
         if uv is not None:
-            uv = np.array(uv, np.float64).reshape(face_count, 3, 2)
+            uv = np.asarray(uv, np.float64)
+            uv = uv if uv.shape == (face_count, 3, 2) else uv.reshape(face_count, 3, 2)
+            if uv.flags.writeable:   # a caller's array: copied; a scene's own (read-only) is kept by colour edits
+                uv = uv.copy()
             if not np.all(np.isfinite(uv)):
                 raise SceneError(f"{self.name}: texture coordinates contain NaN or infinity")
             uv.setflags(write=False)
