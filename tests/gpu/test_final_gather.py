@@ -226,3 +226,17 @@ def gather_with(caster: TriangleCaster, scene: Scene, points, normals, rays: int
     keep = scene.face_areas > 0
     face_tile = np.where(keep, np.cumsum(keep) - 1, -1)
     return GatherRays.of(points, normals, caster, face_tile, origin, n, size[0], 1e-5, rays), size
+
+
+def test_a_caster_started_early_serves_its_own_scene_only():
+    """The renderer starts the gather's caster while it lays the lightmap out (`caster_of`'s `early`): the
+    worker takes that one for the scene it was started for, and makes its own for any other."""
+    from concurrent.futures import Future
+
+    from viewer.gpu.gather_cast import caster_of
+
+    scene, other = load("cornell"), load("paper-test")
+    early = Future()
+    early.set_result("the early caster")
+    assert caster_of(scene, (scene, early)) == "the early caster"
+    assert isinstance(caster_of(other, (scene, early)), TriangleCaster)

@@ -1,5 +1,6 @@
 """Embree called from compiled loops (viewer/rays/embree.py) gives embreex's own answers, bit for bit, on
-every core and without Python's lock; where it cannot load, the caster uses embreex's binding."""
+every core and without Python's lock; where it cannot load, the caster uses embreex's binding. And the order
+that parallel loops take their items in (`spread`)."""
 
 import threading
 
@@ -10,7 +11,7 @@ import trimesh
 from viewer.rays import cast, embree
 from viewer.scene import load
 
-pytestmark = pytest.mark.skipif(not embree.available(), reason="Embree cannot be called directly here")
+needs_embree = pytest.mark.skipif(not embree.available(), reason="Embree cannot be called directly here")
 
 
 def cornell_with_sphere() -> np.ndarray:
@@ -38,6 +39,7 @@ def embreex_scene(triangles):
     return scene
 
 
+@needs_embree
 def test_closest_hits_are_embreex_own_bit_for_bit():
     """The same face, distance and barycentrics as embreex's `run` for every ray that meets a face, and
     the same misses, on rays through a sphere's 1,280 faces and the box around it."""
@@ -54,6 +56,7 @@ def test_closest_hits_are_embreex_own_bit_for_bit():
     assert np.all(np.isinf(t[~hit]))
 
 
+@needs_embree
 def test_a_segment_is_blocked_where_embreex_says_so():
     triangles = cornell_with_sphere()
     origins, directions = rays(triangles, 100_000, seed=6)
@@ -65,6 +68,7 @@ def test_a_segment_is_blocked_where_embreex_says_so():
     np.testing.assert_array_equal(ours, theirs)
 
 
+@needs_embree
 def test_two_threads_tracing_at_once_get_what_each_gets_alone():
     """Queries on one scene from two threads (the GI source's trace beside the final gather) answer as
     each does alone."""
@@ -87,6 +91,7 @@ def test_two_threads_tracing_at_once_get_what_each_gets_alone():
         np.testing.assert_array_equal(a, b)
 
 
+@needs_embree
 def test_the_caster_falls_back_to_embreex_with_the_same_hits(monkeypatch):
     """Where the library cannot be called directly the caster uses embreex's binding: the same hits."""
     scene = load("cornell")
@@ -106,3 +111,16 @@ def test_the_caster_falls_back_to_embreex_with_the_same_hits(monkeypatch):
     lengths = np.full(len(origins), 0.7)
     np.testing.assert_array_equal(direct.blocked(origins, directions, lengths),
                                   bound.blocked(origins, directions, lengths))
+
+
+@pytest.mark.parametrize("count", [0, 1, 511, 512, 513, 5000])
+def test_spread_visits_every_item_once_in_runs_of_neighbours(count):
+    """`spread` is a permutation of range(count) made of runs of `RUN` consecutive items (the last run
+    shorter), the runs out of order: a parallel loop's shares then mix cheap and costly items."""
+    order = embree.spread(count)
+    np.testing.assert_array_equal(np.sort(order), np.arange(count))
+    runs = np.split(order, np.flatnonzero(np.diff(order) != 1) + 1) if count else []
+    for run in runs:   # whole runs (two that follow each other in order would merge here)
+        assert run[0] % embree.RUN == 0 and (len(run) % embree.RUN == 0 or run[-1] == count - 1)
+    if count > 4 * embree.RUN:
+        assert len(runs) > 1

@@ -31,6 +31,7 @@ import numpy as np
 from viewer.gpu.gather_cast import (CHUNK, ESCAPED, cast_rays, direct_args, direction,  # noqa: F401 (ESCAPED)
                                    land_grid)
 from viewer.rays.cast import TriangleCaster
+from viewer.rays.embree import spread
 from viewer.physical.geometry import tangent_frames
 
 RAYS = 72
@@ -188,6 +189,7 @@ def _cast_samples(frame: "_Frame", lift: float, samples: np.ndarray, rays: int, 
     direct = direct_args(*layout)
 
     def cast(which: np.ndarray, these: np.ndarray) -> None:
+        which = which[spread(len(which))]   # the threads' shares alike
         if direct is not None:   # the rays made, traced and landed in one compiled loop, on every core
             return land_grid(*frame.args(lift), np.ascontiguousarray(which, np.int64),
                              np.ascontiguousarray(these, np.int64), *direct, hits)

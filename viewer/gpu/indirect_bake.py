@@ -17,25 +17,23 @@ box's 0.77 M texels). Each face reads its own texels, `lightmap_texel` of the sc
 from __future__ import annotations
 
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import replace
 
 import moderngl
 import numpy as np
 
 from viewer import wake
-from viewer.rays import dda
-from viewer.rays.cast import TriangleCaster, distinct_rows, embree_available
+from viewer.rays.cast import TriangleCaster, distinct_rows
 from viewer.gpu.final_gather import GatherRays
+from viewer.gpu.gather_cast import caster_of
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
-from viewer.gpu.lightmap_update import (Landing, Reached, gather_reflected, gather_texels, reflectance,
+from viewer.gpu.lightmap_update import (Landing, Reached, gather_reflected, gather_texels, reflectance, with_lit,
                                         texture_ratio)
-from viewer.gpu.texel_samples import dark_fill, gather_records, strided_samples, tent_neighbours
+from viewer.gpu.texel_samples import dark_fill, gather_records, strided_samples, tent_neighbours, texel_rows
 from viewer.probes.weights import SurfaceBake, SurfaceWeights
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
-from viewer.rays.voxels import grid_frame
 
-VISIBILITY_VOXELS = 32
-"""Cells per axis of the triangle grid that the probes' visibility is traced in."""
 MAX_SAMPLES = 3_000_000
 """Above this many samples (both sides) the probes stay per fragment: their weights would take minutes
 and gigabytes (a detailed mesh of 82k triangles has 0.3 M)."""
@@ -50,14 +48,6 @@ def lattice_key(probes: ProbeGrid) -> tuple:
             hash(np.asarray(probes.valid, bool).tobytes()))
 
 
-def caster_of(scene: Scene) -> TriangleCaster:
-    """The rays' caster of a geometry, for the gather and the weights: Embree where it is installed (no
-    cells to list: 20-125 ms of a new Cornell box), else the DDA over a VISIBILITY_VOXELS grid of cells."""
-    if embree_available():
-        return TriangleCaster(scene)
-    return TriangleCaster(scene, dda.Cells.blocking(scene, *grid_frame(scene, VISIBILITY_VOXELS), VISIBILITY_VOXELS))
-
-
 class BakedIndirectLight:
     """The indirect irradiance of every lightmap texel, front sides | back sides as the direct lightmap.
 
@@ -66,13 +56,13 @@ class BakedIndirectLight:
     installed, so that the caller can draw the probes per fragment meanwhile instead of stalling."""
 
     def __init__(self, ctx: moderngl.Context, lightmap: BakedDirectLight, scene: Scene, background: bool = False,
-                 gather_rays: int = 0):
+                 gather_rays: int = 0, caster: Future | None = None):
         self.lightmap = lightmap
         self.scene = scene
         height, width = lightmap.covered.shape
         self.texture = ctx.texture((2 * width, height), 3, dtype="f4")
         self.texture.filter, self.texture.repeat_x, self.texture.repeat_y = (moderngl.LINEAR, moderngl.LINEAR), False, False
-        self._image = np.zeros((height * 2 * width, 3), np.float32)
+        self._image, self._written = np.zeros((height * 2 * width, 3), np.float32), False
         rows, columns = np.nonzero(lightmap.covered)           # the order of lightmap.texel_points
         sample, sources, weights = strided_samples(lightmap, rows, columns)
         self._samples = np.flatnonzero(sample)
@@ -80,16 +70,20 @@ class BakedIndirectLight:
         pixels = rows * 2 * width + columns
         self._pixels = np.concatenate([pixels[sample], pixels[sample] + width])
         """Each sample's pixel in the (front | back) image: the front sides', then the back sides'."""
-        self._between = (np.concatenate([pixels, pixels + width]), np.concatenate([sources, sources + width]),
-                         np.concatenate([weights, weights]))
-        """(pixels, their samples' pixels, weights) of every texel, both sides."""
+        self._row_of = np.full(len(self._image), -1, np.int32)
+        self._row_of[self._pixels] = np.arange(len(self._pixels))
+        self._texel_pixels = np.concatenate([pixels, pixels + width]).astype(np.int32)
+        self._texel_rows = (texel_rows(sources, self._row_of, width), np.concatenate([weights, weights]))
+        """Every covered pixel of both sides, and the samples (rows of `SurfaceBake.irradiance`) it
+        interpolates with their weights: the same for every lattice (`_dark` fills in what differs)."""
         self._caster: TriangleCaster | None = None
         """The rays' caster of the installed geometry (Embree where installed, else the DDA's cells)."""
+        self._early = None if caster is None else (scene, caster)   # `caster_of(scene)`, started by the caller
         self.gather_rays = gather_rays
         """Final-gather rays per sample (viewer/gpu/final_gather.py); 0: the probes' light alone."""
-        self._gather: tuple[GatherRays, tuple[np.ndarray, np.ndarray]] | None = None   # rays, `tent_neighbours`
+        self._gather: tuple[GatherRays, tuple, Landing] | None = None   # rays, `tent_neighbours`, their Landing
         self._records: tuple[np.ndarray, np.ndarray] | None = None   # `gather_records`, once per layout
-        self._sample_rows, self._texel_rows_all = np.arange(len(self._pixels)), np.arange(len(self._between[0]))
+        self._sample_rows, self._texel_rows_all = np.arange(len(self._pixels)), np.arange(len(self._texel_pixels))
         self._direct: np.ndarray | None = None   # each pixel's direct irradiance, read back once per bake
         self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
         """(albedo, albedo x direct irradiance) of the pixels the rays land on, once per bake or colour edit."""
@@ -210,7 +204,7 @@ class BakedIndirectLight:
         made = self._made
         if made is not None and made[0] == geometry:
             return made[1], made[2]
-        caster = self._caster if self._caster is not None and not rays else caster_of(scene)
+        caster = self._caster if self._caster is not None and not rays else caster_of(scene, self._early)
         gather = None
         if self.gather_rays and rays:
             points, normals, normal_id = self._sample_points(lightmap)
@@ -218,8 +212,8 @@ class BakedIndirectLight:
                 self._records = gather_records(lightmap, self._samples)
             records = np.concatenate([self._records[0], len(self._samples) + self._records[0]])
             traced = self._gather_rays(scene, lightmap, caster, points[records], normals[normal_id[records]])
-            traced.landing   # noqa: B018 (made here, on the worker, not in the first update)
-            gather = (traced, tent_neighbours(lightmap, self._samples, *self._records, traced))
+            landing = Landing.of(traced.landing[0], self._texel_pixels, self._texel_rows, self._covered, len(self._image))
+            gather = (traced, tent_neighbours(lightmap, self._samples, *self._records, traced), landing)
             self._traced = (scene, lightmap, traced)
         self._made = (geometry, caster, gather)
         return caster, gather
@@ -295,46 +289,41 @@ class BakedIndirectLight:
         self._kept[key] = bake
         while len(self._kept) > KEPT_LATTICES:
             del self._kept[next(iter(self._kept))]
-        self._texel_pixels, self._texel_rows = self._sources(bake)
-        self._landing = None
-
-    def _sources(self, bake: SurfaceBake) -> tuple[np.ndarray, np.ndarray]:
-        """(pixels, (rows, weights)): every covered pixel of the (front | back) image and the rows of
-        `bake.irradiance` it interpolates (its samples'); a sample that sees no probe (a face's strip under
-        the floor, the ceiling above a lamp) next to one of its tile that does shows that one's light, so
-        that the bilinear fetch of a visible pixel near the edge never mixes in their darkness."""
+        # (rows, lit rows): a sample that sees no probe (a face's strip under the floor) next to one of its tile
+        # that does shows its light on each update, so that a visible pixel's fetch never mixes in the dark
         pixels, sources = dark_fill(self.lightmap, self._samples, self._pixels, bake.weights.sum(axis=1) == 0.0)
-        row_of = np.full(len(self._image), -1, np.int64)
-        row_of[self._pixels] = np.arange(len(self._pixels))
-        row_of[pixels] = row_of[sources]                      # dark samples show a lit neighbour's light
-        all_pixels, their_samples, weights = self._between
-        return all_pixels, (row_of[their_samples], weights)
+        self._dark = (self._row_of[pixels].astype(np.int64), self._row_of[sources].astype(np.int64))
+        self._landing = None
 
     def update(self, probes: ProbeGrid) -> None:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
+        dark, lit = self._dark
         if self._gather is None:
             values, texels = self._bake.irradiance(probes.coefficients), self._texel_rows_all
         else:
-            rays, (near, tent) = self._gather
+            rays, (near, tent), _ = self._gather
             landing, albedo, reflected = self._reflected()
             values = self._bake.irradiance(probes.coefficients, self._values, landing.samples)
+            values[dark] = values[lit]
             gather_reflected(values, landing.rows, landing.weights, albedo, reflected, self._scratch)
             samples, texels = self._reached.samples, self._reached.texels
             gather_texels(rays.irradiance(self._scratch), near, tent, self._sample_rows, values, samples)
+        values[dark] = values[lit]
         gather_texels(values, *self._texel_rows, self._texel_pixels, self._image, texels)
         self.texture.write(self._image)
+        self._written = True
 
     def _reflected(self) -> tuple[Landing, np.ndarray, np.ndarray]:
         """(landing, albedo, albedo x direct irradiance) of the pixels the gather's rays land on."""
         self._read_direct()
         if self._landing is None:   # once per install
-            rays, (near, tent) = self._gather
-            self._landing = Landing.of(rays.landing[0], self._texel_pixels, self._texel_rows, self._covered,
-                                       len(self._image))
-            self._reached = Reached.of(rays.landed, near, tent, *self._texel_rows)
+            rays, (near, tent), landing = self._gather
+            self._landing = replace(landing, samples=with_lit(landing.samples, *self._dark))
+            self._reached = Reached.of(rays.landed, near, tent, *self._texel_rows, self._dark)
             self._scratch, self._values = (np.empty((n, 3), np.float32) for n in (len(rays.landing[0]), len(near)))
             self._reflectance = self._texture_ratio = None
-            self._image[:] = 0.0   # the texels no light reaches stay 0
+            if self._written:   # the texels no light reaches stay 0 (a new image is 0 without a write)
+                self._image[:] = 0.0
         if self._reflectance is None:
             landing = self._landing
             textures = tuple(map(id, self.scene.textures or ()))    # the same across colour edits

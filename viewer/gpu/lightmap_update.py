@@ -29,22 +29,45 @@ class Reached:
     """The texels (rows of the texels' pixels, rows and weights) that read a sample some light reaches."""
 
     @staticmethod
-    def of(landed: np.ndarray, near: np.ndarray, tent: np.ndarray, rows: np.ndarray,
-           weights: np.ndarray) -> "Reached":
+    def of(landed: np.ndarray, near: np.ndarray, tent: np.ndarray, rows: np.ndarray, weights: np.ndarray,
+           dark: tuple[np.ndarray, np.ndarray] | None = None) -> "Reached":
         """landed: the records with a ray that landed (`GatherRays.landed`); (near, tent) (S, K): each
-        sample's records and weights; rows and weights (N, 4): the samples every texel interpolates."""
-        return Reached(*_reached(np.asarray(landed, np.int64), near, tent, rows, weights))
+        sample's records and weights; rows and weights (N, 4): the samples every texel interpolates;
+        dark (rows, lit rows): samples that show another's light (the update copies it: `with_lit`)."""
+        dark, lit = dark if dark is not None else (np.zeros(0, np.int64), np.zeros(0, np.int64))
+        samples, texels = _reached(np.asarray(landed, np.int64), near, tent, rows, weights, dark, lit)
+        return Reached(with_lit(samples, dark, lit), texels)
+
+
+def with_lit(samples: np.ndarray, dark: np.ndarray, lit: np.ndarray) -> np.ndarray:
+    """The rows `samples` (ascending) and the lit rows whose light the dark ones among them show."""
+    if len(dark) == 0:
+        return samples
+    return _with_lit(samples, dark, lit, max(samples.max() if len(samples) else 0, lit.max()) + 1)
+
+
+@numba.njit(cache=True, nogil=True)
+def _with_lit(samples, dark, lit, size):
+    read = np.zeros(size, np.bool_)
+    for s in samples:
+        read[s] = True
+    for i in range(dark.shape[0]):
+        if read[dark[i]]:
+            read[lit[i]] = True
+    return np.flatnonzero(read)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _reached(landed, near, tent, rows, weights):
+def _reached(landed, near, tent, rows, weights, dark, lit):
     """(samples, texels) of `Reached.of`: in compiled passes over the samples and texels (numpy's took 150 ms
     of the Cornell box's first update after new geometry)."""
     has_landed = np.zeros(max(near.max(), landed.max() if landed.size else -1) + 1, np.bool_)
     for r in landed:
         has_landed[r] = True
-    lit = _reads(near, tent, has_landed)                # the samples some landed ray's light reaches
-    texels = np.flatnonzero(_reads(rows, weights, lit))
+    reached = _reads(near, tent, has_landed)                # the samples some landed ray's light reaches
+    for i in range(dark.shape[0]):
+        reached[dark[i]] = reached[lit[i]]
+    texels = np.flatnonzero(_reads(rows, weights, reached))
     return _weighted_rows(rows, weights, texels, near.shape[0]), texels
 
 
@@ -121,7 +144,7 @@ class Landing:
         how; covered (pixels, faces): the covered pixels (front texels, then back) and their faces; `size`:
         the image's pixels."""
         rows, weights = texel_rows
-        return Landing(pixels, *_landing_reads(pixels, np.asarray(texel_pixels, np.int64), rows, weights,
+        return Landing(pixels, *_landing_reads(pixels, np.ascontiguousarray(texel_pixels), rows, weights,
                                                np.asarray(covered[0], np.int64), np.asarray(covered[1], np.int64),
                                                size))
 
@@ -130,10 +153,10 @@ class Landing:
 def _landing_reads(pixels, texel_pixels, texel_rows, texel_weights, covered, covered_faces, size):
     """(rows, weights, faces, texels, samples) of `Landing.of`, in compiled passes (numpy's took 60 ms of
     the Cornell box's first update after new geometry)."""
-    spread = np.full(size, -1, np.int64)
+    spread = np.full(size, -1, np.int32)
     for i in numba.prange(texel_pixels.shape[0]):
         spread[texel_pixels[i]] = i
-    where = np.full(size, -1, np.int64)
+    where = np.full(size, -1, np.int32)
     for i in numba.prange(covered.shape[0]):
         where[covered[i]] = i
     count, half = pixels.shape[0], max(covered.shape[0] // 2, 1)

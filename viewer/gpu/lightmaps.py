@@ -8,12 +8,15 @@ own state), apart from the passes that draw with these lightmaps.
 
 from __future__ import annotations
 
+import threading
 import time
+from concurrent.futures import Future
 
 import moderngl
 import numpy as np
 
 from viewer.gpu.direct_bake import BakedDirectLight, fitted_texel, same_atlas
+from viewer.gpu.gather_cast import caster_of
 from viewer.gpu.indirect_bake import BakedIndirectLight
 from viewer.gpu.lights import emitter_samples
 from viewer.gpu.programs import set_uniforms
@@ -44,6 +47,20 @@ def max_texture_side(ctx: moderngl.Context) -> int:
     viewport = info.get("GL_MAX_VIEWPORT_DIMS", (16384, 16384))
     return int(min(info.get("GL_MAX_TEXTURE_SIZE", 16384), info.get("GL_MAX_RENDERBUFFER_SIZE", 16384),
                    *viewport))
+
+
+def started(function, *args) -> Future:
+    """`function(*args)`, started now on a thread of its own; its result (or error) in the future."""
+    future = Future()
+
+    def run() -> None:
+        try:
+            future.set_result(function(*args))
+        except BaseException as exc:  # noqa: BLE001 - handed to whoever asks for the result
+            future.set_exception(exc)
+
+    threading.Thread(target=run, name="caster", daemon=True).start()
+    return future
 
 
 class LightmapUpkeep:
@@ -111,12 +128,15 @@ class LightmapUpkeep:
         changes only the surface pass's colours and what the indirect light's gather reflects)."""
         layout = (self._geometry, self.settings.lightmap_texel, self.settings.final_gather)
         if layout != self._layout_key:
-            old, indirect = self._baked, self._indirect
+            s, old, indirect = self.settings, self._baked, self._indirect
+            moving = old is not None and indirect is not None and self._layout_key[1:] == layout[1:]
+            gathers = self.background_bake and s.indirect and s.final_gather
+            # a new geometry's caster, the gather's first need, built while the lightmap is laid out here
+            caster = started(caster_of, self._draw_scene) if gathers and not moving else None
             texel = fitted_texel(self._draw_scene, self.settings.lightmap_texel * self._scene_size,
                                  max_texture_side(self.ctx))
             baked = BakedDirectLight(self.ctx, self._draw_scene, texel)
-            if (old is not None and indirect is not None and self._layout_key[1:] == layout[1:]
-                    and same_atlas(old, baked)):   # faces moved: the old rays, to trace only what changed
+            if moving and same_atlas(old, baked):   # faces moved: the old rays, to trace only what changed
                 self._indirect = None
                 self._release_baked()
                 indirect.moved(baked, self._draw_scene)
@@ -125,9 +145,8 @@ class LightmapUpkeep:
             else:
                 self._release_baked()
             self._baked, self._layout_key = baked, layout
-            s = self.settings
-            if self._indirect is None and self.background_bake and s.indirect and s.final_gather:
-                self._indirect = self._new_indirect()   # its rays traced while the GI source makes the probes
+            if gathers and self._indirect is None:
+                self._indirect = self._new_indirect(caster)   # its rays traced while the GI source makes the probes
                 self._indirect.prefetch()
         lit = (self._shadow_key, self._lights, self.settings.shadow_bias)
         if lit != self._lit_key:
@@ -162,10 +181,10 @@ class LightmapUpkeep:
             self._indirect_fresh, self._indirect_installs = True, self._indirect.installs
         return self._indirect
 
-    def _new_indirect(self) -> BakedIndirectLight:
+    def _new_indirect(self, caster: Future | None = None) -> BakedIndirectLight:
         self._indirect_installs = -1
         return BakedIndirectLight(self.ctx, self._baked, self._draw_scene, self.background_bake,
-                                  self.settings.final_gather)
+                                  self.settings.final_gather, caster)
 
     def bake_version(self) -> tuple:
         """Changes when background work that changes the image has finished (a redraw key)."""

@@ -13,6 +13,7 @@ import numpy as np
 from viewer.gpu.direct_bake import BakedDirectLight
 from viewer.gpu.final_gather import GatherRays
 from viewer.rays.cast import distinct_rows
+from viewer.rays.embree import spread
 
 SAMPLE_STRIDE = 2   # the texels at odd local coordinates: strided_samples is written for 2
 """The probes' light is evaluated at every SAMPLE_STRIDE-th texel of a tile along each axis (4 cm at the
@@ -69,6 +70,23 @@ def _strided(face, origin, tile_n, rows, columns, width, sample, sources, weight
         weights[t, 0], weights[t, 1] = wx * wy, (1 - wx) * wy
         weights[t, 2], weights[t, 3] = wx * (1 - wy), (1 - wx) * (1 - wy)
         sample[t] = lx == local_x and hx == local_x and ly == local_y and hy == local_y
+
+
+def texel_rows(sources: np.ndarray, row_of: np.ndarray, width: int) -> np.ndarray:
+    """(2T, 4) int32: the samples' rows that each covered texel interpolates, front sides then back:
+    `row_of` (pixels,) each sample's pixel's row; sources (T, 4): `strided_samples`' front pixels."""
+    rows = np.empty((2 * len(sources), sources.shape[1]), np.int32)
+    _texel_rows(np.ascontiguousarray(sources, np.int64), row_of, width, rows)
+    return rows
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _texel_rows(sources, row_of, width, rows):
+    count = sources.shape[0]
+    for t in numba.prange(count):
+        for k in range(sources.shape[1]):
+            rows[t, k] = row_of[sources[t, k]]
+            rows[count + t, k] = row_of[sources[t, k] + width]
 
 
 def dark_fill(lightmap: BakedDirectLight, samples: np.ndarray, pixels: np.ndarray,
@@ -185,17 +203,20 @@ def tent_neighbours(lightmap: BakedDirectLight, samples: np.ndarray, records: np
     starts = np.searchsorted(key[order], np.arange(int(np.prod(shape)) + 1))   # each cell's first record
     _tent(points, normals, reach, small, np.asarray(records, np.int64), np.asarray(own, np.int64),
           borrowing(lightmap, samples), rays.inside(lightmap.covered.shape[1]), bound, cell, shape, starts, order,
-          near, tent)
+          spread((count + BLOCK - 1) // BLOCK, 1), near, tent)
     return near, tent
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _tent(points, normals, reach, small, records, own, borrowed, inside, bound, cell, shape, starts, order, near, tent):
+def _tent(points, normals, reach, small, records, own, borrowed, inside, bound, cell, shape, starts, order, blocks,
+          near, tent):
     """`tent_neighbours`' pass: each sample's FILTER_MAX nearest records within `bound` (`_nearest`), weighed
     as it reads them (`_weigh`), written to rows s (front) and S + s (back, the back sides' records). A
-    `borrowed` sample (`gather_records`) takes the nearest record it finds for its own."""
+    `borrowed` sample (`gather_records`) takes the nearest record it finds for its own. The blocks of
+    samples are taken in the order `blocks` (`spread`: a scanned mesh's many close records cost more)."""
     count, width, total = points.shape[0], near.shape[1], records.shape[0]
-    for block in numba.prange((count + BLOCK - 1) // BLOCK):
+    for i in numba.prange(blocks.shape[0]):
+        block = blocks[i]
         best_d, best_j = np.empty(width), np.empty(width, np.int64)
         for s in range(block * BLOCK, min(count, (block + 1) * BLOCK)):
             found = _nearest(points, records, bound, cell, shape, starts, order, s, best_d, best_j)

@@ -69,7 +69,8 @@ class SurfaceWeights:
                    BACKFACE_FLOOR)
         base, weights = np.empty((len(p), 3), np.int32), np.empty((len(p), 8), np.float32)
         if caster.direct is not None:   # Embree from compiled loops: one pass on every core
-            _weighed(p, n, *lattice, *caster.direct.occlusion, base, weights)
+            blocks = embree.spread((len(p) + embree.BLOCK - 1) // embree.BLOCK, 1)   # the threads' shares alike
+            _weighed(p, n, *lattice, *caster.direct.occlusion, blocks, base, weights)
             return SurfaceWeights(base, weights, int(probes.resolution))
         for start in range(0, len(p), CHUNK):
             part = slice(start, start + CHUNK)
@@ -123,12 +124,13 @@ def _lattice_weights(points, normals, lo, spacing, m, probe_weight, offset, lift
 
 
 @numba.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def _weighed(points, normals, lo, spacing, m, probe_weight, offset, lift, floor, query, scene, base, out):
+def _weighed(points, normals, lo, spacing, m, probe_weight, offset, lift, floor, query, scene, blocks, base, out):
     """`_lattice_weights`, the segments' visibility through Embree and `_normalized`, point by point on
     every core: the same weights, without the (P, 8, 3) segments in memory (0.36 s of a 68k-triangle
     scan's 276k samples in numpy and one thread)."""
     count = points.shape[0]
-    for block in numba.prange((count + embree.BLOCK - 1) // embree.BLOCK):
+    for i in numba.prange(blocks.shape[0]):
+        block = blocks[i]
         record = embree.record()
         w, seen = np.empty(8), np.empty(8)
         for r in range(block * embree.BLOCK, min(count, (block + 1) * embree.BLOCK)):
@@ -206,16 +208,17 @@ class SurfaceBake:
     multiply-adds a point instead of 8 x 27."""
 
     pair_probe: np.ndarray
-    """(Q,) flat index (x-major: (i M + j) M + k) of each pair's probe."""
+    """(Q,) int32 flat index (x-major: (i M + j) M + k) of each pair's probe."""
     pair_normal: np.ndarray
-    """(Q, 3) each pair's unit normal."""
+    """(Q,) int32 each pair's row of the distinct normals (`normal_id`'s numbering)."""
     texel_pairs: np.ndarray
     """(T, 8) int32 the pair of each point's corner."""
     weights: np.ndarray
     """(T, 8) float32 SurfaceWeights.weights."""
     lobe: np.ndarray
-    """(Q, 9) float32 each pair's normal's cosine lobe in SH (made once with the pairs, not on every
-    update: 55 ms a GI update for a scanned mesh's million pairs)."""
+    """(U, 9) float32 each distinct normal's cosine lobe in SH, made once with the pairs (not on every
+    update: 55 ms a GI update for a scanned mesh's million pairs) and per normal, not per pair (the SH
+    basis of the 68k-triangle scan's 2 M pairs took 0.48 s of a new scene's critical path)."""
 
     @staticmethod
     def of(weights: SurfaceWeights, normal_id: np.ndarray, normals: np.ndarray) -> "SurfaceBake":
@@ -224,16 +227,15 @@ class SurfaceBake:
         base = np.ascontiguousarray(weights.base, np.int64)
         normal_id = np.ascontiguousarray(normal_id, np.int64)
         texel_pairs, pair_probe, pair_normal = _pairs(base, weights.resolution, normal_id, len(normals))
-        pair_normals = np.asarray(normals, np.float64)[pair_normal]
-        lobe = np.ascontiguousarray((sh.basis(pair_normals) * sh.COSINE_LOBE).astype(np.float32))
-        return SurfaceBake(pair_probe, pair_normals, texel_pairs, weights.weights, lobe)
+        lobe = np.ascontiguousarray((sh.basis(np.asarray(normals, np.float64)) * sh.COSINE_LOBE).astype(np.float32))
+        return SurfaceBake(pair_probe, pair_normal, texel_pairs, weights.weights, lobe)
 
     def irradiance(self, coefficients: np.ndarray, out: np.ndarray | None = None,
                    points: np.ndarray | None = None) -> np.ndarray:
         """(T, 3) float32 irradiance from the probes' SH (M, M, M, 9, 3); given `points` (indices), only
         those rows of `out` (T, 3) float32 are written, and it is returned."""
         flat = np.ascontiguousarray(np.asarray(coefficients, np.float32).reshape(-1, sh.SH_COUNT, 3))
-        pair = _pair_irradiance(flat, self.pair_probe, self.lobe)
+        pair = _pair_irradiance(flat, self.pair_probe, self.pair_normal, self.lobe)
         if out is None:
             out = np.empty((len(self.weights), 3), np.float32)
         if points is None:
@@ -260,7 +262,7 @@ def _pairs(base, m, normal_id, count):
         filled[normal_id[t]] += 1
     group, slot = np.full(m * m * m, -1, np.int64), np.empty(m * m * m, np.int64)
     texel_pairs = np.empty((points, 8), np.int32)
-    pair_probe, pair_normal = np.empty(points * 8, np.int64), np.empty(points * 8, np.int64)
+    pair_probe, pair_normal = np.empty(points * 8, np.int32), np.empty(points * 8, np.int32)
     used = 0
     for g in range(count):
         for i in range(start[g], start[g + 1]):
@@ -277,14 +279,14 @@ def _pairs(base, m, normal_id, count):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _pair_irradiance(coefficients, pair_probe, lobe):
+def _pair_irradiance(coefficients, pair_probe, pair_normal, lobe):
     out = np.empty((pair_probe.shape[0], 3), np.float32)
     for q in numba.prange(pair_probe.shape[0]):
-        c = coefficients[pair_probe[q]]
+        c, n = coefficients[pair_probe[q]], pair_normal[q]
         for channel in range(3):
             total = np.float32(0.0)
             for j in range(c.shape[0]):
-                total += lobe[q, j] * c[j, channel]
+                total += lobe[n, j] * c[j, channel]
             out[q, channel] = total
     return out
 
