@@ -155,7 +155,7 @@ def test_the_final_gather_reads_the_texture_where_its_rays_land(gl_context, tmp_
         face_albedo = np.ascontiguousarray(scene.albedo[scene.face_areas > 0], np.float32)
         albedo, reflected = (np.empty((len(pixels), 3), np.float32) for _ in range(2))
         direct = np.ones((pixels.max() + 1, 3), np.float32)
-        reflectance(pixels, faces, face_albedo, ratio, direct, albedo, reflected)
+        reflectance(pixels, faces, face_albedo, ratio, direct, np.ones(3, np.float32), albedo, reflected)
         np.testing.assert_array_equal(reflected, albedo)
         front = albedo[:len(lightmap.texel_points)]
         x, y = lightmap.texel_points[:, 0], lightmap.texel_points[:, 1]

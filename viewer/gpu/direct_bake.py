@@ -20,7 +20,7 @@ import moderngl
 import numba
 import numpy as np
 
-from viewer.gpu.mesh import TriangleBuffer, face_uv, vertex_albedo, write_colours
+from viewer.gpu.mesh import TriangleBuffer, face_colours, face_uv, vertex_albedo, write_colours
 from viewer.scene import Scene, SceneError
 
 ATLAS_WIDTH = 2048
@@ -181,7 +181,7 @@ class BakedDirectLight(TriangleBuffer):
         self.tile_origin, self.tile_n = origin, n
         """Each face's tile: its lower-left atlas texel (F, 2) and its triangle's texels per side (F,)."""
         vertices = lightmap_vertices(scene, origin, n, self.size)
-        self._uv = scene.uv   # the texture coordinates the buffer holds
+        self._uv, self._colours = scene.uv, None   # the texture coordinates the buffer holds, and the colours
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(vertices.tobytes())
         position, normal, tile, inside = lightmap_texels(scene, origin, n, self.size)
@@ -210,9 +210,10 @@ class BakedDirectLight(TriangleBuffer):
         the lightmap must be baked again. Only the colours are written (0.1 s less on a 68k-triangle scan);
         where the texture coordinates differ too (a texture dropped), every attribute."""
         if scene.uv is self._uv:   # the same array: `in_draw_order` keeps it across colour edits
-            write_colours(self.buffer, scene, 64)
+            self._colours = write_colours(self.buffer, face_colours(scene), self._colours, 64)
         else:
             self.buffer.write(lightmap_vertices(scene, self.tile_origin, self.tile_n, self.size).tobytes())
+            self._colours = None
         self._uv = scene.uv
 
     def bake(self, program: moderngl.Program, first_unit: int) -> None:

@@ -188,10 +188,11 @@ def _texel(values, rows, weights, i):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def reflectance(pixels, faces, face_albedo, ratio, direct, albedo, reflected):
+def reflectance(pixels, faces, face_albedo, ratio, direct, scale, albedo, reflected):
     """albedo[i] = face_albedo[faces[i]] (times ratio[i], the texture where a scene has one, at most 0.999)
-    and reflected[i] = albedo[i] x direct[pixels[i]]: what each pixel that the gather's rays land on
-    reflects (0 off the covered texels: faces[i] = -1), once per colour edit or bake, in one pass."""
+    and reflected[i] = albedo[i] x direct[pixels[i]] x scale (a lamp's new colour since the bake): what
+    each pixel that the gather's rays land on reflects (0 off the covered texels: faces[i] = -1), once per
+    colour edit or bake, in one pass."""
     textured = ratio.shape[0] > 0
     for i in numba.prange(pixels.shape[0]):
         p, f = pixels[i], faces[i]
@@ -202,7 +203,7 @@ def reflectance(pixels, faces, face_albedo, ratio, direct, albedo, reflected):
                 if textured:
                     a = min(a * ratio[i, c], np.float32(0.999))
             albedo[i, c] = a
-            reflected[i, c] = a * direct[p, c]
+            reflected[i, c] = a * (direct[p, c] * scale[c])
 
 
 def texture_ratio(scene, lightmap: BakedDirectLight, faces: np.ndarray, texels: np.ndarray) -> np.ndarray | None:

@@ -107,19 +107,28 @@ def same_triangles(a: Scene, b: Scene) -> bool:
             and np.array_equal(a.faces, b.faces) and np.array_equal(a.vertices, b.vertices))
 
 
-def vertex_colours(scene: Scene) -> np.ndarray:
-    """(3F, 6) float32: each drawn vertex's albedo (`vertex_albedo`) and emission: the attributes after
-    position and normal in both vertex layouts (SceneMesh's and the lightmap's), which a colour edit
-    writes alone (`write_colours`)."""
+def face_colours(scene: Scene) -> np.ndarray:
+    """(F, 6) float32: each drawn face's albedo (`vertex_albedo`) and emission, the attributes after position
+    and normal in both vertex layouts (SceneMesh's and the lightmap's), which a colour edit writes alone
+    (`write_colours`)."""
     keep = scene.face_areas > 0
-    per_face = np.concatenate([vertex_albedo(scene)[keep], scene.emission[keep]], axis=1).astype(np.float32)
-    return np.repeat(per_face, 3, axis=0)
+    return np.concatenate([vertex_albedo(scene)[keep], scene.emission[keep]], axis=1).astype(np.float32)
 
 
-def write_colours(buffer: moderngl.Buffer, scene: Scene, stride: int) -> None:
-    """Write `vertex_colours` into a vertex buffer of `stride` bytes a vertex (position and normal first)."""
-    colours = vertex_colours(scene)
-    buffer.write_chunks(colours.tobytes(), 24, stride, len(colours))
+def write_colours(buffer: moderngl.Buffer, colours: np.ndarray, held: np.ndarray | None, stride: int) -> np.ndarray:
+    """Write the faces' `colours` (`face_colours`) into a vertex buffer of `stride` bytes a vertex (position
+    and normal first), three vertices a face, where they differ from `held`, the colours it holds (None:
+    unknown): the faces from the first that changed to the last, in one write (a lamp's colour or a wall's
+    is a few faces, where all of a 68k-triangle scan's took 6 ms a buffer). Returns `colours`, held now."""
+    if held is None or held.shape != colours.shape:
+        changed = np.arange(len(colours))
+    else:
+        changed = np.flatnonzero((colours != held).any(axis=1))
+    if len(changed):
+        first, last = int(changed[0]), int(changed[-1]) + 1
+        vertices = np.repeat(colours[first:last], 3, axis=0)
+        buffer.write_chunks(vertices.tobytes(), 24 + 3 * first * stride, stride, len(vertices))
+    return colours
 
 
 class SceneMesh(TriangleBuffer):
@@ -132,6 +141,7 @@ class SceneMesh(TriangleBuffer):
         vertices = self._vertices(scene)
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(vertices.tobytes())
+        self.colours: np.ndarray | None = None   # `face_colours` the buffer holds, once a colour edit wrote them
 
     @staticmethod
     def _vertices(scene: Scene) -> np.ndarray:
@@ -148,9 +158,10 @@ class SceneMesh(TriangleBuffer):
         texture coordinates are the same too), else a new one (`old` released)."""
         if old is not None and previous is not None and same_triangles(scene, previous):
             if scene.uv is previous.uv:   # the same array: `in_draw_order` keeps it across colour edits
-                write_colours(old.buffer, scene, 56)
+                old.colours = write_colours(old.buffer, face_colours(scene), old.colours, 56)
             else:
                 old.buffer.write(SceneMesh._vertices(scene).tobytes())
+                old.colours = None
             return old
         if old is not None:
             old.release()

@@ -158,6 +158,14 @@ class GIController:
             self.fallback = self._fallback_from = None
 
     # ---- per frame ----------------------------------------------------------------------------------------
+    def start(self) -> None:
+        """The shown source takes up a change now, ahead of the frame's `update`: a relight on its worker
+        then runs while the render thread does its own share of an edit (on a 68k-triangle scan, 17 ms of
+        vertex colours, then a frame that holds Python's lock for 11 ms while llvmpipe shades its vertices)."""
+        live = self._live.get(self.source)
+        if live is not None and not self.unlit:
+            live.step()
+
     def update(self) -> tuple[bool, ProbeGrid | None]:
         """(changed, grid): whether the shown probes should change, and to what (None: no indirect)."""
         for name, live in list(self._live.items()):

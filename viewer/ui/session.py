@@ -179,8 +179,9 @@ class Session:
         self.scene = self.edits.apply()
         self._applied_version, self._applied_at = self.edits.version, now
         self.scene_version += 1
-        self.renderer.set_scene(self.scene)
         self.gi.set_scene(self.scene, self.scene_version)
+        self.gi.start()   # its worker's relight beside the renderer's part
+        self.renderer.set_scene(self.scene)
 
     def _update_voxels(self) -> None:
         """Voxelize the shown scene for the `voxels` view (in the background, at the GI resolution)."""
