@@ -48,9 +48,11 @@ class ModelError(ValueError):
 
 
 def open_session(path: Path, threads: int = 1):
-    """An onnxruntime session on the CPU, or ModelError in one line. One thread by default: the networks
-    are small, and a second one fights the renderer's threads for the two cores (measured slower under
-    load, docs/PERFORMANCE.md)."""
+    """An onnxruntime session on the CPU, or ModelError in one line. One thread by default (the timings the
+    docs compare are of one); with more, the threads sleep between runs instead of spin-waiting, which took
+    a core from the renderer's threads (two threads that spin made a Cornell box's albedo edit 63 ms to
+    the settled frame where one made it 66 and two that sleep 54, on 2 cores: the viewer's choice,
+    `viewer.ui.neural_source`)."""
     try:
         import onnxruntime as ort
     except ImportError as exc:
@@ -58,6 +60,8 @@ def open_session(path: Path, threads: int = 1):
     options = ort.SessionOptions()
     options.intra_op_num_threads = threads
     options.inter_op_num_threads = 1
+    if threads > 1:
+        options.add_session_config_entry("session.intra_op.allow_spinning", "0")
     try:
         return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
     except Exception as exc:  # noqa: BLE001 - onnxruntime raises its own types for bad files

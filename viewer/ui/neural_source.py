@@ -4,6 +4,7 @@ thread once the scene's voxels are ready, with its timings and domain warning fo
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -11,6 +12,11 @@ from viewer.physical.gi import GISettings
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 from viewer.ui.background import BackgroundTask
+
+
+NETWORK_THREADS = min(4, os.cpu_count() or 1)
+"""onnxruntime's threads in the viewer (sleeping between runs: viewer.neural.field.open_session): the
+network runs on the render thread, between frames, so the cores are its own while it runs."""
 
 
 class NeuralSource:
@@ -27,7 +33,7 @@ class NeuralSource:
     def __init__(self, model: Path | None = None):
         from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI
 
-        self.field = NeuralField(model or DEFAULT_MODEL)
+        self.field = NeuralField(model or DEFAULT_MODEL, threads=NETWORK_THREADS)
         self.gi = NeuralGI(self.field)
         self.voxelizing: BackgroundTask | None = None
         self.error: str | None = None
