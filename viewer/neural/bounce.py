@@ -142,13 +142,13 @@ class Bounce:
         return (self._spread @ self._gathered.reshape(len(self._points), -1)).reshape(-1, sh.SH_COUNT, 3)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _reflected(index, weight, lobe, light):
     """(K, C) max(0, irradiance) / pi of each voxel: its 8 probes' SH (`light` (P, 9, C), at `index`
     (8, K) with `weight` (8, K)) against its cosine lobe (`lobe` (K, 9): A_l Y_lm(n) / pi)."""
     k_count, channels = lobe.shape[0], light.shape[2]
     out = np.zeros((k_count, channels), np.float32)
-    for k in range(k_count):
+    for k in numba.prange(k_count):
         for c in range(channels):
             total = 0.0
             for j in range(index.shape[0]):
