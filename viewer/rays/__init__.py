@@ -4,7 +4,8 @@
     voxel_faces.py  which faces land in which voxel (FaceVoxels), for incremental re-voxelizing
     dda.py          cell-exact DDA against the triangles (numba): the exact ray caster, per voxel or face
     cast.py         closest hits (face, distance, barycentrics, side) of many rays: Embree, or the DDA without it
-    embree.py       Embree called from compiled loops, on every core and without Python's lock
+    embree.py       Embree called from compiled loops, on every core and without Python's lock; the order
+                    parallel loops take their items in, so that the cores' shares cost alike (`spread`)
     voxel_rays.py   rays that land on the voxel of the surface they meet (the solver's, the neural source's)
     raymarch.py     distance-field marching through the voxel occupancy (the paper kernel's visibility)
 """
