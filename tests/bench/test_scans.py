@@ -54,3 +54,25 @@ def test_the_command_writes_rooms_that_every_command_opens(tmp_path):
     for name, count in (("ball-room-300.obj", 300), ("ball-room-1k.obj", 1000)):
         room = load(tmp_path / "rooms" / name)
         assert len(room.faces) == count and room.emission.max() > 0      # the box's lamp came along
+
+
+def test_opening_a_scan_room_is_timed_to_its_probes_first_frame_and_settled_frame(tmp_path):
+    """`open_times` drops each scene on the headless viewer and reads the three moments in their order,
+    with the resident memory at each, and tabulates the medians against the first scene's."""
+    from viewer.bench import open_times
+    from viewer.scene import obj, scene_file
+
+    sphere = trimesh.creation.icosphere(subdivisions=1, radius=3.0)
+    scan = Scene("ball", sphere.vertices, sphere.faces, np.full((len(sphere.faces), 3), 0.2),
+                 np.zeros((len(sphere.faces), 3)), np.zeros(len(sphere.faces), np.int64), ("ball",))
+    path = tmp_path / "ball-room.obj"
+    obj.write(scans.scan_room(scan, 300), path)
+    scenes = [scene_file("cornell"), path]
+    results = {"neural": open_times.time_opens("neural", scenes, scene_file("paper-test"), repeats=1)}
+    for scene in scenes:
+        moments = results["neural"][str(scene)]
+        (probes, mb), (first, _), (settled, _) = (moments[m][0] for m in open_times.MOMENTS)
+        assert 0 < probes <= first <= settled and mb > 0
+    text = open_times.table(results, scenes, 1, "python -m viewer.bench.open_times")
+    assert "| neural | cornell | 36 |" in text and "| neural | ball-room | 300 |" in text
+    assert "| 1.0x |" in text and text.splitlines()[-1].startswith("| neural | peak |")

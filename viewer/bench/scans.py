@@ -1,9 +1,11 @@
 """Scanned-mesh rooms for the benchmark: a public scan standing in the Cornell box, refined to a triangle
 count, so that the cost of real meshes is measured on scenes anyone can make again.
 
-    python -m viewer.bench.scans --mesh bun_zipper.ply --triangles 68000 272000 1000000 --out scans/
+    cp bun_zipper.ply bunny.ply
+    python -m viewer.bench.scans --mesh bunny.ply --triangles 68000 272000 1000000 --out scans/
 
-writes scans/bunny-room-68k.obj, -272k and -1m (each with its .mtl and camera sidecar), which every
+writes scans/bunny-room-68k.obj, -272k and -1m (each with its .mtl and camera sidecar; the rooms are named
+after the mesh file, up to its first underscore: bun_zipper.ply itself gives bun-room-68k.obj), which every
 command opens (`python -m viewer capture scans/bunny-room-272k.obj --out x.png`). The scan is any mesh
 trimesh reads; the one the docs measure is the Stanford bunny (the Stanford 3D Scanning Repository,
 https://graphics.stanford.edu/data/3Dscanrep/: `bunny/reconstruction/bun_zipper.ply`, 69,451
