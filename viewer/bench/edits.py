@@ -31,9 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from viewer import sources as gi_sources
-from viewer.evaluation.report import replace_block
+from viewer.evaluation.report import show_table
 
-ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- bench-edits -->"
 EDITS = ("albedo", "light colour", "lamp move", "new scene")
 
@@ -140,9 +139,7 @@ def main(argv=None) -> int:
     results = {source: time_edits(source, args.scene, args.other, args.repeats, args.edits)
                for source in args.sources}
     text = table(results, args.scene, args.repeats)
-    print(text)
-    if args.write:
-        replace_block(ROOT / "docs" / "PERFORMANCE.md", MARKER, text, "# Performance")
+    show_table(text, MARKER, args.write)
     return 0
 
 

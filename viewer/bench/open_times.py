@@ -30,10 +30,9 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from viewer import sources as gi_sources
-from viewer.evaluation.report import replace_block
+from viewer.evaluation.report import show_table
 from viewer.memory import resident_mb
 
-ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- bench-open-times -->"
 MOMENTS = ("probes", "first frame", "settled")
 
@@ -134,9 +133,7 @@ def main(argv=None) -> int:
             results[source] = pool.submit(time_opens, source, scenes, scene_file(args.before), args.repeats).result()
     command = "python -m viewer.bench.open_times " + " ".join(args.scenes) + f" --repeats {args.repeats} --write"
     text = table(results, scenes, args.repeats, command)
-    print(text)
-    if args.write:
-        replace_block(ROOT / "docs" / "PERFORMANCE.md", MARKER, text, "# Performance")
+    show_table(text, MARKER, args.write)
     return 0
 
 

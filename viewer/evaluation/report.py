@@ -5,6 +5,16 @@ from __future__ import annotations
 from pathlib import Path
 
 
+PERFORMANCE = Path(__file__).resolve().parents[2] / "docs" / "PERFORMANCE.md"
+
+
+def show_table(text: str, marker: str, write: bool) -> None:
+    """Print a benchmark's table and, with `write`, put it between `marker`'s lines of docs/PERFORMANCE.md."""
+    print(text)
+    if write:
+        replace_block(PERFORMANCE, marker, text, "# Performance")
+
+
 def replace_block(path: Path, marker: str, block: str, title: str) -> None:
     """Put `block` between the two `marker` lines of `path` (a new file gets `title` and the markers)."""
     path = Path(path)
