@@ -390,28 +390,3 @@ def test_a_jittered_frame_is_the_frame_moved_and_supersampling_resolves_a_lamps_
         assert abs(many.mean() - more.mean()) < min(0.02 * more.mean(), 0.5 * abs(one.mean() - more.mean()))
     finally:
         offscreen.release()
-
-
-def test_colour_edits_leave_both_vertex_buffers_as_a_fresh_upload_of_the_scene(ctx, cornell):
-    """A colour edit writes only the faces whose colours changed (`write_colours`): after a wall's albedo,
-    the lamp's colour and the wall again, the scene's and the lightmap's vertex buffers hold byte for byte
-    what a renderer given the last scene afresh holds."""
-    edited, fresh = Renderer(ctx), Renderer(ctx)
-    try:
-        scene = cornell
-        edited.set_scene(scene)
-        for change in (lambda s: s.with_albedo("green-wall", (0.2, 0.5, 0.7)),
-                       lambda s: s.with_emission("light", (3.0, 2.0, 1.0)),
-                       lambda s: s.with_albedo("small-box", (0.9, 0.1, 0.1))):
-            scene = change(scene)
-            edited.set_scene(scene)
-            edited._ensure_shadows()
-            edited._ensure_baked()
-        fresh.set_scene(scene)
-        fresh._ensure_shadows()
-        fresh._ensure_baked()
-        for pick in (lambda r: r.mesh, lambda r: r._baked):
-            assert pick(edited).buffer.read() == pick(fresh).buffer.read()
-    finally:
-        edited.release()
-        fresh.release()

@@ -43,15 +43,14 @@ def open_once(viewer, path: Path) -> dict[str, tuple[float, float]]:
     start = time.perf_counter()
     viewer.edited()
     viewer.session.load_file(path)
-    loads, seen = viewer.session.loads, {}
+    loads, errors, seen = viewer.session.loads, viewer.session.load_errors, {}
     viewer.step()
     while "settled" not in seen:
         now = time.perf_counter()
         session = viewer.session
-        opened = session.loads > loads or session.load_errors
-        if session.load_errors:
+        if session.load_errors > errors:
             raise RuntimeError(f"{path}: the viewer could not open it: {viewer.log[-1] if viewer.log else ''}")
-        if opened and not session.busy:
+        if session.loads > loads and not session.busy:
             for moment, done in (("probes", True), ("first frame", viewer.viewport.drawn),
                                  ("settled", viewer.settled)):
                 if done and moment not in seen:

@@ -205,12 +205,14 @@ class BakedDirectLight(TriangleBuffer):
         """What the baked irradiance is multiplied by where it is read: a lamp's new colour or intensity in a
         scene lit by its lamps alone scales it (`LightmapUpkeep._ensure_shadows`) instead of a bake."""
 
-    def recolour(self, scene: Scene) -> None:
+    def recolour(self, scene: Scene, colours: np.ndarray | None = None) -> None:
         """Take the colours (albedo, emission) of `scene`, whose triangles are those this was made for;
-        the lightmap must be baked again. Only the colours are written (0.1 s less on a 68k-triangle scan);
-        where the texture coordinates differ too (a texture dropped), every attribute."""
+        the lightmap must be baked again. Only the colours are written (0.1 s less on a 68k-triangle scan):
+        `colours` (`face_colours` of `scene`, as the scene's mesh just took them) or made here; where the
+        texture coordinates differ too (a texture dropped), every attribute."""
         if scene.uv is self._uv:   # the same array: `in_draw_order` keeps it across colour edits
-            self._colours = write_colours(self.buffer, face_colours(scene), self._colours, 64)
+            colours = face_colours(scene) if colours is None else colours
+            self._colours = write_colours(self.buffer, colours, self._colours, 64)
         else:
             self.buffer.write(lightmap_vertices(scene, self.tile_origin, self.tile_n, self.size).tobytes())
             self._colours = None

@@ -84,7 +84,7 @@ class BakedIndirectLight:
         """Final-gather rays per sample (viewer/gpu/final_gather.py); 0: the probes' light alone."""
         self._gather: tuple[GatherRays, tuple, Landing] | None = None   # rays, `tent_neighbours`, their Landing
         self._records: tuple[np.ndarray, np.ndarray] | None = None   # `gather_records`, once per layout
-        self._sample_rows, self._texel_rows_all = np.arange(len(self._pixels)), np.arange(len(self._texel_pixels))
+        self._sample_rows, self._all_texels = np.arange(len(self._pixels)), None   # the latter made if asked
         self._direct: tuple | None = None   # each pixel's direct irradiance and its (3,) scale, read back per bake
         self._reflectance: tuple[np.ndarray, np.ndarray] | None = None
         """(albedo, albedo x direct irradiance) of the pixels the rays land on, once per bake or colour edit."""
@@ -300,7 +300,9 @@ class BakedIndirectLight:
         """Evaluate and upload the indirect irradiance of `probes` (a lattice that is ready_for)."""
         dark, lit = self._dark
         if self._gather is None:
-            values, texels = self._bake.irradiance(probes.coefficients), self._texel_rows_all
+            if self._all_texels is None:   # the texels the update spreads to without a gather: every one
+                self._all_texels = np.arange(len(self._texel_pixels))
+            values, texels = self._bake.irradiance(probes.coefficients), self._all_texels
         else:
             rays, (near, tent), _ = self._gather
             landing, albedo, reflected = self._reflected()

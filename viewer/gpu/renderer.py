@@ -137,14 +137,14 @@ class Renderer(LightmapUpkeep):
                          f"per fragment")
                 lo, hi = scene.bounds
                 self._scene_size = float(np.max(hi - lo))   # kept while the same faces move
-        elif self._baked is not None:
-            self._baked.recolour(draw_scene)
-            if self._indirect is not None:
-                self._indirect.recolour(draw_scene)
-                self._stale_indirect(awaiting=True)
         self.scene, self.bounds = scene, scene.bounds   # (lo, hi); Scene.bounds scans the faces: not per frame
         previous, self._draw_scene = self._draw_scene, draw_scene
         self.mesh = SceneMesh.remade(self.mesh, self.ctx, draw_scene, previous)   # a colour edit keeps its arrays
+        if same and self._baked is not None:   # the lightmap's vertices take the colours the mesh's just took
+            self._baked.recolour(draw_scene, self.mesh.colours)
+            if self._indirect is not None:
+                self._indirect.recolour(draw_scene)
+                self._stale_indirect(awaiting=True)
         self._textures.set_scene(self._draw_scene)
         self._scene_version += 1
 
