@@ -240,3 +240,72 @@ def test_a_caster_started_early_serves_its_own_scene_only():
     early.set_result("the early caster")
     assert caster_of(scene, (scene, early)) == "the early caster"
     assert isinstance(caster_of(other, (scene, early)), TriangleCaster)
+
+
+def cornell_samples(count: int, seed: int):
+    """Random points on the Cornell box's faces, both sides, with their normals and faces."""
+    scene = load("cornell")
+    rng = np.random.default_rng(seed)
+    faces = rng.integers(0, len(scene.faces), count)
+    u, v = rng.random((2, count))
+    flip = u + v > 1
+    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+    corners = scene.triangles[faces]
+    points = corners[:, 0] + u[:, None] * (corners[:, 1] - corners[:, 0]) + v[:, None] * (corners[:, 2] - corners[:, 0])
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return scene, np.concatenate([points, points]), np.concatenate([normals, -normals]), np.concatenate([faces, faces])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_coarse_samples_cast_half_their_rays_and_repeat_the_rest(backend, monkeypatch):
+    """A coarse sample casts its even strata and its scouts, the rays a full gather casts there, and each
+    other ray repeats the one before it in its row (unless the sample is enclosed: then every ray repeats
+    a scout); the other samples' rays are the full gather's. A move then gives what gathering the moved
+    scene afresh gives, coarse samples alike."""
+    from viewer.gpu import final_gather
+
+    scene, points, normals, faces = cornell_samples(300, 7)
+    coarse = np.random.default_rng(8).random(len(points)) < 0.5
+    origin, n, size = lightmap_layout(scene, TEXEL)
+    keep = scene.face_areas > 0
+    layout = (np.where(keep, np.cumsum(keep) - 1, -1), origin, n, size[0], 1e-5)
+    caster = TriangleCaster(scene, dda.Cells.of(voxelize_with_faces(scene, 16), scene), backend)
+    sent = []
+    counting = caster.closest_hits
+    monkeypatch.setattr(caster, "closest_hits", lambda o, d, t=np.inf: sent.append(len(o)) or counting(o, d, t))
+    landing = final_gather.land_grid
+    monkeypatch.setattr(final_gather, "land_grid", lambda *a: sent.append(len(a[8]) * len(a[9])) or landing(*a))
+    full = GatherRays.of(points, normals, caster, *layout, 72)
+    all_rays, sent[:] = sum(sent), []
+    half = GatherRays.of(points, normals, caster, *layout, 72, coarse=coarse)
+    cast, repeated = final_gather.paired_rays(72)
+    assert len(cast) == 40 and (repeated % 2 == 1).all() and np.isin(final_gather.scout_rays(72), cast).all()
+    np.testing.assert_array_equal(half.hits[~coarse], full.hits[~coarse])
+    np.testing.assert_array_equal(half.hits[np.ix_(coarse, cast)], full.hits[np.ix_(coarse, cast)])
+    paired = coarse & ~final_gather._all_backs(full.hits[:, final_gather.scout_rays(72)], size[0])
+    assert paired.sum() > 0.3 * len(points)   # the others are enclosed: their rays repeat the scouts'
+    np.testing.assert_array_equal(half.hits[np.ix_(paired, repeated)], half.hits[np.ix_(paired, repeated - 1)])
+    outward = caster.nothing_ahead(points, normals, 0.5e-5)   # these cast none
+    assert sum(sent) == all_rays - 32 * (paired & ~outward).sum()
+
+    box_faces = np.flatnonzero(scene.face_group == scene.groups.index("large-box"))
+    moved_vertices = scene.vertices.copy()
+    moved_vertices[np.unique(scene.faces[box_faces])] += [0.03, 0.0, 0.02]
+    moved = Scene(scene.name, moved_vertices, scene.faces, scene.albedo, scene.emission, scene.face_group,
+                  scene.groups)
+    moved_faces = np.flatnonzero(np.any(scene.triangles[keep] != moved.triangles[keep], axis=(1, 2)))
+    assert 0 < len(moved_faces) < keep.sum()
+    position, _, tile, _ = lightmap_texels(scene, origin, n, size)
+    pixel_points = np.concatenate([position[..., :3], position[..., :3]], axis=1).reshape(-1, 3)
+    pixel_moved = np.isin(np.concatenate([tile, tile], axis=1).ravel(), moved_faces)
+    moved_points = points.copy()
+    sample_moved = np.isin(faces, np.flatnonzero(keep)[moved_faces])
+    assert sample_moved.any() and np.isin(faces[sample_moved], box_faces).all()
+    moved_points[sample_moved] += [0.03, 0.0, 0.02]
+    moved_caster = TriangleCaster(moved, dda.Cells.of(voxelize_with_faces(moved, 16), moved), backend)
+    after = half.after_moving(sample_moved, pixel_moved, pixel_points, moved.triangles[keep][moved_faces],
+                              2.0 * TEXEL, moved_points, normals, moved_caster, *layout)
+    afresh = GatherRays.of(moved_points, normals, moved_caster, *layout, 72, coarse=coarse)
+    np.testing.assert_array_equal(after.hits, afresh.hits)
+    np.testing.assert_array_equal(after.coarse, coarse)

@@ -38,10 +38,10 @@ def test_the_rays_land_on_their_pixels_rows():
     assert (rows[hits < 0] == ESCAPED).all()
 
     covered = rng.choice(size, 300, replace=False)       # front texels, then back: 150 texels a side
-    covered_faces = rng.integers(0, 20, 300)
-    texel_pixels = covered
+    texel_faces = rng.integers(0, 20, 150)
+    covered_faces = np.concatenate([texel_faces, texel_faces])
     texel_rows = rng.integers(0, 99, (300, 4)), rng.uniform(0, 1, (300, 4)).astype(np.float32)
-    landing = Landing.of(pixels, texel_pixels, texel_rows, (covered, covered_faces), size)
+    landing = Landing.of(pixels, covered, texel_rows, texel_faces, size)
     where = {p: i for i, p in enumerate(covered)}
     for k, p in enumerate(pixels):
         if p in where:

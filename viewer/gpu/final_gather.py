@@ -51,20 +51,26 @@ class GatherRays:
 
     hits: np.ndarray
     """(S, K) int32."""
+    coarse: np.ndarray | None = None
+    """(S,) bool or None: the samples that cast half their rays (`of`)."""
 
     @staticmethod
     def of(points: np.ndarray, normals: np.ndarray, caster: TriangleCaster, face_tile: np.ndarray,
            tile_origin: np.ndarray, tile_n: np.ndarray, width: int, lift: float, rays: int = RAYS,
-           seed: int = 0) -> "GatherRays":
+           seed: int = 0, coarse: np.ndarray | None = None) -> "GatherRays":
         """points, normals (S, 3): the samples; caster: the scene's triangles (its faces are the scene's
         faces); face_tile (F,): each scene face's lightmap tile, -1 for none; tile_origin
         (tiles, 2) and tile_n (tiles,): the atlas layout (viewer.gpu.direct_bake.lightmap_layout),
-        `width` texels a side; lift: how far off the surface the rays start."""
+        `width` texels a side; lift: how far off the surface the rays start. `coarse` (S,) bool: samples
+        that cast only the strata of even number (and the scouts), each odd one repeating the hit of the
+        stratum beside it in the same row (`paired_rays`): half the rays, for samples whose light the
+        tent averages over many records anyway (a scanned mesh's)."""
         frame = _Frame.of(points, normals, rays, seed)
         hits = np.empty((frame.count, rays), np.int32)
         layout = (caster, face_tile, tile_origin, tile_n, width)
-        _cast_samples(frame, lift, np.arange(frame.count), rays, layout, hits)
-        return GatherRays(hits)
+        coarse = None if coarse is None or not np.any(coarse) else np.asarray(coarse, np.bool_)
+        _cast_samples(frame, lift, np.arange(frame.count), rays, layout, hits, coarse)
+        return GatherRays(hits, coarse)
 
     def after_moving(self, sample_moved: np.ndarray, pixel_moved: np.ndarray, pixel_points: np.ndarray,
                      moved: np.ndarray, slack: float, points: np.ndarray, normals: np.ndarray, caster: TriangleCaster,
@@ -93,13 +99,18 @@ class GatherRays:
         enclosed = _all_backs(self.hits[:, scouts], int(width))
         again = np.flatnonzero(enclosed & todo.any(axis=1))
         todo[enclosed] = False
+        coarse, repeated = self.coarse, paired_rays(rays)[1]
+        if coarse is not None:   # a coarse sample's repeated rays take their partners' hits again below
+            todo[np.ix_(np.flatnonzero(coarse), repeated)] = False
         rows = np.argwhere(todo).astype(np.int64)
         hits[todo] = ESCAPED
         _cast(frame, lift, rows, *layout, hits)
-        _cast_samples(frame, lift, again, rays, layout, hits)
-        closed = np.flatnonzero(_all_backs(hits[:, scouts], int(width)) & ~enclosed)   # enclosed by the move
-        _repeat_scouts(hits, closed, scouts)
-        return GatherRays(hits)
+        _cast_samples(frame, lift, again, rays, layout, hits, coarse)
+        closed = _all_backs(hits[:, scouts], int(width)) & ~enclosed   # enclosed by the move
+        if coarse is not None:
+            _repeat_pairs(hits, np.flatnonzero(coarse & ~closed & ~enclosed), rays)
+        _repeat_scouts(hits, np.flatnonzero(closed), scouts)
+        return GatherRays(hits, coarse)
 
     def inside(self, width: int) -> np.ndarray:
         """(S,) bool: the samples most of whose rays meet the backs of faces (inside a solid); `width`:
@@ -177,11 +188,28 @@ def scout_rays(rays: int) -> np.ndarray:
     return np.unique(np.linspace(0, rays - 1, min(SCOUTS, rays)).round().astype(np.int64))
 
 
+def paired_rays(rays: int) -> tuple[np.ndarray, np.ndarray]:
+    """(cast, repeated): the rays a coarse sample casts, the even strata and the scouts, and those it
+    repeats, each the odd stratum after an even one in the same row (a row has 2r strata) that is not
+    a scout. The scouts are spread over the strata (`scout_rays`), so a repeated ray's partner is cast."""
+    scouts = scout_rays(rays)
+    index = np.arange(rays)
+    repeated = index[(index % 2 == 1) & ~np.isin(index, scouts)]
+    return np.setdiff1d(index, repeated), repeated
+
+
+def _repeat_pairs(hits: np.ndarray, samples: np.ndarray, rays: int) -> None:
+    """Every repeated ray of `samples` (`paired_rays`) takes its partner's hit."""
+    repeated = paired_rays(rays)[1]
+    hits[samples[:, None], repeated] = hits[samples[:, None], repeated - 1]
+
+
 def _cast_samples(frame: "_Frame", lift: float, samples: np.ndarray, rays: int, layout: tuple,
-                  hits: np.ndarray) -> None:
+                  hits: np.ndarray, coarse: np.ndarray | None = None) -> None:
     """Gather `samples` whole into hits: none for those that look out of the scene (`nothing_ahead`: the
     backs of a room's walls, a third of the Cornell box's samples), their scouts for the others, then the
-    other rays of those not enclosed (the enclosed ones repeat their scouts' hits)."""
+    other rays of those not enclosed (the enclosed ones repeat their scouts' hits), of the `coarse` ones
+    half (`paired_rays`)."""
     outward = layout[0].nothing_ahead(frame.points[samples], frame.normals[samples], 0.5 * lift)
     hits[samples[outward]] = ESCAPED
     samples = samples[~outward]
@@ -198,7 +226,12 @@ def _cast_samples(frame: "_Frame", lift: float, samples: np.ndarray, rays: int, 
 
     cast(samples, scouts)
     enclosed = _all_backs(hits[samples[:, None], scouts], int(layout[-1]))
-    cast(samples[~enclosed], np.setdiff1d(np.arange(rays), scouts))
+    open_ = samples[~enclosed]
+    few = np.zeros(len(open_), bool) if coarse is None else coarse[open_]
+    cast(open_[~few], np.setdiff1d(np.arange(rays), scouts))
+    if few.any():
+        cast(open_[few], np.setdiff1d(paired_rays(rays)[0], scouts))
+        _repeat_pairs(hits, open_[few], rays)
     _repeat_scouts(hits, samples[enclosed], scouts)
 
 

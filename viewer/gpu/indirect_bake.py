@@ -30,7 +30,8 @@ from viewer.gpu.context import finish
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.gpu.lightmap_update import (Landing, Reached, gather_reflected, gather_texels, reflectance, with_lit,
                                         texture_ratio)
-from viewer.gpu.texel_samples import dark_fill, gather_records, strided_samples, tent_neighbours, texel_rows
+from viewer.gpu.texel_samples import (dark_fill, gather_records, small_tiles, strided_samples, tent_neighbours,
+                                     texel_rows)
 from viewer.probes.weights import SurfaceBake, SurfaceWeights
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
@@ -213,7 +214,8 @@ class BakedIndirectLight:
                 self._records = gather_records(lightmap, self._samples)
             records = np.concatenate([self._records[0], len(self._samples) + self._records[0]])
             traced = self._gather_rays(scene, lightmap, caster, points[records], normals[normal_id[records]])
-            landing = Landing.of(traced.landing[0], self._texel_pixels, self._texel_rows, self._covered, len(self._image))
+            landing = Landing.of(traced.landing[0], self._texel_pixels, self._texel_rows, lightmap.texel_faces,
+                                 len(self._image))
             gather = (traced, tent_neighbours(lightmap, self._samples, *self._records, traced), landing)
             self._traced = (scene, lightmap, traced)
         self._made = (geometry, caster, gather)
@@ -250,7 +252,8 @@ class BakedIndirectLight:
                   4e-6 * float(np.min(hi - lo)))
         moved = self._moved_tiles(scene, lightmap)
         if moved is None:
-            return GatherRays.of(points, normals, *layout, self.gather_rays)
+            return GatherRays.of(points, normals, *layout, self.gather_rays,
+                                 coarse=np.tile(small_tiles(lightmap, self._samples[self._records[0]]), 2))
         _, old_lightmap, old_rays = self._traced
         tiles = lightmap.texel_faces[self._samples[self._records[0]]]
         sample_moved = np.isin(np.concatenate([tiles, tiles]), moved)

@@ -139,27 +139,23 @@ class Landing:
 
     @staticmethod
     def of(pixels: np.ndarray, texel_pixels: np.ndarray, texel_rows: tuple[np.ndarray, np.ndarray],
-           covered: tuple[np.ndarray, np.ndarray], size: int) -> "Landing":
-        """texel_pixels (N,) and texel_rows ((N, 4), (N, 4)): every pixel the samples' light is spread to and
-        how; covered (pixels, faces): the covered pixels (front texels, then back) and their faces; `size`:
-        the image's pixels."""
+           texel_faces: np.ndarray, size: int) -> "Landing":
+        """texel_pixels (2T,) and texel_rows ((2T, 4), (2T, 4)): the pixel of every covered texel, front
+        sides then back, and the samples its light is spread from and how; texel_faces (T,): each texel's
+        face among the scene's non-degenerate ones; `size`: the image's pixels."""
         rows, weights = texel_rows
         return Landing(pixels, *_landing_reads(pixels, np.ascontiguousarray(texel_pixels), rows, weights,
-                                               np.asarray(covered[0], np.int64), np.asarray(covered[1], np.int64),
-                                               size))
+                                               np.ascontiguousarray(texel_faces), size))
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _landing_reads(pixels, texel_pixels, texel_rows, texel_weights, covered, covered_faces, size):
+def _landing_reads(pixels, texel_pixels, texel_rows, texel_weights, texel_faces, size):
     """(rows, weights, faces, texels, samples) of `Landing.of`, in compiled passes (numpy's took 60 ms of
     the Cornell box's first update after new geometry)."""
     spread = np.full(size, -1, np.int32)
     for i in numba.prange(texel_pixels.shape[0]):
         spread[texel_pixels[i]] = i
-    where = np.full(size, -1, np.int32)
-    for i in numba.prange(covered.shape[0]):
-        where[covered[i]] = i
-    count, half = pixels.shape[0], max(covered.shape[0] // 2, 1)
+    count, half = pixels.shape[0], max(texel_pixels.shape[0] // 2, 1)
     rows = np.zeros((count, texel_rows.shape[1]), texel_rows.dtype)
     weights = np.zeros((count, texel_rows.shape[1]), np.float32)
     faces, texels = np.full(count, -1, np.int64), np.full(count, -1, np.int64)
@@ -167,9 +163,7 @@ def _landing_reads(pixels, texel_pixels, texel_rows, texel_weights, covered, cov
         t = spread[pixels[i]]
         if t >= 0:
             rows[i], weights[i] = texel_rows[t], texel_weights[t]
-        c = where[pixels[i]]
-        if c >= 0:
-            faces[i], texels[i] = covered_faces[c], c % half
+            faces[i], texels[i] = texel_faces[t % half], t % half
     samples = _weighted_rows(rows, weights, np.arange(count), texel_rows.max() + 1 if texel_rows.size else 0)
     return rows, weights, faces, texels, samples
 
