@@ -19,7 +19,7 @@ from viewer.scene import load
 @pytest.fixture(scope="module")
 def cut_box(gl_context):
     """The Cornell box with its large box cut into 12,000 triangles, most narrower than two texels, set
-    in a renderer with its probes: (renderer's indirect lightmap, direct lightmap, offscreen)."""
+    in a renderer with its probes: (the renderer's indirect lightmap, its direct lightmap, the probes)."""
     from viewer.bench.scans import refine
 
     cornell = load("cornell")
@@ -32,10 +32,11 @@ def cut_box(gl_context):
                     face_group=np.concatenate([cornell.face_group[keep],
                                                np.full(len(cut), cornell.group_index("large-box"))]))
     offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
+    probes = solve_probes(gl_context, scene, GISettings(), include_emitted=False)
     offscreen.renderer.set_scene(scene)
-    offscreen.renderer.set_probes(solve_probes(gl_context, scene, GISettings(), include_emitted=False))
+    offscreen.renderer.set_probes(probes)
     offscreen.render_hdr(view="final")
-    yield offscreen.renderer._indirect, offscreen.renderer._baked
+    yield offscreen.renderer._indirect, offscreen.renderer._baked, probes
     offscreen.release()
 
 
@@ -45,7 +46,7 @@ def test_a_small_tiles_sample_reads_the_nearest_records_that_face_its_way(cut_bo
     lies within half the reach of the sample's plane and not inside a solid: brute force over every
     record agrees. Records that face elsewhere take no place among the FILTER_MAX (on a curved scan
     they are most of the nearest)."""
-    indirect, lightmap = cut_box
+    indirect, lightmap, _ = cut_box
     samples = indirect._samples
     records, own = indirect._records
     rays, (near, tent), _ = indirect._gather
@@ -82,7 +83,7 @@ def test_the_records_of_small_tiles_cast_half_their_rays(cut_box):
     """The gather marks the records of one-sample tiles coarse, both sides, and no other: their repeated
     rays hold their partners' hits (but for the enclosed ones, the box's inside, whose rays all repeat
     their scouts')."""
-    indirect, lightmap = cut_box
+    indirect, lightmap, _ = cut_box
     records = indirect._records[0]
     rays = indirect._gather[0]
     small = texel_samples.small_tiles(lightmap, indirect._samples[records])
@@ -93,3 +94,25 @@ def test_the_records_of_small_tiles_cast_half_their_rays(cut_box):
     hits = rays.hits[rays.coarse & ~enclosed]
     assert len(hits) > 0.3 * rays.coarse.sum()
     assert (hits[:, repeated] == hits[:, repeated - 1]).all()
+
+
+def test_a_small_tiles_sample_takes_its_records_probe_weights(cut_box):
+    """The probe weights of a one-sample tile's sample are its record's, both sides; every other sample
+    has the weights of its own point and normal (`weight_rows`)."""
+    from viewer.probes.weights import SurfaceWeights
+
+    indirect, lightmap, probes = cut_box
+    records, own = indirect._records
+    small = texel_samples.small_tiles(lightmap, indirect._samples)
+    weighed, rows = texel_samples.weight_rows(small, (records, own))
+    count = len(small)
+    assert len(weighed) < 2 * count and len(rows) == 2 * count
+    taken = weighed[rows]                              # the sample whose weights each one takes
+    front = np.where(small, records[own], np.arange(count))
+    np.testing.assert_array_equal(taken, np.concatenate([front, count + front]))
+    points, normals, normal_id = indirect._sample_points(lightmap)
+    own_weights = SurfaceWeights.of(points, normals[normal_id], probes, indirect._caster)
+    np.testing.assert_array_equal(indirect._bake.weights, own_weights.weights[taken])
+    everyone = texel_samples.weight_rows(small, None)
+    np.testing.assert_array_equal(everyone[0][everyone[1]], np.arange(2 * count))
+

@@ -31,8 +31,8 @@ from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.gpu.lightmap_update import (Landing, Reached, gather_reflected, gather_texels, reflectance, with_lit,
                                         texture_ratio)
 from viewer.gpu.texel_samples import (dark_fill, gather_records, small_tiles, strided_samples, tent_neighbours,
-                                     texel_rows)
-from viewer.probes.weights import SurfaceBake, SurfaceWeights
+                                     texel_rows, weight_rows)
+from viewer.probes.weights import SurfaceBake, SurfaceWeights, lobe_normals
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 
@@ -195,8 +195,10 @@ class BakedIndirectLight:
             geometry, scene, lightmap, rays = self._geometry_now()
         caster, gather = self._geometry_work(geometry, scene, lightmap, rays)
         points, normals, normal_id = self._sample_points(lightmap)
-        weights = SurfaceWeights.of(points, normals[normal_id], probes, caster)
-        return SurfaceBake.of(weights, normal_id, normals), caster, gather
+        small = small_tiles(lightmap, self._samples)   # a scan's: their records' weights, their lobes rounded
+        weighed, rows = weight_rows(small, self._records)
+        weights = SurfaceWeights.of(points[weighed], normals[normal_id[weighed]], probes, caster).take(rows)
+        return SurfaceBake.of(weights, *lobe_normals(normals, normal_id, np.tile(small, 2))), caster, gather
 
     def _geometry_work(self, geometry: int, scene: Scene, lightmap: BakedDirectLight,
                        rays: bool) -> tuple[TriangleCaster, tuple | None]:

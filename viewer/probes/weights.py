@@ -29,7 +29,7 @@ import numba
 import numpy as np
 
 from viewer.rays import dda, embree
-from viewer.rays.cast import TriangleCaster
+from viewer.rays.cast import TriangleCaster, distinct_rows
 from viewer.probes import sh
 from viewer.probes.grid import ProbeGrid
 
@@ -80,6 +80,10 @@ class SurfaceWeights:
             seen[point, corner] = ~caster.blocked(origin[point], directions[point, corner], lengths[point, corner])
             weights[part] = _normalized(w, seen)
         return SurfaceWeights(base, weights, int(probes.resolution))
+
+    def take(self, rows: np.ndarray) -> "SurfaceWeights":
+        """The weights of the points `rows` (indices), in that order."""
+        return SurfaceWeights(self.base[rows], self.weights[rows], self.resolution)
 
     def irradiance(self, probes: ProbeGrid, normals: np.ndarray) -> np.ndarray:
         """(P, 3) irradiance at the points from `probes` (the same lattice as the weights)."""
@@ -242,6 +246,31 @@ class SurfaceBake:
             points = np.arange(len(self.weights))
         _mix(pair, self.texel_pairs, self.weights, out, points)
         return out
+
+
+def lobe_normals(normals: np.ndarray, normal_id: np.ndarray, coarse: np.ndarray,
+                 steps: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """(normal_id, normals) for `SurfaceBake.of`: the points in `coarse` (T,) bool take their normals
+    with each component rounded to 1 / `steps` (and made unit again); the others keep theirs. A
+    scanned mesh's one-sample tiles each have a normal of their own (138k on the 68k-triangle scan, times
+    8 probes a pair each); rounded, they share a few thousand, while the irradiance of an L2 lobe turns
+    by under 2 degrees' worth."""
+    normal_id = np.asarray(normal_id, np.int64)
+    if not np.any(coarse):
+        return normal_id, normals
+    kept = np.zeros(len(normals), bool)          # the normals of the other points, as they are
+    kept[normal_id[~coarse]] = True
+    used = np.zeros(len(normals), bool)          # and those the coarse points round
+    used[normal_id[coarse]] = True
+    used = np.flatnonzero(used)
+    rounded = np.round(np.asarray(normals)[used] * steps).astype(np.int64)
+    first, which = distinct_rows(rounded)
+    snapped = rounded[first].astype(np.float64)
+    snapped /= np.maximum(np.linalg.norm(snapped, axis=1, keepdims=True), 1e-12)
+    number = np.cumsum(kept) - 1
+    number[used] = int(kept.sum()) + np.asarray(which).ravel()   # a normal both keep is kept for the others
+    ids = np.where(coarse, number[normal_id], np.cumsum(kept)[normal_id] - 1)
+    return ids, np.concatenate([np.asarray(normals)[kept], snapped])
 
 
 @numba.njit(cache=True, nogil=True)
