@@ -179,17 +179,7 @@ def test_samples_that_look_out_of_the_room_are_not_cast_and_land_as_if_they_were
     the hits are those that casting every ray gives, on the Cornell box's walls, floor and boxes alike."""
     from viewer.gpu import final_gather
 
-    scene = load("cornell")
-    rng = np.random.default_rng(4)
-    faces = rng.integers(0, len(scene.faces), 400)
-    u, v = rng.random((2, 400))
-    flip = u + v > 1
-    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
-    corners = scene.triangles[faces]
-    points = corners[:, 0] + u[:, None] * (corners[:, 1] - corners[:, 0]) + v[:, None] * (corners[:, 2] - corners[:, 0])
-    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    points, normals = np.concatenate([points, points]), np.concatenate([normals, -normals])   # both sides
+    scene, points, normals, _ = cornell_samples(400, 4)   # both sides
     cells = dda.Cells.of(voxelize_with_faces(scene, 16), scene)
     caster = TriangleCaster(scene, cells, backend)
     outward = caster.nothing_ahead(points, normals, 1e-6)

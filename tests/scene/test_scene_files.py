@@ -298,18 +298,28 @@ def test_an_obj_read_in_bulk_is_the_obj_read_line_by_line(tmp_path):
     line reader's scene, bit for bit."""
     from viewer.scene import obj
 
-    (tmp_path / "m.mtl").write_text("newmtl red\nKd 0.8 0.1 0.1\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n")
     text = ("mtllib m.mtl\n# a comment\nv 0 0 0\nv 1 0 0 1.0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
             "usemtl red\nf 1/1/1 2/1/1 3/1/1 4/1/1\nv 0 0 1\nv 1 0 1\nv 1 1 1\n"
             "usemtl lamp\nf -3 -2 -1 # relative\nusemtl red\nf 5//1 6//1 7//1 3 2\nf 1 2 -1\n")
-    path = tmp_path / "mixed.obj"
+    bulk, each = read_twice(tmp_path / "mixed.obj", text, obj._read_bulk, obj._read_lines)
+    assert bulk is not None and len(bulk.faces) == 2 + 1 + 3 + 1
+    assert_same_scene(bulk, each, ("red", "lamp"))
+
+
+def read_twice(path, text: str, first, second):
+    """`text` written to `path` (beside an MTL of two materials, red and lamp), read by two OBJ readers."""
+    from viewer.scene import obj
+
+    (path.parent / "m.mtl").write_text("newmtl red\nKd 0.8 0.1 0.1\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n")
     path.write_text(text)
     lines = obj._lines(path)
-    bulk, each = obj._read_bulk(path, lines), obj._read_lines(path, lines)
-    assert bulk is not None and len(bulk.faces) == 2 + 1 + 3 + 1
+    return first(path, lines), second(path, lines)
+
+
+def assert_same_scene(a, b, groups):
     for name in ("vertices", "faces", "albedo", "emission", "face_group"):
-        np.testing.assert_array_equal(getattr(bulk, name), getattr(each, name), err_msg=name)
-    assert bulk.groups == each.groups == ("red", "lamp")
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert a.groups == b.groups == groups
 
 
 def test_an_obj_of_plain_triangles_is_read_as_the_bulk_reader_reads_it(tmp_path):
@@ -319,18 +329,13 @@ def test_an_obj_of_plain_triangles_is_read_as_the_bulk_reader_reads_it(tmp_path)
     line, or an index past the vertices leave the file to the bulk reader."""
     from viewer.scene import obj
 
-    (tmp_path / "m.mtl").write_text("newmtl red\nKd 0.8 0.1 0.1\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n")
     plain = ("mtllib m.mtl\n# a comment\nv 0 0 0\nv 1 0 0 1.0\nv 1 1 0\nv 0.1 1 0.30000000000000004\nvt 0 0\n"
              "vn 0 0 1\nf 1 2 3\nusemtl red\nf 1\t3 4\ng top\nv 0 0 1e-3\nv 1 0 1 # end\nusemtl lamp\n"
              "f  4 5 6 # lamp\ns off\nusemtl red\nf 1 2 5\n")
     path = tmp_path / "plain.obj"
-    path.write_text(plain)
-    lines = obj._lines(path)
-    fast, bulk = obj._read_plain(path, lines), obj._read_bulk(path, lines)
+    fast, bulk = read_twice(path, plain, obj._read_plain, obj._read_bulk)
     assert fast is not None and len(fast.faces) == 4
-    for name in ("vertices", "faces", "albedo", "emission", "face_group"):
-        np.testing.assert_array_equal(getattr(fast, name), getattr(bulk, name), err_msg=name)
-    assert fast.groups == bulk.groups == ("default", "red", "lamp")
+    assert_same_scene(fast, bulk, ("default", "red", "lamp"))
     for other in ("f 1 2 3 4\n", "f 1/1 2/1 3/1\n", "f 1 2 -1\n", " v 0 0 2\n", "v 0 0\n", "f 1 2 9\n",
                   "f 1 2 x\n", "f 1 2 3 # three\nf 1 3 4 5 # four\n"):
         path.write_text(plain + other)
