@@ -121,6 +121,13 @@ class Cells:
         return Cells._make(scene, lo, h, n, cell, triangle, np.zeros(len(triangle), np.int64))
 
     @staticmethod
+    def unlisted(scene, lo, h: float, n: int) -> "Cells":
+        """The grid of `blocking` with no triangle listed in its cells, for a caster that traces the
+        triangles themselves (Embree) and reads only the grid's frame and the triangles."""
+        empty = np.zeros(0, np.int64)
+        return Cells._make(scene, np.asarray(lo, np.float64), h, n, empty, empty, empty)
+
+    @staticmethod
     def _make(scene, lo, h, n, cell, triangle, voxel) -> "Cells":
         tri = scene.triangles
         first = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=n ** 3))]).astype(np.int64)
