@@ -74,8 +74,8 @@ class BakedIndirectLight:
         """Each sample's pixel in the (front | back) image: the front sides', then the back sides'."""
         self._row_of = np.full(len(self._image), -1, np.int32)
         self._row_of[self._pixels] = np.arange(len(self._pixels))
-        self._texel_pixels = np.concatenate([pixels, pixels + width]).astype(np.int32)
-        self._texel_rows = (texel_rows(sources, self._row_of, width), np.concatenate([weights, weights]))
+        rows, weights, self._texel_pixels = texel_rows(sources, weights, pixels, self._row_of, width)
+        self._texel_rows = (rows, weights)
         """Every covered pixel of both sides, and the samples (rows of `SurfaceBake.irradiance`) it
         interpolates with their weights: the same for every lattice (`_dark` fills in what differs)."""
         self._caster: TriangleCaster | None = None
