@@ -16,6 +16,8 @@ longest side apart (RenderSettings.lightmap_texel: 0.02 units in the Cornell box
 
 from __future__ import annotations
 
+import weakref
+
 import moderngl
 import numba
 import numpy as np
@@ -79,7 +81,22 @@ def fitted_texel(scene: Scene, texel: float, max_side: int, max_texels: int | No
 
 def lightmap_layout(scene: Scene, texel: float):
     """Tiles for the scene's non-degenerate faces: (tile origin (F, 2) int, n (F,) int, atlas size).
-    Shelf packing, tallest tiles first."""
+    Shelf packing, tallest tiles first. The last scene's layout is kept (read-only): `fitted_texel`
+    lays the lightmap out for the texel it then makes the lightmap with (10-14 ms on a 68k-triangle scan)."""
+    last = _last_layout
+    if last is not None and last[0]() is scene and last[1] == texel:
+        return last[2]
+    layout = _layout(scene, texel)
+    for array in layout[:2]:
+        array.flags.writeable = False
+    globals()["_last_layout"] = (weakref.ref(scene), texel, layout)
+    return layout
+
+
+_last_layout: tuple | None = None   # (weak reference to the scene, texel, layout) of the last call
+
+
+def _layout(scene: Scene, texel: float):
     keep = scene.face_areas > 0
     corners = scene.triangles[keep].astype(np.float64)
     legs = np.linalg.norm(corners[:, 1:] - corners[:, :1], axis=2).max(axis=1)
