@@ -200,7 +200,7 @@ class BakedDirectLight(TriangleBuffer):
         vertices = lightmap_vertices(scene, origin, n, self.size)
         self._uv, self._colours = scene.uv, None   # the texture coordinates the buffer holds, and the colours
         self.vertex_count = len(vertices)
-        self.buffer = ctx.buffer(vertices.tobytes())
+        self.buffer = ctx.buffer(np.ascontiguousarray(vertices))   # read in place, not copied
         position, normal, tile, inside = lightmap_texels(scene, origin, n, self.size)
         self.covered = position[..., 3] > 0
         """(H, W) the atlas texels a tile covers."""
@@ -210,8 +210,8 @@ class BakedDirectLight(TriangleBuffer):
         """(T,) each covered texel's face, as an index into the non-degenerate faces."""
         self.texel_inside = inside[self.covered]
         """(T,) the covered texels whose point lies in their triangle (`lightmap_texels`)."""
-        self._inputs = [ctx.texture(self.size, 4, position.tobytes(), dtype="f4"),
-                        ctx.texture(self.size, 4, normal.tobytes(), dtype="f4")]
+        self._inputs = [ctx.texture(self.size, 4, np.ascontiguousarray(position), dtype="f4"),
+                        ctx.texture(self.size, 4, np.ascontiguousarray(normal), dtype="f4")]
         for texture in self._inputs:
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.texture = ctx.texture((2 * self.size[0], self.size[1]), 4, dtype="f2")
@@ -231,7 +231,7 @@ class BakedDirectLight(TriangleBuffer):
             colours = face_colours(scene) if colours is None else colours
             self._colours = write_colours(self.buffer, colours, self._colours, 64)
         else:
-            self.buffer.write(lightmap_vertices(scene, self.tile_origin, self.tile_n, self.size).tobytes())
+            self.buffer.write(np.ascontiguousarray(lightmap_vertices(scene, self.tile_origin, self.tile_n, self.size)))
             self._colours = None
         self._uv = scene.uv
 

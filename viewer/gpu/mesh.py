@@ -140,7 +140,7 @@ class SceneMesh(TriangleBuffer):
         super().__init__(ctx)
         vertices = self._vertices(scene)
         self.vertex_count = len(vertices)
-        self.buffer = ctx.buffer(vertices.tobytes())
+        self.buffer = ctx.buffer(np.ascontiguousarray(vertices))   # read in place, not copied
         self.colours: np.ndarray | None = None   # `face_colours` the buffer holds, once a colour edit wrote them
 
     @staticmethod
@@ -160,7 +160,7 @@ class SceneMesh(TriangleBuffer):
             if scene.uv is previous.uv:   # the same array: `in_draw_order` keeps it across colour edits
                 old.colours = write_colours(old.buffer, face_colours(scene), old.colours, 56)
             else:
-                old.buffer.write(SceneMesh._vertices(scene).tobytes())
+                old.buffer.write(np.ascontiguousarray(SceneMesh._vertices(scene)))
                 old.colours = None
             return old
         if old is not None:
