@@ -148,3 +148,30 @@ def test_first_hits_are_the_nearest_triangle_and_its_side():
     assert np.all(np.isfinite(truth)) and np.all(hits != dda.MISS)
     assert np.allclose(distance, truth, rtol=0, atol=1e-9)
     assert np.array_equal(hits == dda.BACKFACE, ~front)
+
+
+def test_a_triangle_is_listed_in_the_cells_of_its_box_its_plane_passes_through():
+    """`_listing` against every cell of the grid, one at a time: a triangle is listed in a cell of its
+    bounding box where the cell's centre lies within half the cell's extent along the normal of its plane,
+    the entries sorted by flat cell and, within a cell, by triangle."""
+    from viewer.scene.types import Scene
+
+    rng = np.random.default_rng(9)
+    n, h, lo = 8, 0.25, np.zeros(3)
+    centres = rng.uniform(0.1, 1.9, (40, 1, 3))
+    vertices = (centres + rng.normal(scale=0.3, size=(40, 3, 3))).clip(0.0, 1.999).reshape(-1, 3)
+    faces = np.arange(120).reshape(40, 3)
+    scene = Scene("cloud", vertices, faces, np.full((40, 3), 0.5), np.zeros((40, 3)), np.zeros(40, np.int64), ("a",))
+    xyz, triangle = dda._listing(scene, lo, h, n)
+    expected = []
+    cells = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    for t, corners in enumerate(scene.triangles):
+        low, high = np.floor(corners.min(axis=0) / h), np.floor(corners.max(axis=0) / h)
+        normal = scene.face_normals[t]
+        for cell in cells[np.all((cells >= low) & (cells <= high), axis=1)]:
+            distance = abs((lo + (cell + 0.5) * h - corners[0]) @ normal)
+            if distance <= 0.5 * h * np.abs(normal).sum() * (1 + 1e-9) + 1e-12 * h:
+                expected.append((cell[0] + n * (cell[1] + n * cell[2]), t))
+    assert len(expected) > 100
+    flat = xyz[:, 0] + n * (xyz[:, 1] + n * xyz[:, 2])
+    assert list(zip(flat.tolist(), triangle.tolist())) == sorted(expected)

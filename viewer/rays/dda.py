@@ -39,26 +39,43 @@ def voxel_of(keys: np.ndarray, key: np.ndarray) -> np.ndarray:
 
 def _listing(scene, lo: np.ndarray, h: float, n: int) -> tuple[np.ndarray, np.ndarray]:
     """((E, 3) cell, (E,) triangle) sorted by flat cell: every usable triangle of `scene` in each cell of
-    its bounding box that its plane passes through."""
+    its bounding box that its plane passes through (compiled, on every core: a 68k-triangle scan's
+    listing took 40 ms of numpy's passes over every candidate cell)."""
     tri = scene.triangles
     areas = scene.face_areas
     usable = np.nonzero(areas > 1e-12 * max(float(areas.max()), 1e-30))[0]
-    low = np.clip(np.floor((tri[usable].min(axis=1) - lo) / h).astype(np.int64), 0, n - 1)
-    extent = np.clip(np.floor((tri[usable].max(axis=1) - lo) / h).astype(np.int64), 0, n - 1) - low + 1
+    corners = np.ascontiguousarray(tri[usable], np.float64)
+    low = np.clip(np.floor((corners.min(axis=1) - lo) / h).astype(np.int64), 0, n - 1)
+    extent = np.clip(np.floor((corners.max(axis=1) - lo) / h).astype(np.int64), 0, n - 1) - low + 1
     sizes = extent.prod(axis=1)
-    owner = np.repeat(np.arange(len(usable)), sizes)
-    local = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-    ext = extent[owner]
-    xyz = low[owner] + np.stack([local % ext[:, 0], local // ext[:, 0] % ext[:, 1],
-                                 local // (ext[:, 0] * ext[:, 1])], axis=1)
-    triangle = usable[owner]
-    normal = scene.face_normals[triangle]
-    centre = lo + (xyz + 0.5) * h
-    distance = np.abs(np.einsum("ij,ij->i", centre - tri[triangle, 0], normal))
-    near = distance <= 0.5 * h * np.abs(normal).sum(axis=1) * (1 + 1e-9) + 1e-12 * h
+    first = np.concatenate([[0], np.cumsum(sizes)])
+    xyz, triangle = np.empty((int(first[-1]), 3), np.int64), np.empty(int(first[-1]), np.int64)
+    near = np.empty(int(first[-1]), np.bool_)
+    _candidates(corners, np.ascontiguousarray(scene.face_normals[usable], np.float64), usable,
+                np.asarray(lo, np.float64), float(h), low, extent, first, xyz, triangle, near)
     xyz, triangle = xyz[near], triangle[near]
     order = np.argsort(xyz[:, 0] + n * (xyz[:, 1] + n * xyz[:, 2]), kind="stable")
     return xyz[order], triangle[order]
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _candidates(corners, normals, usable, lo, h, low, extent, first, xyz, triangle, near):
+    """Each triangle's bounding-box cells (x fastest) from `first[t]` on, and whether its plane passes
+    within the cell: the distance from the cell's centre to the plane at most half the cell's extent
+    along the normal (with a hair of tolerance)."""
+    for t in numba.prange(corners.shape[0]):
+        nx, ny, nz = normals[t, 0], normals[t, 1], normals[t, 2]
+        reach = 0.5 * h * ((abs(nx) + abs(ny)) + abs(nz)) * (1 + 1e-9) + 1e-12 * h
+        e0, e1 = extent[t, 0], extent[t, 1]
+        for local in range(first[t + 1] - first[t]):
+            i = first[t] + local
+            x, y, z = low[t, 0] + local % e0, low[t, 1] + local // e0 % e1, low[t, 2] + local // (e0 * e1)
+            xyz[i, 0], xyz[i, 1], xyz[i, 2] = x, y, z
+            triangle[i] = usable[t]
+            dx = lo[0] + (x + 0.5) * h - corners[t, 0, 0]
+            dy = lo[1] + (y + 0.5) * h - corners[t, 0, 1]
+            dz = lo[2] + (z + 0.5) * h - corners[t, 0, 2]
+            near[i] = abs((dx * nx + dy * ny) + dz * nz) <= reach
 
 
 @dataclass(frozen=True)
