@@ -83,13 +83,13 @@ def lightmap_layout(scene: Scene, texel: float):
     """Tiles for the scene's non-degenerate faces: (tile origin (F, 2) int, n (F,) int, atlas size).
     Shelf packing, tallest tiles first. The last scene's layout is kept (read-only): `fitted_texel`
     lays the lightmap out for the texel it then makes the lightmap with (10-14 ms on a 68k-triangle scan)."""
-    last = _last_layout
-    if last is not None and last[0]() is scene and last[1] == texel:
-        return last[2]
+    global _last_layout
+    if _last_layout is not None and _last_layout[0]() is scene and _last_layout[1] == texel:
+        return _last_layout[2]
     layout = _layout(scene, texel)
     for array in layout[:2]:
         array.flags.writeable = False
-    globals()["_last_layout"] = (weakref.ref(scene), texel, layout)
+    _last_layout = (weakref.ref(scene), texel, layout)
     return layout
 
 

@@ -69,6 +69,7 @@ class BakedIndirectLight:
         sample, sources, weights = strided_samples(lightmap, rows, columns)
         self._samples = np.flatnonzero(sample)
         """The texels (indices into lightmap.texel_points) that the probes' light is evaluated at."""
+        self._small = small_tiles(lightmap, self._samples)   # a scan's: records' weights, half rays, rounded lobes
         pixels = rows * 2 * width + columns
         self._pixels = np.concatenate([pixels[sample], pixels[sample] + width])
         """Each sample's pixel in the (front | back) image: the front sides', then the back sides'."""
@@ -195,10 +196,9 @@ class BakedIndirectLight:
             geometry, scene, lightmap, rays = self._geometry_now()
         caster, gather = self._geometry_work(geometry, scene, lightmap, rays)
         points, normals, normal_id = self._sample_points(lightmap)
-        small = small_tiles(lightmap, self._samples)   # a scan's: their records' weights, their lobes rounded
-        weighed, rows = weight_rows(small, self._records)
+        weighed, rows = weight_rows(self._small, self._records)
         weights = SurfaceWeights.of(points[weighed], normals[normal_id[weighed]], probes, caster).take(rows)
-        return SurfaceBake.of(weights, *lobe_normals(normals, normal_id, np.tile(small, 2))), caster, gather
+        return SurfaceBake.of(weights, *lobe_normals(normals, normal_id, np.tile(self._small, 2))), caster, gather
 
     def _geometry_work(self, geometry: int, scene: Scene, lightmap: BakedDirectLight,
                        rays: bool) -> tuple[TriangleCaster, tuple | None]:
@@ -255,7 +255,7 @@ class BakedIndirectLight:
         moved = self._moved_tiles(scene, lightmap)
         if moved is None:
             return GatherRays.of(points, normals, *layout, self.gather_rays,
-                                 coarse=np.tile(small_tiles(lightmap, self._samples[self._records[0]]), 2))
+                                 coarse=np.tile(self._small[self._records[0]], 2))
         _, old_lightmap, old_rays = self._traced
         tiles = lightmap.texel_faces[self._samples[self._records[0]]]
         sample_moved = np.isin(np.concatenate([tiles, tiles]), moved)

@@ -187,7 +187,7 @@ def gather_records(lightmap: BakedDirectLight, samples: np.ndarray) -> tuple[np.
     surface's area instead of its triangle count (on a 68k-triangle scan, 136k such samples a side make
     a few thousand records)."""
     face = lightmap.texel_faces[samples]
-    small = lightmap.tile_n[face] <= SAMPLE_STRIDE
+    small = small_tiles(lightmap, samples)
     own = np.arange(len(samples))
     if small.any():
         small = np.flatnonzero(small)

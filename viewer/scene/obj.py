@@ -84,8 +84,8 @@ def _read_plain(path: Path, lines: list[str]) -> Scene | None:
     starts with a space: `_read_bulk` reads those)."""
     vertices: list[str] = []
     triangles: list[str] = []
-    switches: list[tuple[int, int]] = []    # (triangles before it, material) at each material line
     state = _Materials()
+    switches: list[tuple[int, int]] = [(0, state.current)]   # (triangles before it, material) at each line
     for raw in lines:
         head = raw[:2]
         if head == "v ":
@@ -114,9 +114,8 @@ def _read_plain(path: Path, lines: list[str]) -> Scene | None:
         return None
     if not np.all(np.isfinite(positions)) or corners.min() < 1 or corners.max() > len(positions):
         return None
-    material = np.full(len(triangles), _Materials().current, np.int64)
-    for first, current in switches:
-        material[first:] = current
+    starts, current = np.array(switches, np.int64).T   # each material from its line to the next one's
+    material = np.repeat(current, np.diff(np.append(starts, len(triangles))))
     return state.scene(path, positions, corners - 1, material)
 
 
