@@ -156,11 +156,7 @@ class Shape:
     @staticmethod
     def of(scene: Scene) -> "Shape":
         lo, hi = scene.bounds
-        triangles = scene.triangles
-        cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-        doubled = np.linalg.norm(cross, axis=1)
-        normals = np.divide(cross, doubled[:, None], out=np.zeros_like(cross), where=doubled[:, None] > 0)
-        areas = 0.5 * doubled
+        triangles, areas, normals = scene.triangles, scene.face_areas, scene.face_normals   # kept by the scene
         extent = hi - lo
         return Shape(lo, hi, areas, normals, float(extent.max() / extent.min()),
                      _open_sides(triangles, areas, normals, lo, hi))
@@ -220,7 +216,8 @@ def _open_sides(triangles: np.ndarray, areas: np.ndarray, normals: np.ndarray, l
                 hi: np.ndarray) -> int:
     """How many of the six sides of the scene's box surfaces do not cover (`COVERED`)."""
     tolerance = SIDE_TOLERANCE * float((hi - lo).max())
-    low, high = triangles.min(axis=1), triangles.max(axis=1)   # (F, 3) each triangle's box
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)   # (F, 3) each triangle's box
     open_sides = 0
     for axis in range(3):
         others = [a for a in range(3) if a != axis]

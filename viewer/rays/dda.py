@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from viewer.rays.listing import listing as _listing
+
 MISS = -1
 """The ray left the grid (or reached the end of its segment) without crossing a surface."""
 BACKFACE = -2
@@ -35,43 +37,6 @@ def voxel_of(keys: np.ndarray, key: np.ndarray) -> np.ndarray:
     """Index of each key in the sorted voxel keys, -1 where absent."""
     where = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
     return np.where(keys[where] == key, where, -1)
-
-
-def _listing(scene, lo: np.ndarray, h: float, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """((E, 3) cell, (E,) triangle) sorted by flat cell: every usable triangle of `scene` in each cell of
-    its bounding box that its plane passes through (compiled, on every core: a 68k-triangle scan's
-    listing took 40 ms of numpy's passes over every candidate cell)."""
-    areas = scene.face_areas
-    usable = np.nonzero(areas > 1e-12 * max(float(areas.max()), 1e-30))[0]
-    corners = np.ascontiguousarray(scene.triangles[usable], np.float64)
-    low = np.clip(np.floor((corners.min(axis=1) - lo) / h).astype(np.int64), 0, n - 1)
-    extent = np.clip(np.floor((corners.max(axis=1) - lo) / h).astype(np.int64), 0, n - 1) - low + 1
-    first = np.concatenate([[0], np.cumsum(extent.prod(axis=1))])
-    xyz, triangle, near = (np.empty(shape, kind) for shape, kind in (((first[-1], 3), np.int64),
-                                                                      (first[-1], np.int64), (first[-1], np.bool_)))
-    _candidates(corners, np.ascontiguousarray(scene.face_normals[usable], np.float64), usable,
-                np.asarray(lo, np.float64), float(h), low, extent, first, xyz, triangle, near)
-    xyz, triangle = xyz[near], triangle[near]
-    order = np.argsort(xyz[:, 0] + n * (xyz[:, 1] + n * xyz[:, 2]), kind="stable")
-    return xyz[order], triangle[order]
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _candidates(corners, normals, usable, lo, h, low, extent, first, xyz, triangle, near):
-    """Each triangle's bounding-box cells (x fastest) from `first[t]` on, and whether its plane passes
-    within the cell: the distance from the cell's centre to the plane at most half the cell's extent
-    along the normal (with a hair of tolerance)."""
-    for t in numba.prange(corners.shape[0]):
-        nx, ny, nz = normals[t, 0], normals[t, 1], normals[t, 2]
-        reach = 0.5 * h * ((abs(nx) + abs(ny)) + abs(nz)) * (1 + 1e-9) + 1e-12 * h
-        e0, e1 = extent[t, 0], extent[t, 1]
-        for local in range(first[t + 1] - first[t]):
-            i = first[t] + local
-            x, y, z = low[t, 0] + local % e0, low[t, 1] + local // e0 % e1, low[t, 2] + local // (e0 * e1)
-            xyz[i, 0], xyz[i, 1], xyz[i, 2] = x, y, z
-            triangle[i] = usable[t]
-            dx, dy = lo[0] + (x + 0.5) * h - corners[t, 0, 0], lo[1] + (y + 0.5) * h - corners[t, 0, 1]
-            near[i] = abs((dx * nx + dy * ny) + (lo[2] + (z + 0.5) * h - corners[t, 0, 2]) * nz) <= reach
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from scipy import sparse
 
 from viewer.scene import Scene
 from viewer.scene.textures import relative_at
+from viewer.rays.pieces import PIECE_EDGE, face_pairs
 from viewer.rays.voxels import (FACINGS, VoxelGrid, Voxelization, light_samples, subdivide, face_facing,
                            grid_frame, voxel_albedo)
 
@@ -123,18 +124,21 @@ def _pairs(scene: Scene, triangles: np.ndarray, faces: np.ndarray, lo: np.ndarra
     if len(faces) == 0:
         return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)),
                 np.zeros((0, 3)) if scene.textured else None)
-    centroid, piece_area, source = subdivide(triangles[faces], 0.25 * size)
+    facing = face_facing(normals[faces])
+    if not scene.textured:
+        key, source, area, moment = face_pairs(triangles[faces], scene.face_areas[faces], facing, lo, size,
+                                               resolution)
+        return key, faces[source], area, moment, None
+    centroid, piece_area, source = subdivide(triangles[faces], PIECE_EDGE * size)
     piece_face = faces[source]
     coords = np.clip(np.floor((centroid - lo) / size).astype(np.int64), 0, resolution - 1)
     cell = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2
-    key = cell * 6 + face_facing(normals[faces])[source]
+    key = cell * 6 + facing[source]
     pair, inverse = np.unique(key * len(normals) + piece_face, return_inverse=True)
     inverse = inverse.ravel()
     area = np.bincount(inverse, piece_area, minlength=len(pair))
     moment = np.stack([np.bincount(inverse, centroid[:, c] * piece_area, minlength=len(pair)) for c in range(3)],
                       axis=1)
-    tint = None
-    if scene.textured:
-        excess = (relative_at(scene, piece_face, centroid) - 1.0) * piece_area[:, None]
-        tint = np.stack([np.bincount(inverse, excess[:, c], minlength=len(pair)) for c in range(3)], axis=1)
+    excess = (relative_at(scene, piece_face, centroid) - 1.0) * piece_area[:, None]
+    tint = np.stack([np.bincount(inverse, excess[:, c], minlength=len(pair)) for c in range(3)], axis=1)
     return pair // len(normals), pair % len(normals), area, moment, tint

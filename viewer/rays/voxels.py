@@ -8,18 +8,18 @@ would cancel out on a thin wall and point nowhere useful in a corner, and light 
 meaningful facing per patch; the paper's per-cell view is `cells()`.
 
 Voxelization splits every triangle until its edges are shorter than a quarter voxel and bins the pieces
-by centroid, so areas are exact up to the pieces cut by cell faces.
+by centroid, so areas are exact up to the pieces cut by cell faces (compiled: viewer.rays.pieces).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from viewer.scene import Scene
+from viewer.rays.pieces import PIECE_EDGE, face_pairs, piece_centroids, piece_levels
 from viewer.scene.textures import relative_at, textured_faces
 
 if TYPE_CHECKING:  # scipy is imported when a voxelization needs it
@@ -140,28 +140,16 @@ def grid_frame(scene: Scene, resolution: int) -> tuple[np.ndarray, float]:
     return centre - 0.5 * size, size / resolution
 
 
-@lru_cache(maxsize=None)
-def _piece_centroids(level: int) -> np.ndarray:
-    """Barycentric centroids (4^level, 3) of the pieces of a triangle split 4-way `level` times at its
-    edge midpoints: every piece has the same area, 1/4^level of the triangle."""
-    tri = np.eye(3)[None]
-    for _ in range(level):
-        a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-        ab, bc, ca = 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)
-        tri = np.concatenate([np.stack(s, axis=1) for s in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
-    return tri.mean(axis=1)
-
-
 def subdivide(tri: np.ndarray, max_edge: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Split triangles until every edge is <= max_edge: (centroids (P, 3), area (P,), source index (P,))."""
+    """Split triangles until every edge is <= max_edge: (centroids (P, 3), area (P,), source index (P,)),
+    the same pieces as viewer.rays.pieces bins."""
     edges = np.stack([tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]], axis=1)
-    longest = np.sqrt((edges ** 2).sum(-1)).max(axis=1)
     area = 0.5 * np.linalg.norm(np.cross(edges[:, 0], -edges[:, 2]), axis=1)
-    level = np.ceil(np.log2(np.maximum(longest / max_edge, 1.0))).astype(np.int64)
+    level = piece_levels(tri, max_edge)
     centroids, areas, sources = [], [], []
     for k in np.unique(level):
         group = np.nonzero(level == k)[0]
-        bary = _piece_centroids(int(k))
+        bary = piece_centroids(int(k))
         centroids.append(np.matmul(bary, tri[group]).reshape(-1, 3))
         areas.append(np.repeat(area[group] / len(bary), len(bary)))
         sources.append(np.repeat(group, len(bary)))
@@ -241,29 +229,34 @@ def _voxelize(scene: Scene, resolution: int, normal_mode: str):
     areas = scene.face_areas
     keep = areas > 1e-12 * max(float(areas.max()), 1e-30)
     face_ids = np.nonzero(keep)[0]
-    centroid, piece_area, source = subdivide(scene.triangles[keep], 0.25 * h)
-    piece_face = face_ids[source]
     face_normal = scene.face_normals
-
-    coords = np.clip(np.floor((centroid - lo) / h).astype(np.int64), 0, resolution - 1)
-    # per face, then per piece: a (pieces x 3) @ (3 x 6) product goes to multi-threaded BLAS, which is
-    # 2-3x slower than the whole voxelization when the other core is busy
-    facing = face_facing(face_normal)[piece_face]
-    cell = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2
-    keys, inverse = _sorted_unique(cell * 6 + facing, resolution ** 3 * 6)
+    facing = face_facing(face_normal[face_ids])
+    # Items binned per voxel: a plain scene's (voxel, face) pairs, summed as its pieces are made
+    # (viewer.rays.pieces); a textured one's pieces themselves, each taking its texture where it lies.
+    piece_tint = None
+    if scene.textured:
+        centroid, piece_area, source = subdivide(scene.triangles[keep], PIECE_EDGE * h)
+        coords = np.clip(np.floor((centroid - lo) / h).astype(np.int64), 0, resolution - 1)
+        item_key = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2
+        item_key = item_key * 6 + facing[source]
+        moment = centroid * piece_area[:, None]
+        piece_tint = relative_at(scene, face_ids[source], centroid)
+    else:
+        item_key, source, piece_area, moment = face_pairs(scene.triangles[keep], areas[keep], facing, lo, h,
+                                                          resolution)
+    piece_face = face_ids[source]
+    keys, inverse = _sorted_unique(item_key, resolution ** 3 * 6)
 
     def total(values, per_face=True):
         """Area-weighted sums per voxel-facing, one contiguous column at a time (4x faster than
-        weighting the (pieces, 3) array; values per face are gathered per column)."""
+        weighting the (items, 3) array; values per face are gathered per column)."""
         columns = np.asarray(values, np.float64).T
         return np.stack([np.bincount(inverse, (column[piece_face] if per_face else column) * piece_area,
                                      minlength=len(keys)) for column in columns], 1)
 
     area = np.bincount(inverse, piece_area, minlength=len(keys))
     safe = np.maximum(area, 1e-30)[:, None]
-    position = total(centroid, per_face=False) / safe
-    # a textured face's pieces take its texture where they lie (viewer.scene.textures)
-    piece_tint = relative_at(scene, piece_face, centroid) if scene.textured else None
+    position = np.stack([np.bincount(inverse, column, minlength=len(keys)) for column in moment.T], 1) / safe
     if piece_tint is None:
         albedo = total(scene.albedo) / safe
     else:

@@ -187,10 +187,11 @@ class Scene:
         object.__setattr__(self, "textures", textures)
 
     # ---- derived geometry -------------------------------------------------------------------------
-    @property
+    @cached_property
     def triangles(self) -> np.ndarray:
-        """(F, 3, 3) corner positions."""
-        return self.vertices[self.faces]
+        """(F, 3, 3) corner positions, made once (read-only): each stage of a new scene asks for them, and
+        on a 272k-triangle scan each gather of the corners took 14 ms (100 ms of voxelizing it)."""
+        return _read_only(self.vertices[self.faces])
 
     @cached_property
     def geometry_digest(self) -> bytes:

@@ -1,0 +1,92 @@
+"""Which triangles reach into which cells of a grid: the listing the cell-exact rays (viewer.rays.dda) read.
+
+Every usable triangle is listed in each cell of its bounding box that its plane passes through (a
+superset of the cells it passes through: an extra entry costs the march a test and never a hit). All of
+it is compiled: the boxes, the candidates on every core, and the sort by cell (by counting: the cells are
+a small integer range). With numpy's passes over the corners and a sort, a 272k-triangle scan's listing
+took 93 ms, shared by the solver and the network on every new scene.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+def listing(scene, lo: np.ndarray, h: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """((E, 3) cell, (E,) triangle): every usable triangle of `scene` (an area above 1e-12 of the
+    largest) in each cell of its bounding box that its plane passes through, sorted by flat cell
+    (x + n y + n^2 z) and, within a cell, by triangle."""
+    areas = scene.face_areas
+    usable = np.flatnonzero(areas > 1e-12 * max(float(areas.max()), 1e-30))
+    triangles = scene.triangles
+    corners = triangles if len(usable) == len(areas) else triangles[usable]
+    corners = np.ascontiguousarray(corners, np.float64)
+    normals = np.ascontiguousarray(scene.face_normals[usable], np.float64)
+    lo = np.asarray(lo, np.float64)
+    low = np.empty((len(usable), 3), np.int64)
+    extent = np.empty((len(usable), 3), np.int64)
+    first = np.empty(len(usable) + 1, np.int64)
+    _boxes(corners, lo, float(h), n, low, extent, first)
+    xyz = np.empty((first[-1], 3), np.int64)
+    triangle = np.empty(first[-1], np.int64)
+    near = np.empty(first[-1], np.bool_)
+    _candidates(corners, normals, usable, lo, float(h), low, extent, first, xyz, triangle, near)
+    return _by_cell(xyz, triangle, near, n)
+
+
+@numba.njit(cache=True, nogil=True)
+def _boxes(corners, lo, h, n, low, extent, first):
+    """Each triangle's box of cells (its lowest cell and its extent in cells, clipped to the grid), and
+    where its candidates start (`first`, a running sum of the boxes' cells)."""
+    first[0] = 0
+    for t in range(corners.shape[0]):
+        cells = 1
+        for axis in range(3):
+            a, b, c = corners[t, 0, axis], corners[t, 1, axis], corners[t, 2, axis]
+            start = min(max(int(np.floor((min(a, b, c) - lo[axis]) / h)), 0), n - 1)
+            end = min(max(int(np.floor((max(a, b, c) - lo[axis]) / h)), 0), n - 1)
+            low[t, axis] = start
+            extent[t, axis] = end - start + 1
+            cells *= end - start + 1
+        first[t + 1] = first[t] + cells
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _candidates(corners, normals, usable, lo, h, low, extent, first, xyz, triangle, near):
+    """Each triangle's bounding-box cells (x fastest) from `first[t]` on, and whether its plane passes
+    within the cell: the distance from the cell's centre to the plane at most half the cell's extent
+    along the normal (with a hair of tolerance)."""
+    for t in numba.prange(corners.shape[0]):
+        nx, ny, nz = normals[t, 0], normals[t, 1], normals[t, 2]
+        reach = 0.5 * h * ((abs(nx) + abs(ny)) + abs(nz)) * (1 + 1e-9) + 1e-12 * h
+        e0, e1 = extent[t, 0], extent[t, 1]
+        for local in range(first[t + 1] - first[t]):
+            i = first[t] + local
+            x, y, z = low[t, 0] + local % e0, low[t, 1] + local // e0 % e1, low[t, 2] + local // (e0 * e1)
+            xyz[i, 0], xyz[i, 1], xyz[i, 2] = x, y, z
+            triangle[i] = usable[t]
+            dx, dy = lo[0] + (x + 0.5) * h - corners[t, 0, 0], lo[1] + (y + 0.5) * h - corners[t, 0, 1]
+            near[i] = abs((dx * nx + dy * ny) + (lo[2] + (z + 0.5) * h - corners[t, 0, 2]) * nz) <= reach
+
+
+@numba.njit(cache=True, nogil=True)
+def _by_cell(xyz, triangle, near, n):
+    """The `near` entries, sorted by flat cell by counting (stable: the triangles stay in order)."""
+    starts = np.zeros(n * n * n + 1, np.int64)
+    for i in range(len(near)):
+        if near[i]:
+            starts[xyz[i, 0] + n * (xyz[i, 1] + n * xyz[i, 2]) + 1] += 1
+    for c in range(n * n * n):
+        starts[c + 1] += starts[c]
+    total = starts[n * n * n]
+    out_xyz = np.empty((total, 3), np.int64)
+    out_triangle = np.empty(total, np.int64)
+    for i in range(len(near)):
+        if near[i]:
+            c = xyz[i, 0] + n * (xyz[i, 1] + n * xyz[i, 2])
+            j = starts[c]
+            starts[c] = j + 1
+            out_xyz[j, 0], out_xyz[j, 1], out_xyz[j, 2] = xyz[i, 0], xyz[i, 1], xyz[i, 2]
+            out_triangle[j] = triangle[i]
+    return out_xyz, out_triangle

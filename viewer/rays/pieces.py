@@ -1,0 +1,124 @@
+"""A triangle's voxel shares from its pieces, compiled: the pieces are summed per voxel as they are made.
+
+Voxelizing cuts every triangle into equal pieces of at most a quarter voxel (split 4-way at its edge
+midpoints `level` times: 4^level pieces, a triangular lattice of 2^level per edge) and bins each piece's
+area and area-weighted centroid into the voxel its centroid falls in. A wall of the Cornell box at 32^3
+voxels is 65,536 pieces, but only a few hundred (voxel, face) pairs: numpy made every piece an array row
+and sorted them all (860k pieces, 80 ms at 24^3 voxels and 130 ms at 32^3 for the box's 36 triangles);
+this loop keeps one running sum per pair of the face in hand and never stores a piece.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numba
+import numpy as np
+
+PIECE_EDGE = 0.25
+"""The longest edge of a piece, in voxels."""
+
+
+def piece_levels(triangles: np.ndarray, max_edge: float) -> np.ndarray:
+    """(F,) how many times each triangle is split 4-way for every edge to be <= max_edge."""
+    edges = np.stack([triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 1],
+                      triangles[:, 0] - triangles[:, 2]], axis=1)
+    longest = np.sqrt((edges ** 2).sum(-1)).max(axis=1)
+    return np.ceil(np.log2(np.maximum(longest / max_edge, 1.0))).astype(np.int64)
+
+
+@lru_cache(maxsize=None)
+def piece_centroids(level: int) -> np.ndarray:
+    """(4^level, 3) barycentric centroids of the pieces, in the order `face_pairs` makes them: the
+    lattice's upright triangles, then its inverted ones."""
+    n = 1 << level
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    up = (i + j <= n - 1).ravel()
+    down = (i + j <= n - 2).ravel()
+    rows = []
+    for offset, keep in ((1.0 / 3.0, up), (2.0 / 3.0, down)):
+        b, c = (i.ravel()[keep] + offset) / n, (j.ravel()[keep] + offset) / n
+        rows.append(np.stack([1.0 - b - c, b, c], axis=1))
+    return np.concatenate(rows)
+
+
+def face_pairs(triangles: np.ndarray, areas: np.ndarray, facing: np.ndarray, lo: np.ndarray, size: float,
+               resolution: int):
+    """(key, face, area, moment) per (voxel, face) pair of the triangles' pieces: key = flat cell x 6 +
+    the face's `facing`, face an index into `triangles`, area the pieces' summed area there, moment their
+    area-weighted centroids summed. Pairs come face by face, each face's in the order its pieces first
+    reach a voxel."""
+    triangles = np.ascontiguousarray(triangles, np.float64)
+    lo = np.asarray(lo, np.float64)
+    level = np.empty(len(triangles), np.int64)
+    bound = _plan(triangles, PIECE_EDGE * size, lo, float(size), resolution, level)
+    slot = np.full(resolution ** 3, -1, np.int32)
+    key = np.empty(bound, np.int64)
+    face = np.empty(bound, np.int64)
+    area = np.empty(bound)
+    moment = np.empty((bound, 3))
+    count = _bin(triangles, np.asarray(areas, np.float64), level, np.asarray(facing, np.int64), lo, float(size),
+                 resolution, slot, key, face, area, moment)
+    return key[:count], face[:count], area[:count], moment[:count]
+
+
+@numba.njit(cache=True, nogil=True)
+def _plan(triangles, max_edge, lo, size, n, level):
+    """Each face's `piece_levels` into `level`; returns how many pairs the faces can make at most (a pair
+    a piece, or a pair a cell of the face's bounding box, whichever is fewer)."""
+    bound = 0
+    for f in range(len(triangles)):
+        longest = 0.0
+        cells = 1
+        for e in range(3):
+            p, q = triangles[f, e], triangles[f, (e + 1) % 3]
+            longest = max(longest, np.sqrt((q[0] - p[0]) ** 2 + (q[1] - p[1]) ** 2 + (q[2] - p[2]) ** 2))
+            low = min(triangles[f, 0, e], triangles[f, 1, e], triangles[f, 2, e])
+            high = max(triangles[f, 0, e], triangles[f, 1, e], triangles[f, 2, e])
+            cells *= _cell(high, lo[e], size, n) - _cell(low, lo[e], size, n) + 1
+        level[f] = int(np.ceil(np.log2(max(longest / max_edge, 1.0))))
+        bound += min(cells, 1 << (2 * level[f]))
+    return bound
+
+
+@numba.njit(cache=True, nogil=True)
+def _bin(triangles, areas, level, facing, lo, size, n, slot, key, face, area, moment):
+    count = 0
+    for f in range(len(triangles)):
+        side = 1 << level[f]
+        piece = areas[f] / (side * side)
+        a, b, c = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+        first = count
+        for flip in range(2):
+            offset = (1.0 + flip) / 3.0
+            for i in range(side):
+                for j in range(side - i - flip):
+                    u = (i + offset) / side
+                    v = (j + offset) / side
+                    w = 1.0 - u - v
+                    x = w * a[0] + u * b[0] + v * c[0]
+                    y = w * a[1] + u * b[1] + v * c[1]
+                    z = w * a[2] + u * b[2] + v * c[2]
+                    cell = (_cell(x, lo[0], size, n) + n * _cell(y, lo[1], size, n)
+                            + n * n * _cell(z, lo[2], size, n))
+                    s = slot[cell]
+                    if s < 0:
+                        s = count
+                        slot[cell] = s
+                        key[s] = cell * 6 + facing[f]
+                        face[s] = f
+                        area[s] = 0.0
+                        moment[s, 0] = moment[s, 1] = moment[s, 2] = 0.0
+                        count += 1
+                    area[s] += piece
+                    moment[s, 0] += x * piece
+                    moment[s, 1] += y * piece
+                    moment[s, 2] += z * piece
+        for s in range(first, count):    # the next face starts from an empty table
+            slot[key[s] // 6] = -1
+    return count
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _cell(x, lo, size, n):
+    return min(max(int(np.floor((x - lo) / size)), 0), n - 1)
