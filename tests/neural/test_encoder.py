@@ -200,3 +200,40 @@ def test_the_encoder_is_a_cache_not_a_state():
         if not shadows:
             blockers, reference = None, encoding.encode(voxels, scene.sun, lo, hi, 16, None)
         assert_same_encoding(encoder.encode(voxels, scene.sun, blockers), reference)
+
+
+@pytest.mark.parametrize("backend", ["embree", "dda"])
+def test_a_moved_object_retraces_only_the_shadow_rays_through_its_old_and_new_places(backend):
+    """After a move, the shadows made from the previous ones trace again only the rays that meet the box
+    around the moved triangles' old and new places, and give every ray, kept or traced, the answer of
+    shadows traced afresh; a moved lamp's new ray ends are traced in full."""
+    from viewer.neural.lattice import LatticeShadows
+    from viewer.probes.grid import ProbeGrid
+
+    if backend == "embree":
+        pytest.importorskip("embreex")
+    scene = load("cornell")
+    lo, hi = scene.bounds
+    points = ProbeGrid.positions_for(lo, hi, 16).reshape(-1, 3)
+    spacing = (hi - lo) / 16
+    ends = np.array([[0.0, 0.54, 0.0], [0.1, 0.54, -0.1], [-0.2, 0.3, 0.25]])
+    sun = np.array([-0.3, 0.4, 1.0])
+
+    def shadows(scene, previous=None):
+        voxels = voxelize(scene, VOXELS)
+        return LatticeShadows(encoding.Occluders(scene, voxels, backend), points, lo, spacing, previous)
+
+    before = shadows(scene)
+    before.visibility(ends)
+    before.sun_visibility(sun)
+    shifted = moved(scene, "small-box", (0.1, 0.0, 0.1))
+    after = shadows(shifted, before)
+    fresh = shadows(shifted)
+    visible = after.visibility(ends)
+    assert 0 < after.retraced < 0.5 * visible.size
+    assert np.array_equal(visible, fresh.visibility(ends))
+    assert np.array_equal(after.sun_visibility(sun), fresh.sun_visibility(sun))
+    assert not np.array_equal(visible, before.visibility(ends))      # the box's shadow did move
+    new_end = ends + [0.05, 0.0, 0.0]
+    assert np.array_equal(after.visibility(new_end), fresh.visibility(new_end))
+    assert after.retraced == visible.size

@@ -129,7 +129,7 @@ class Encoder:
             self._seen = encoding.seen_rays(blockers, voxels, self.points)
             self.ray_seconds = time.perf_counter() - clock
         if shadows_changed:
-            self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing)
+            self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing, self._shadows)
             self.emitters = []   # every basis holds the old shadows
             self.recomputed.append("shadows")
         g = self._geometry

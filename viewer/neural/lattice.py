@@ -4,6 +4,7 @@ the features that the voxels' geometry alone fixes, and the shadow rays that the
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy import sparse
 
@@ -57,11 +58,28 @@ class LatticeGeometry:
 class LatticeShadows:
     """What the encoding's shadows take from the occluders (`encoding.occluders`; None: nothing casts a
     shadow) on one lattice: the visibility rays of emitting patches, and the sun's visibility for the
-    last direction asked."""
+    last direction asked.
 
-    def __init__(self, blockers: VoxelRays | None, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray):
+    Made from the `previous` occluders' shadows when only some of the triangles moved (an object or a
+    lamp dragged): a ray that meets neither where the moved triangles were nor where they are now meets
+    the same triangles as before, so it keeps its answer, and only the rays through the box around the
+    moved triangles' old and new places are traced again (`moved_box`)."""
+
+    def __init__(self, blockers: VoxelRays | None, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray,
+                 previous: "LatticeShadows | None" = None):
         self.blockers, self.points, self.lo, self.spacing = blockers, points, lo, spacing
         self._sun: tuple[bytes, np.ndarray] | None = None
+        self._rows: dict[bytes, np.ndarray] = {}
+        """Each traced ray end's visibility (P,), for the shadows of the next move."""
+        self._before = None
+        """(box lo, box hi, the previous shadows' rows, their sun) when those answer every ray outside the
+        box."""
+        if previous is not None and np.array_equal(previous.points, points):
+            box = moved_box(previous.blockers, blockers)
+            if box is not None:
+                self._before = (*box, previous._rows, previous._sun)
+        self.retraced = 0
+        """Rays traced again through the moved box (the others kept) by the last call."""
 
     def fits(self, blockers: VoxelRays | None) -> bool:
         """Whether `blockers` are these occluders: the same object, or equal arrays (a new listing of the
@@ -86,11 +104,81 @@ class LatticeShadows:
         columns of the whole)."""
         if self.blockers is None:
             return np.ones((len(target), len(self.points)), np.float32)
-        return np.ascontiguousarray(self.blockers.pairs_clear(self.points, target).T)
+        target = np.asarray(target, np.float64).reshape(-1, 3)
+        out = np.empty((len(target), len(self.points)), np.float32)
+        fresh = []
+        self.retraced = 0
+        for c, end in enumerate(target):
+            kept = None if self._before is None else self._before[2].get(end.tobytes())
+            if kept is None:
+                fresh.append(c)
+                continue
+            out[c] = kept
+            near = np.flatnonzero(_meets_box(self.points, end, False, self._before[0], self._before[1]))
+            if len(near):
+                out[c, near] = self.blockers.segments_clear(self.points[near], np.broadcast_to(end, (len(near), 3)))
+                self.retraced += len(near)
+        if fresh:
+            out[fresh] = self.blockers.pairs_clear(self.points, target[fresh]).T
+            self.retraced += len(fresh) * len(self.points)
+        for c, end in enumerate(target):
+            self._rows[end.tobytes()] = out[c].copy()
+        return out
 
     def sun_visibility(self, direction: np.ndarray) -> np.ndarray:
         """(P,) `encoding.sun_visibility` against these occluders, kept for the last direction asked."""
         key = direction.tobytes()
         if self._sun is None or self._sun[0] != key:
-            self._sun = (key, encoding.sun_visibility(self.blockers, self.points, direction))
+            before = None if self._before is None else self._before[3]
+            if before is not None and before[0] == key and self.blockers is not None:
+                visible = before[1].copy()
+                unit = np.asarray(direction, np.float64) / np.linalg.norm(direction)
+                near = np.flatnonzero(_meets_box(self.points, unit, True, self._before[0], self._before[1]))
+                visible[near] = encoding.sun_visibility(self.blockers, self.points[near], direction)
+            else:
+                visible = encoding.sun_visibility(self.blockers, self.points, direction)
+            self._sun = (key, visible)
         return self._sun[1]
+
+
+MOVED_SHARE = 0.5
+"""Past this share of the triangles moved, the shadows are traced afresh."""
+
+
+def moved_box(before: VoxelRays | None, after: VoxelRays | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lo, hi) around the old and new places of the triangles that moved from `before` to `after` (the
+    same triangles, in the same order), a hair wider; None when they are not the same triangles, none
+    moved or most did."""
+    if before is None or after is None:
+        return None
+    old, new = before.cells, after.cells
+    if old.v0.shape != new.v0.shape:
+        return None
+    moved = np.flatnonzero(np.any((old.v0 != new.v0) | (old.e1 != new.e1) | (old.e2 != new.e2), axis=1))
+    if len(moved) == 0 or len(moved) > MOVED_SHARE * len(new.v0):
+        return None
+    corners = np.concatenate([np.concatenate([c.v0[moved], c.v0[moved] + c.e1[moved], c.v0[moved] + c.e2[moved]])
+                              for c in (old, new)])
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    margin = 1e-6 * max(float((hi - lo).max()), float(new.h))
+    return lo - margin, hi + margin
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _meets_box(points, end, is_direction, lo, hi):
+    """(P,) bool: the segment from each point to `end` (or, `is_direction`, the ray from it along `end`)
+    passes through the box [lo, hi] (slab test)."""
+    out = np.empty(points.shape[0], np.bool_)
+    for p in numba.prange(points.shape[0]):
+        near, far = 0.0, np.inf if is_direction else 1.0
+        for axis in range(3):
+            o = points[p, axis]
+            d = end[axis] if is_direction else end[axis] - o
+            if d == 0.0:
+                if o < lo[axis] or o > hi[axis]:
+                    near, far = 1.0, 0.0
+            else:
+                a, b = (lo[axis] - o) / d, (hi[axis] - o) / d
+                near, far = max(near, min(a, b)), min(far, max(a, b))
+        out[p] = near <= far
+    return out

@@ -150,7 +150,9 @@ def subdivide(tri: np.ndarray, max_edge: float) -> tuple[np.ndarray, np.ndarray,
     for k in np.unique(level):
         group = np.nonzero(level == k)[0]
         bary = piece_centroids(int(k))
-        centroids.append(np.matmul(bary, tri[group]).reshape(-1, 3))
+        corners = tri[group][:, None]   # each centroid as the compiled binning computes it, to the last bit
+        centroids.append((bary[:, :1] * corners[:, :, 0] + bary[:, 1:2] * corners[:, :, 1]
+                          + bary[:, 2:] * corners[:, :, 2]).reshape(-1, 3))
         areas.append(np.repeat(area[group] / len(bary), len(bary)))
         sources.append(np.repeat(group, len(bary)))
     return np.concatenate(centroids), np.concatenate(areas), np.concatenate(sources)
