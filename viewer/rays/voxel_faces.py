@@ -5,8 +5,8 @@ voxelized again from the moved faces alone.
 (area, area-weighted centroid and normal). Those sums are additive over faces: kept per (voxel, face)
 pair, the pairs of the faces that did not move stay as they were, and the moved faces' pieces make new
 pairs. Summing the pairs per voxel gives `voxelize_with_faces`' grid and face shares, to round-off (the
-sums come in another order). A few thousand pairs instead of a hundred thousand pieces: a lamp moved in
-the Cornell box at 24^3 voxels takes milliseconds instead of a full voxelization's ~100.
+sums come in another order). A lamp moved in the Cornell box re-bins only the lamp's pieces (the
+binning itself is compiled: viewer.rays.pieces).
 
 Only the `area` normals (the default) are kept this way; the voxel frame (the scene's bounds) must not
 change, nor the faces' indices.
