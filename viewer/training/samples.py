@@ -130,9 +130,12 @@ PAPER_TRAINING = ("paper-train-1", "paper-train-2", "paper-train-3", "paper-trai
 
 
 def training_split(root: Path, resolution: int, quiet: bool = False, voxels: int = ENCODING_VOXELS,
-                   encode: bool = True) -> Samples:
-    """The procedural `train` split plus the paper's training layouts."""
+                   encode: bool = True, limit: int = 0) -> Samples:
+    """The procedural `train` split (its first `limit` rooms, when given) plus the paper's training
+    layouts."""
     train = load_split(root, "train", resolution, quiet=quiet, voxels=voxels, encode=encode)
+    if limit:
+        train = train.subset(np.arange(min(limit, len(train))))
     paper = load_split(root, "paper", resolution, quiet=quiet, voxels=voxels)
     return concat(train, paper, keep=[n for n in paper.names if n in PAPER_TRAINING])
 

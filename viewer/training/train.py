@@ -263,7 +263,9 @@ def main(argv=None) -> int:
     parser.add_argument("--batch", type=int, default=TrainSettings.batch, help="scenes per step")
     parser.add_argument("--lr", type=float, default=TrainSettings.learning_rate)
     parser.add_argument("--weight-decay", type=float, default=0.0)
-    parser.add_argument("--limit", type=int, default=0, help="use only the first N training scenes")
+    parser.add_argument("--limit", type=int, default=0,
+                        help="use only the first N procedural training rooms (the paper's training layouts "
+                             "are always used): a run comparable with one on a smaller dataset of the same seed")
     parser.add_argument("--steps", type=int, default=0, help="steps per epoch (0: the whole split)")
     parser.add_argument("--reflected-weight", type=float, default=TrainSettings.reflected_weight)
     parser.add_argument("--solver-weight", type=float, default=TrainSettings.solver_weight)
@@ -277,11 +279,9 @@ def main(argv=None) -> int:
                         help="train on the shards encoded so far (a dataset still being made)")
     parser.add_argument("--val-rooms", type=int, default=100, help="validation rooms scored every epoch")
     args = parser.parse_args(argv)
-    train_set = training_split(args.data, args.probes, encode=not args.encoded_only)
+    train_set = training_split(args.data, args.probes, encode=not args.encoded_only, limit=args.limit)
     val_set = load_split(args.data, "val", args.probes)
     val_set = val_set.subset(np.arange(min(args.val_rooms, len(val_set))))
-    if args.limit:
-        train_set = train_set.subset(np.arange(min(args.limit, len(train_set))))
     record_data(args.out, args.data, train_set, val_set, args.probes,
                 " ".join(["python -m viewer.training.train", *(sys.argv[1:] if argv is None else argv)]))
     config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels,
