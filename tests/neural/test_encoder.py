@@ -237,3 +237,32 @@ def test_a_moved_object_retraces_only_the_shadow_rays_through_its_old_and_new_pl
     new_end = ends + [0.05, 0.0, 0.0]
     assert np.array_equal(after.visibility(new_end), fresh.visibility(new_end))
     assert after.retraced == visible.size
+
+
+@pytest.mark.parametrize("name, group, offset", [("cornell", "small-box", (0.1, 0.0, 0.1)),
+                                                 ("cornell", "light", (0.2, 0.0, -0.15)),
+                                                 ("paper-test", "large-box", (-0.05, 0.0, 0.1))])
+def test_after_a_move_the_seen_rays_land_where_rays_cast_afresh_do(name, group, offset):
+    """The seen rays after a move, made from the previous ones (only the rays through the moved
+    triangles' box traced again, the others landed again on the new voxels), land on the voxels that
+    rays cast afresh on the moved scene land on, every one of them."""
+    pytest.importorskip("embreex")
+    from viewer.neural.lattice import moved_box
+    from viewer.probes.grid import ProbeGrid
+
+    scene = load(name)
+    points = ProbeGrid.positions_for(*scene.bounds, 16).reshape(-1, 3)
+
+    def occluders(scene):
+        voxels = voxelize(scene, VOXELS)
+        return voxels, encoding.Occluders(scene, voxels, "embree")
+
+    voxels, blockers = occluders(scene)
+    before = encoding.seen_rays(blockers, voxels, points)
+    shifted = moved(scene, group, offset)
+    voxels, after_blockers = occluders(shifted)
+    after = encoding.seen_rays(after_blockers, voxels, points, before, moved_box(blockers, after_blockers))
+    fresh = encoding.seen_rays(after_blockers, voxels, points)
+    assert 0 < after.traced < len(fresh.voxel) and fresh.traced == len(fresh.voxel)
+    assert np.array_equal(after.voxel, fresh.voxel)
+    assert not np.array_equal(before.voxel, fresh.voxel)

@@ -46,7 +46,7 @@ from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
 from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, SEEN, Encoding
-from viewer.neural.lattice import LatticeGeometry, LatticeShadows
+from viewer.neural.lattice import LatticeGeometry, LatticeShadows, moved_box
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
 
@@ -126,7 +126,8 @@ class Encoder:
             self.recomputed.append("geometry")
         if geometry_changed or shadows_changed:
             clock = time.perf_counter()
-            self._seen = encoding.seen_rays(blockers, voxels, self.points)
+            box = None if self._shadows is None else moved_box(self._shadows.blockers, blockers)
+            self._seen = encoding.seen_rays(blockers, voxels, self.points, self._seen, box)
             self.ray_seconds = time.perf_counter() - clock
         if shadows_changed:
             self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing, self._shadows)

@@ -132,12 +132,13 @@ def landing_cells(scene, voxels: VoxelGrid) -> dda.Cells:
     return replace(cells, voxel=np.where(cells.voxel >= 0, order[np.maximum(cells.voxel, 0)], cells.voxel))
 
 
-def seen_rays(blockers: VoxelRays | None, voxels: VoxelGrid, points: np.ndarray) -> SeenRays | None:
+def seen_rays(blockers: VoxelRays | None, voxels: VoxelGrid, points: np.ndarray, previous: SeenRays | None = None,
+              box=None) -> SeenRays | None:
     """The seen rays of the lattice `points` on `blockers`' landing listing; None without `Occluders`
-    (nothing is seen then: the seen features are zero)."""
+    (nothing is seen then: the seen features are zero). `previous`, `box`: see `SeenRays`."""
     if not isinstance(blockers, Occluders):
         return None
-    return SeenRays(blockers.landing, voxels.count, points)
+    return SeenRays(blockers.landing, voxels.count, points, previous=previous, box=box)
 
 
 def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None) -> Encoding:

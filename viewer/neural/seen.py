@@ -44,6 +44,9 @@ SEEN_BOUNCES = 3
 TAIL_RATIO_MAX = 0.95
 """The most of its light a room's surfaces are taken to reflect from one bounce to the next (the
 geometric tail's ratio): past it the tail's 1 / (1 - r) would grow without bound."""
+MOVED_MARGIN = 3
+"""Cells around the moved triangles' box within which a kept ray is traced again: the voxels of those
+cells, and the listing's lookups a cell or two around them, may have changed."""
 SEED = 0x5EE
 """The directions' rotations: the same in training and in the viewer."""
 
@@ -54,10 +57,24 @@ class SeenRays:
     light it brings."""
 
     def __init__(self, landing: VoxelRays, count: int, points: np.ndarray, rays: int = SEEN_RAYS,
-                 seed: int = SEED):
+                 seed: int = SEED, previous: "SeenRays | None" = None, box=None):
+        """`previous`, `box`: the same probes' rays in the scene before some triangles moved, and the
+        box around those triangles' old and new places (`lattice.moved_box`): the rays that do not pass
+        through it (widened by MOVED_MARGIN cells) keep the face they met, and are only landed again."""
         self.count, self.rays, self.probes = int(count), int(rays), len(points)
+        self.seed = seed
         directions, self._basis = lattice_rays(len(points), self.rays, seed)
-        hits = landing.bundle_hits(points, directions).reshape(-1)
+        before = None
+        if (box is not None and previous is not None and previous._faces is not None
+                and (previous.probes, previous.rays, previous.seed) == (self.probes, self.rays, seed)):
+            margin = MOVED_MARGIN * landing.cells.h
+            before, box = previous._faces, (box[0] - margin, box[1] + margin)
+        hits, *faces = landing.kept_bundle(points, directions, before, box)
+        self._faces = None if faces[0] is None else tuple(faces)
+        """(P, R) the face each ray met and its distance, for the rays after a move."""
+        self.traced = landing.traced
+        """How many of the rays were traced (the others landed again)."""
+        hits = hits.reshape(-1)
         self.voxel = np.where(hits < 0, count, hits).astype(np.int64)
         """(P x R,) the voxel each ray lands on; `count` where it brings no light."""
 

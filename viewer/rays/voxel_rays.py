@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from viewer.rays import dda, embree
-from viewer.rays.cast import NO_FACE, TriangleCaster, embree_available, first_face
+from viewer.rays.cast import NO_FACE, TriangleCaster, embree_available, first_face, front_of
 
 FAR = 1e37
 """The length of a ray that goes on until it meets something (Embree's own default)."""
@@ -83,6 +83,32 @@ class VoxelRays:
             out[part] = self.first_hits(starts, d[part].reshape(-1, 3)).reshape(-1, count)
         return out
 
+    def kept_bundle(self, origins: np.ndarray, directions: np.ndarray, before=None, box=None):
+        """`bundle_hits` for (P, D, 3) `directions`, with what a later call needs to keep them: (hits,
+        faces, t) per ray, or (hits, None, None) where the rays are not traced through Embree from
+        compiled code. `before`: the (faces, t) of the same rays in a scene where only the triangles in
+        `box` ((lo, hi): their old and new places, with room for a cell's neighbours) moved; a ray that
+        does not pass through the box before its old hit meets the same face at the same t, and only its
+        voxel is looked up again in this listing; the others are traced again."""
+        o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
+        d = np.ascontiguousarray(directions, np.float64)
+        if self.caster is None or self.caster.direct is None:
+            self.traced = d.shape[0] * d.shape[1]
+            return self.bundle_hits(o, d), None, None
+        c, caster = self.cells, self.caster
+        out = np.empty(d.shape[:2], np.int32)
+        face = np.empty(d.shape[:2], np.int32)
+        t = np.empty(d.shape[:2], np.float64)
+        if before is None:
+            trace = np.ones(d.shape[:2], np.bool_)
+        else:
+            face[:], t[:] = before
+            trace = _through_box(o, d, t, face, np.asarray(box[0], np.float64), np.asarray(box[1], np.float64))
+        self.traced = int(trace.sum())
+        _bundle_kept(o, d, trace, *caster.direct.handle, caster.faces, caster.e1, caster.e2, c.lo, c.h, c.n,
+                     c.first, c.triangle, c.voxel, out, face, t)
+        return out, face, t
+
     def escapes(self, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """(R,) bool: a ray from each origin along one direction meets no surface (it leaves the scene)."""
         o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
@@ -138,6 +164,45 @@ def _bundle(o, d, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, vo
             f, t, _, _, front = first_face(intersect, scene, record, faces, e1, e2, o[p, 0], o[p, 1], o[p, 2], dx, dy,
                                            dz, FAR)
             out[p, k] = _voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _bundle_kept(o, d, trace, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, voxel, out, face, t):
+    """`_bundle` for (P, D, 3) directions, keeping each ray's face and t; a ray not to `trace` keeps the
+    face and t it has and only looks its voxel up again."""
+    for p in numba.prange(o.shape[0]):
+        record = embree.record()
+        for k in range(d.shape[1]):
+            dx, dy, dz = d[p, k, 0], d[p, k, 1], d[p, k, 2]
+            if trace[p, k]:
+                f, th, _, _, front = first_face(intersect, scene, record, faces, e1, e2, o[p, 0], o[p, 1], o[p, 2],
+                                                dx, dy, dz, FAR)
+                face[p, k], t[p, k] = f, th
+            else:
+                f, th = face[p, k], t[p, k]
+                front = f != NO_FACE and front_of(f, dx, dy, dz, e1, e2)
+            out[p, k] = _voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, th, front, lo, h, n, first, triangle,
+                                  voxel)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _through_box(o, d, t, face, lo, hi):
+    """(P, D) bool: the ray passes through the box [lo, hi] before its hit (all the way, where it hit
+    nothing): a slab test."""
+    out = np.empty(t.shape, np.bool_)
+    for p in numba.prange(o.shape[0]):
+        for k in range(d.shape[1]):
+            near, far = 0.0, FAR if face[p, k] == NO_FACE else t[p, k]
+            for axis in range(3):
+                start, step = o[p, axis], d[p, k, axis]
+                if step == 0.0:
+                    if start < lo[axis] or start > hi[axis]:
+                        near, far = 1.0, 0.0
+                else:
+                    a, b = (lo[axis] - start) / step, (hi[axis] - start) / step
+                    near, far = max(near, min(a, b)), min(far, max(a, b))
+            out[p, k] = near <= far
+    return out
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
