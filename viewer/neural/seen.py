@@ -22,7 +22,9 @@ and gathered again. On 20 validation rooms, against the solver's reflected light
 30.0%. So two bounces carry all that these rays can.
 
 Kept per geometry (`SeenRays`): the rays are cast once; a light or colour edit is two gathers of the
-voxels' new light, each a (P, 9, R) x (P, R, 3) product.
+voxels' new light, each a (P, 9, R) x (P, R, 3) product. A moved object or lamp casts again only the rays
+that pass through the box around its old and new places; the others keep the face they met and are
+landed again on the new voxels.
 """
 
 from __future__ import annotations
@@ -61,19 +63,18 @@ class SeenRays:
         """`previous`, `box`: the same probes' rays in the scene before some triangles moved, and the
         box around those triangles' old and new places (`lattice.moved_box`): the rays that do not pass
         through it (widened by MOVED_MARGIN cells) keep the face they met, and are only landed again."""
-        self.count, self.rays, self.probes = int(count), int(rays), len(points)
-        self.seed = seed
+        self.count, self.rays, self.probes, self.points, self.seed = int(count), int(rays), len(points), points, seed
         directions, self._basis = lattice_rays(len(points), self.rays, seed)
         before = None
         if (box is not None and previous is not None and previous._faces is not None
-                and (previous.probes, previous.rays, previous.seed) == (self.probes, self.rays, seed)):
+                and (previous.rays, previous.seed) == (self.rays, seed)
+                and (previous.points is points or np.array_equal(previous.points, points))):
             margin = MOVED_MARGIN * landing.cells.h
             before, box = previous._faces, (box[0] - margin, box[1] + margin)
-        hits, *faces = landing.kept_bundle(points, directions, before, box)
-        self._faces = None if faces[0] is None else tuple(faces)
+        hits, face, t, self.traced = landing.kept_bundle(points, directions, before, box)
+        """`traced`: how many of the rays were traced (the others landed again)."""
+        self._faces = None if face is None else (face, t)
         """(P, R) the face each ray met and its distance, for the rays after a move."""
-        self.traced = landing.traced
-        """How many of the rays were traced (the others landed again)."""
         hits = hits.reshape(-1)
         self.voxel = np.where(hits < 0, count, hits).astype(np.int64)
         """(P x R,) the voxel each ray lands on; `count` where it brings no light."""

@@ -85,16 +85,16 @@ class VoxelRays:
 
     def kept_bundle(self, origins: np.ndarray, directions: np.ndarray, before=None, box=None):
         """`bundle_hits` for (P, D, 3) `directions`, with what a later call needs to keep them: (hits,
-        faces, t) per ray, or (hits, None, None) where the rays are not traced through Embree from
-        compiled code. `before`: the (faces, t) of the same rays in a scene where only the triangles in
-        `box` ((lo, hi): their old and new places, with room for a cell's neighbours) moved; a ray that
-        does not pass through the box before its old hit meets the same face at the same t, and only its
-        voxel is looked up again in this listing; the others are traced again."""
+        faces, t, traced): the hits, each ray's face and distance (None, None where the rays are not
+        traced through Embree from compiled code), and how many rays were traced. `before`: the (faces,
+        t) of the same rays in a scene where only the triangles in `box` ((lo, hi): their old and new
+        places, with room for a cell's neighbours) moved; a ray that does not pass through the box before
+        its old hit meets the same face at the same t, and only its voxel is looked up again in this
+        listing; the others are traced again."""
         o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
         d = np.ascontiguousarray(directions, np.float64)
         if self.caster is None or self.caster.direct is None:
-            self.traced = d.shape[0] * d.shape[1]
-            return self.bundle_hits(o, d), None, None
+            return self.bundle_hits(o, d), None, None, d.shape[0] * d.shape[1]
         c, caster = self.cells, self.caster
         out = np.empty(d.shape[:2], np.int32)
         face = np.empty(d.shape[:2], np.int32)
@@ -104,10 +104,9 @@ class VoxelRays:
         else:
             face[:], t[:] = before
             trace = _through_box(o, d, t, face, np.asarray(box[0], np.float64), np.asarray(box[1], np.float64))
-        self.traced = int(trace.sum())
         _bundle_kept(o, d, trace, *caster.direct.handle, caster.faces, caster.e1, caster.e2, c.lo, c.h, c.n,
                      c.first, c.triangle, c.voxel, out, face, t)
-        return out, face, t
+        return out, face, t, int(trace.sum())
 
     def escapes(self, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """(R,) bool: a ray from each origin along one direction meets no surface (it leaves the scene)."""
