@@ -10,7 +10,7 @@ from scipy import sparse
 
 from viewer.neural import encoding
 from viewer.neural.encoding import CHANNELS
-from viewer.rays.voxel_rays import VoxelRays
+from viewer.rays.voxel_rays import VoxelRays, meets_box
 from viewer.rays.voxels import VoxelGrid
 
 
@@ -169,18 +169,12 @@ def moved_box(before: VoxelRays | None, after: VoxelRays | None) -> tuple[np.nda
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _meets_box(points, end, is_direction, lo, hi):
     """(P,) bool: the segment from each point to `end` (or, `is_direction`, the ray from it along `end`)
-    passes through the box [lo, hi] (slab test)."""
+    passes through the box [lo, hi]."""
     out = np.empty(points.shape[0], np.bool_)
     for p in numba.prange(points.shape[0]):
-        near, far = 0.0, np.inf if is_direction else 1.0
-        for axis in range(3):
-            o = points[p, axis]
-            d = end[axis] if is_direction else end[axis] - o
-            if d == 0.0:
-                if o < lo[axis] or o > hi[axis]:
-                    near, far = 1.0, 0.0
-            else:
-                a, b = (lo[axis] - o) / d, (hi[axis] - o) / d
-                near, far = max(near, min(a, b)), min(far, max(a, b))
-        out[p] = near <= far
+        x, y, z = points[p, 0], points[p, 1], points[p, 2]
+        if is_direction:
+            out[p] = meets_box(x, y, z, end[0], end[1], end[2], np.inf, lo, hi)
+        else:
+            out[p] = meets_box(x, y, z, end[0] - x, end[1] - y, end[2] - z, 1.0, lo, hi)
     return out

@@ -187,21 +187,29 @@ def _bundle_kept(o, d, trace, intersect, scene, faces, e1, e2, lo, h, n, first, 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _through_box(o, d, t, face, lo, hi):
     """(P, D) bool: the ray passes through the box [lo, hi] before its hit (all the way, where it hit
-    nothing): a slab test."""
+    nothing)."""
     out = np.empty(t.shape, np.bool_)
     for p in numba.prange(o.shape[0]):
         for k in range(d.shape[1]):
-            near, far = 0.0, FAR if face[p, k] == NO_FACE else t[p, k]
-            for axis in range(3):
-                start, step = o[p, axis], d[p, k, axis]
-                if step == 0.0:
-                    if start < lo[axis] or start > hi[axis]:
-                        near, far = 1.0, 0.0
-                else:
-                    a, b = (lo[axis] - start) / step, (hi[axis] - start) / step
-                    near, far = max(near, min(a, b)), min(far, max(a, b))
-            out[p, k] = near <= far
+            out[p, k] = meets_box(o[p, 0], o[p, 1], o[p, 2], d[p, k, 0], d[p, k, 1], d[p, k, 2],
+                                  FAR if face[p, k] == NO_FACE else t[p, k], lo, hi)
     return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def meets_box(ox, oy, oz, dx, dy, dz, far, lo, hi):
+    """Whether o + s d for s in [0, far] passes through the box [lo, hi] (a slab test)."""
+    near = 0.0
+    for axis in range(3):
+        start = ox if axis == 0 else (oy if axis == 1 else oz)
+        step = dx if axis == 0 else (dy if axis == 1 else dz)
+        if step == 0.0:
+            if start < lo[axis] or start > hi[axis]:
+                return False
+        else:
+            a, b = (lo[axis] - start) / step, (hi[axis] - start) / step
+            near, far = max(near, min(a, b)), min(far, max(a, b))
+    return near <= far
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
