@@ -124,13 +124,16 @@ class Encoder:
         if geometry_changed:
             self._geometry = LatticeGeometry(voxels, self.lo, self.hi, self.points)
             self.recomputed.append("geometry")
+        # where only some triangles moved: the box around their old and new places, outside which the
+        # seen rays and the shadow rays keep their answers
+        box = None if not shadows_changed or self._shadows is None else moved_box(self._shadows.blockers, blockers)
         if geometry_changed or shadows_changed:
             clock = time.perf_counter()
-            box = None if self._shadows is None else moved_box(self._shadows.blockers, blockers)
             self._seen = encoding.seen_rays(blockers, voxels, self.points, self._seen, box)
             self.ray_seconds = time.perf_counter() - clock
         if shadows_changed:
-            self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing, self._shadows)
+            self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing,
+                                           None if box is None else self._shadows, box)
             self.emitters = []   # every basis holds the old shadows
             self.recomputed.append("shadows")
         g = self._geometry

@@ -66,7 +66,8 @@ class LatticeShadows:
     moved triangles' old and new places are traced again (`moved_box`)."""
 
     def __init__(self, blockers: VoxelRays | None, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray,
-                 previous: "LatticeShadows | None" = None):
+                 previous: "LatticeShadows | None" = None, box=None):
+        """`box`: `moved_box(previous.blockers, blockers)` where the caller has it already."""
         self.blockers, self.points, self.lo, self.spacing = blockers, points, lo, spacing
         self._sun: tuple[bytes, np.ndarray] | None = None
         self._rows: dict[bytes, np.ndarray] = {}
@@ -75,7 +76,7 @@ class LatticeShadows:
         """(box lo, box hi, the previous shadows' rows, their sun) when those answer every ray outside the
         box."""
         if previous is not None and np.array_equal(previous.points, points):
-            box = moved_box(previous.blockers, blockers)
+            box = moved_box(previous.blockers, blockers) if box is None else box
             if box is not None:
                 self._before = (*box, previous._rows, previous._sun)
         self.retraced = 0
