@@ -67,6 +67,18 @@ def test_export_runs_in_the_neural_source(tiny, tmp_path):
     example = dataset.load_example(dataset.room_refs(tiny, "val")[0])
     grid = neural.NeuralField(tmp_path / "m.onnx").solve(example.scene)
     assert grid.coefficients.shape == (8, 8, 8, 9, 3) and np.all(np.isfinite(grid.coefficients))
+    # a run of no epochs exports the network as it starts: its inputs' own answer, the yardstick of
+    # what training adds (the direct light, and the seen light box filtered)
+    start = tmp_path / "start"
+    config = ProbeNetConfig(width=4, hidden=8, levels=2, bounce_gain=0.0, seen_gain=1.0)
+    train(ProbeNet(config), train_set, val_set, TrainSettings(epochs=0), run=start, quiet=True)
+    card = export.export(start, tmp_path / "start.onnx", 8, inputs, {}, {})
+    assert card["architecture"]["seen_gain"] == 1.0
+    with torch.no_grad():
+        answer = ProbeNet(config)(torch.from_numpy(inputs)).numpy()
+    import onnxruntime
+    exported = onnxruntime.InferenceSession(str(tmp_path / "start.onnx")).run(None, {"inputs": inputs})[0]
+    np.testing.assert_allclose(exported[:, :18], answer[:, :18], atol=1e-5)   # whatever the random weights
 
 
 def test_the_split_streams_from_memory_mapped_shard_caches(tiny):
@@ -124,6 +136,11 @@ def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
     # the room-relative loss: each room's squared error over its reflected light's energy
     relative = TrainSettings(reflected_weight=1.0, solver_weight=1.0, mitsuba=False, reflected_loss="room")
     assert float(loss_terms(Constant(3.0), batch, relative)[0]) == pytest.approx(4.0)   # (3 - 1)^2 / 1^2
+    # a room's three passes are scored together, as the validation scores a room: the blue pass of a
+    # red room, barely lit, does not blow its relative error up on its own
+    red = Batch(batch.pick, batch.x, y * torch.tensor([1.0, 1.0, 1e-4] * 2)[:, None, None, None, None],
+                batch.valid, unbiased, has)
+    assert float(loss_terms(Constant(1.0), red, relative)[0]) == pytest.approx(1.0 / 2.0, rel=1e-3)
 
 
 def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():

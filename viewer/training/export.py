@@ -126,9 +126,10 @@ def main(argv=None) -> int:
     data = json.loads((args.run / "data.json").read_text()) if (args.run / "data.json").exists() else {}
     chosen = torch.load(shipped_checkpoint(args.run), weights_only=False)["history"]
     epoch = len(chosen["epochs"]) - 1   # the shipped epoch's own validation (the best, or the last)
-    training = {"run": str(args.run), "epochs": len(history["epochs"]), "shipped_epoch": epoch + 1,
-                "final_val_relative_rmse": history["val_relative_rmse"][epoch],
-                **({"final_val": history["val_metrics"][epoch]} if history.get("val_metrics") else {}), **data}
+    training = {"run": str(args.run), "epochs": len(history["epochs"]), "shipped_epoch": epoch + 1, **data}
+    if epoch >= 0:   # else an untrained run (`train --epochs 0`): the network as it starts
+        training.update(final_val_relative_rmse=history["val_relative_rmse"][epoch],
+                        **({"final_val": history["val_metrics"][epoch]} if history.get("val_metrics") else {}))
     card = export(args.run, args.out / f"{args.name}.onnx", args.probes, inputs, training, metrics)
     print(f"wrote {args.out / args.name}.onnx ({card['parameters']} parameters, "
           f"onnx vs torch {card['metrics']['onnx_max_difference']:.1e})", file=sys.stderr)

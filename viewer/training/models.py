@@ -48,6 +48,14 @@ class ProbeNetConfig:
     """Stride-2 levels below the probe lattice (M must be divisible by 2^levels)."""
     upsample: str = "trilinear"
     """How a coarse level reaches the finer one: `trilinear` or `nearest` (cheaper, blockier)."""
+    bounce_gain: float = 0.5
+    """The unshadowed bounce's gain in the reflected light at the start of training (learned from there)."""
+    seen_gain: float = 0.5
+    """The filtered seen light's gain at the start of training (learned from there); see BOUNCE_GAIN."""
+    reflected_correction: bool = True
+    """Whether the head corrects the reflected light; without, the reflected light is the two bounces
+    times their gains alone (the seen one through its learned filter): a linear denoiser of the seen
+    light, and the head corrects the direct light and answers the validity only."""
     seen: bool = True
     """Whether the network reads the seen bounce (viewer/neural/seen.py); without it, those features are
     zeroed as they come in: the same network blind to visibility beyond the direct light's shadows
@@ -86,8 +94,8 @@ class ProbeNet(nn.Module):
         self.head = nn.Sequential(*layers)
         nn.init.zeros_(self.head[-1].weight)  # start from "the direct light, and the bounce times a gain"
         nn.init.zeros_(self.head[-1].bias)
-        self.bounce_gain = nn.Parameter(torch.tensor(BOUNCE_GAIN))
-        self.seen_gain = nn.Parameter(torch.tensor(SEEN_GAIN))
+        self.bounce_gain = nn.Parameter(torch.tensor(float(config.bounce_gain)))
+        self.seen_gain = nn.Parameter(torch.tensor(float(config.seen_gain)))
         # the seen bounce's denoiser at the probes' own resolution: one 3x3x3 kernel per SH coefficient,
         # starting as the box filter (which takes its raw 62% to 30% on the validation rooms)
         self.seen_filter = nn.Conv3d(9, 9, 3, padding=1, padding_mode="replicate", groups=9, bias=False)
@@ -114,8 +122,9 @@ class ProbeNet(nn.Module):
         hidden = F.relu(self.local(x_in) + self._up(hidden))
         out = self.head(hidden)
         seen = self.seen_filter(x[:, encoding.SEEN])
-        reflected = (self.bounce_gain * x[:, encoding.BOUNCE] + self.seen_gain * seen
-                     + out[:, REFLECTED] * reflected_magnitude)
+        reflected = self.bounce_gain * x[:, encoding.BOUNCE] + self.seen_gain * seen
+        if self.config.reflected_correction:
+            reflected = reflected + out[:, REFLECTED] * reflected_magnitude
         total = x[:, encoding.DIRECT] + out[:, TOTAL] * magnitude + reflected  # direct - occlusion + reflected
         return torch.cat([total, reflected, out[:, VALIDITY:]], dim=1)
 

@@ -133,7 +133,7 @@ def training_split(root: Path, resolution: int, quiet: bool = False, voxels: int
                    encode: bool = True, limit: int = 0) -> Samples:
     """The procedural `train` split (its first `limit` rooms, when given) plus the paper's training
     layouts."""
-    train = load_split(root, "train", resolution, quiet=quiet, voxels=voxels, encode=encode)
+    train = load_split(root, "train", resolution, quiet=quiet, voxels=voxels, encode=encode, rooms=limit)
     if limit:
         train = train.subset(np.arange(min(limit, len(train))))
     paper = load_split(root, "paper", resolution, quiet=quiet, voxels=voxels)
@@ -192,11 +192,12 @@ def split_files(root: Path, split: str) -> list[str]:
 
 
 def load_split(root: Path, split: str, resolution: int, workers: int = 2, quiet: bool = False,
-               voxels: int = ENCODING_VOXELS, encode: bool = True) -> Samples:
+               voxels: int = ENCODING_VOXELS, encode: bool = True, rooms: int = 0) -> Samples:
     """The encoded split, from the caches where they match the dataset's files, else encoded now (or,
-    with `encode=False`, left out: training on the shards encoded so far while a dataset grows)."""
+    with `encode=False`, left out: training on the shards encoded so far while a dataset grows).
+    `rooms`: only the shards that hold the split's first so many rooms (0: all)."""
     arrays = encoded_split(root, split, "probenet", partial(encode_scene, voxels=voxels), resolution, workers,
-                           quiet, key_extra=voxels, encode=encode)
+                           quiet, key_extra=voxels, encode=encode, rooms=rooms)
     return Samples(arrays["inputs"], arrays["targets"], arrays["valid"], np.asarray(arrays["scale"]),
                    [str(n) for n in arrays["names"]], arrays["unbiased"], np.asarray(arrays["has_unbiased"], bool))
 
@@ -211,13 +212,21 @@ def containers(root: Path, split: str) -> dict[str, list[str]]:
 
 
 def encoded_split(root: Path, split: str, tag: str, encoder, resolution: int, workers: int = 2,
-                  quiet: bool = False, key_extra=None, encode: bool = True) -> dict[str, Stacked]:
+                  quiet: bool = False, key_extra=None, encode: bool = True, rooms: int = 0) -> dict[str, Stacked]:
     """{name: rows of every container} of `encoder(ref, resolution)` -> dict over a split's rooms, cached
     per container (shard) in `<root>/cache/<split>/` under a key of its rooms and their files' sizes, the
-    encoder's tag and CACHE_VERSION, and read back memory-mapped."""
+    encoder's tag and CACHE_VERSION, and read back memory-mapped. `rooms`: only the containers that hold
+    the first so many rooms (0: all), so that a run on part of a dataset encodes no more than it reads."""
     groups = containers(root, split)
     if not groups:
         raise FileNotFoundError(f"no scenes in {Path(root) / split}")
+    if rooms:
+        kept, held = {}, 0
+        for name, refs in groups.items():
+            if held >= rooms:
+                break
+            kept[name], held = refs, held + len(refs)
+        groups = kept
     parts = [_cached(Path(root), split, name, refs, tag, encoder, resolution, workers, quiet, key_extra, encode)
              for name, refs in groups.items()]
     parts = [p for p in parts if p is not None]

@@ -105,8 +105,11 @@ def loss_terms(model, batch: Batch, settings: "TrainSettings"):
     room = batch.has_unbiased + (1 - batch.has_unbiased) * settings.solver_weight
     target = reflected_target(batch)
     if settings.reflected_loss == "room":
-        per_row = ((out[:, REFLECTED] - target) ** 2).mean(dim=(1, 2, 3, 4)) \
-            / (target ** 2).mean(dim=(1, 2, 3, 4)).clamp_min(1e-12)
+        # a room's three colour passes together, as the validation scores it: per pass, a channel the
+        # room barely lights (the blue of a red room) made its relative error, and the loss, explode
+        err = ((out[:, REFLECTED] - target) ** 2).mean(dim=(1, 2, 3, 4)).reshape(-1, 3)
+        energy = (target ** 2).mean(dim=(1, 2, 3, 4)).reshape(-1, 3)
+        per_row = (err.sum(dim=1) / energy.sum(dim=1).clamp_min(1e-12)).repeat_interleave(3)
     else:
         per_row = (w * (out[:, REFLECTED] - target) ** 2).mean(dim=(1, 2, 3, 4))
     reflected_loss = (room * per_row).sum() / room.sum().clamp_min(1e-6) * (room.mean() > 0)
@@ -215,7 +218,12 @@ def train(model: ProbeNet, train_set: Samples, val_set: Samples, settings: Train
                 # the epoch the export ships: validation wanders by several points between epochs
                 torch.save({"model": model.state_dict(), "history": history.__dict__, "epoch": epoch,
                             "config": model.config.to_dict()}, run / BEST)
-    if run:
+    if run and not history.epochs:   # `--epochs 0`: the network as it starts (its inputs' own answer)
+        run.mkdir(parents=True, exist_ok=True)
+        torch.save({"model": model.state_dict(), "history": history.__dict__, "config": model.config.to_dict()},
+                   checkpoint)
+        (run / "history.json").write_text(json.dumps(history.__dict__, indent=1))
+    elif run:
         plot_history(history, run / "loss.png", title=run.name)
     return history
 
@@ -259,6 +267,13 @@ def main(argv=None) -> int:
     parser.add_argument("--levels", type=int, default=ProbeNetConfig.levels)
     parser.add_argument("--without-seen", action="store_true",
                         help="zero the seen-bounce features (to measure what the seen rays bring)")
+    parser.add_argument("--start-gains", type=float, nargs=2, metavar=("BOUNCE", "SEEN"),
+                        default=(ProbeNetConfig.bounce_gain, ProbeNetConfig.seen_gain),
+                        help="the reflected light's start: the unshadowed bounce's and the filtered seen "
+                             "light's gains")
+    parser.add_argument("--no-reflected-correction", action="store_true",
+                        help="the reflected light is the bounces times their gains alone (the seen one "
+                             "filtered): the head corrects the direct light only")
     parser.add_argument("--epochs", type=int, default=TrainSettings.epochs)
     parser.add_argument("--batch", type=int, default=TrainSettings.batch, help="scenes per step")
     parser.add_argument("--lr", type=float, default=TrainSettings.learning_rate)
@@ -285,7 +300,8 @@ def main(argv=None) -> int:
     record_data(args.out, args.data, train_set, val_set, args.probes,
                 " ".join(["python -m viewer.training.train", *(sys.argv[1:] if argv is None else argv)]))
     config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels,
-                            seen=not args.without_seen)
+                            seen=not args.without_seen, bounce_gain=args.start_gains[0],
+                            seen_gain=args.start_gains[1], reflected_correction=not args.no_reflected_correction)
     model = ProbeNet(config)
     if args.init and not (args.out / "checkpoint.pt").exists():
         model.load_state_dict(torch.load(args.init, weights_only=False)["model"])
