@@ -104,12 +104,16 @@ class Bounce:
         """(K, C) the radiance each voxel of `albedo` (K, C) reflects under `light` (P, 9, C), SH at the
         probes read half a voxel in front of it, as `sh` reads the direct light (in one compiled pass:
         three times faster than the same sums in numpy on a Cornell box)."""
+        return np.asarray(albedo, np.float32) * self._leaving(light)
+
+    def _leaving(self, light: np.ndarray) -> np.ndarray:
+        """(K, C) float32 max(0, irradiance) / pi of every voxel under `light` (P, 9, C), read half a voxel
+        in front of it."""
         if self._lobe is None:
             self._lobe = np.ascontiguousarray(sh.basis(self.normal) * sh.COSINE_LOBE / np.pi, np.float32)
             self._corners = (np.stack([i for i, _ in self._front]).astype(np.int64),
                              np.stack([w for _, w in self._front]).astype(np.float32))
-        light = np.ascontiguousarray(light, np.float32)
-        return np.asarray(albedo, np.float32) * _reflected(*self._corners, self._lobe, light)
+        return _reflected(*self._corners, self._lobe, np.ascontiguousarray(light, np.float32))
 
     def sh(self, albedo: np.ndarray, direct: np.ndarray, channels: np.ndarray | None = None) -> np.ndarray:
         """(P, 9, 3) `bounce_sh` for the voxels' `albedo` (K, 3) under `direct` (P, 9, 3). Only the colour
@@ -119,8 +123,7 @@ class Bounce:
         if self._count == 0:
             return np.zeros((self.m ** 3, sh.SH_COUNT, 3))
         if self._direct is None or not np.array_equal(direct, self._direct):
-            incident = sum(w[:, None, None] * direct[index] for index, w in self._front)  # (K, 9, 3)
-            self._leaving_per_albedo = np.maximum(sh.irradiance(incident, self.normal), 0.0) / np.pi
+            self._leaving_per_albedo = self._leaving(direct).astype(np.float64)
             self._direct = np.array(direct, copy=True)
         radiance = self._mean(albedo * self._leaving_per_albedo)  # (patches, 3)
         if self._gathered is None:
