@@ -133,6 +133,9 @@ class VoxelRays:
         if self.caster is None:
             return dda.pairs_clear(self.cells, a, b)
         out = np.empty((len(a), len(b)), np.float32)
+        if self.caster.direct is not None:
+            _pairs_clear(*self.caster.direct.occlusion, a, b, out)
+            return out
         rows = max(1, RAYS_PER_CALL // max(len(b), 1))
         for start in range(0, len(a), rows):
             part = a[start:start + rows]
@@ -182,6 +185,24 @@ def _bundle_kept(o, d, trace, intersect, scene, faces, e1, e2, lo, h, n, first, 
                 front = f != NO_FACE and front_of(f, dx, dy, dz, e1, e2)
             out[p, k] = _voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, th, front, lo, h, n, first, triangle,
                                   voxel)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _pairs_clear(query, scene, a, b, out):
+    """`pairs_clear` through Embree, each segment made and cast in one compiled pass (repeating, tiling
+    and normalizing (A x B, 3) arrays in numpy first took a third of a moved lamp's shadow rays)."""
+    for i in numba.prange(a.shape[0]):
+        record = embree.record()
+        for j in range(b.shape[0]):
+            dx, dy, dz = b[j, 0] - a[i, 0], b[j, 1] - a[i, 1], b[j, 2] - a[i, 2]
+            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            if length <= 0.0:
+                out[i, j] = 1.0
+                continue
+            inv = 1.0 / length
+            blocked = embree.occluded(query, scene, record, a[i, 0], a[i, 1], a[i, 2], dx * inv, dy * inv, dz * inv,
+                                      length)
+            out[i, j] = 0.0 if blocked else 1.0
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
