@@ -218,8 +218,13 @@ def voxelize_with_faces(scene: Scene, resolution: int = 32, normal_mode: str = "
 
 
 def face_facing(normals: np.ndarray) -> np.ndarray:
-    """(F,) index into FACINGS of the signed axis closest to each normal (the voxel a face's pieces join)."""
-    return np.argmax(normals @ FACINGS.T, axis=1)
+    """(F,) index into FACINGS of the signed axis closest to each normal (the voxel a face's pieces join):
+    the largest of its dot products with FACINGS, the first of equals, found from |n| without a matrix
+    product (a BLAS call that waits for its threads after the compiled loops' parallel work: 2-8 ms on a
+    69k-face scan, against 0.7)."""
+    normals = np.asarray(normals)
+    axis = np.argmax(np.abs(normals), axis=1)
+    return 2 * axis + (np.take_along_axis(normals, axis[:, None], 1)[:, 0] < 0)
 
 
 def _voxelize(scene: Scene, resolution: int, normal_mode: str):
@@ -294,7 +299,7 @@ def light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSampl
     normal = scene.face_normals[face]
     coords = np.clip(np.floor((centroid - lo) / h).astype(np.int64), 0, resolution - 1)
     cell = coords[:, 0] + coords[:, 1] * resolution + coords[:, 2] * resolution ** 2
-    key = cell * 6 + np.argmax(scene.face_normals[emitting] @ FACINGS.T, axis=1)[source]
+    key = cell * 6 + face_facing(scene.face_normals[emitting])[source]
     voxel = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
     stray = keys[voxel] != key
     if stray.any():
