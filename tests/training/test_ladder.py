@@ -49,7 +49,10 @@ def test_a_room_of_uniform_light_is_seen_whole_by_rays_and_cones(room):
     ones = np.ones((voxels.count, 3))
     rays = SeenRays(rays_of_scene, voxels.count, points, 64).gathered(ones)
     np.testing.assert_allclose(rays[:, 0], DC_OF_ONE, rtol=1e-6)
-    assert np.abs(rays[:, 1:]).max() < 0.01 * DC_OF_ONE   # the 64-point lattice integrates the rest nearly to 0
+    # 27 points are dealt the 27 interleaved parts of one lattice of 1,728 directions: together they
+    # integrate the rest to nearly 0, each alone to within a few percent
+    assert np.abs(rays[:, 1:].mean(axis=0)).max() < 0.002 * DC_OF_ONE
+    assert np.abs(rays[:, 1:]).max() < 0.03 * DC_OF_ONE
     cones = ConeTracer(voxels, 16).gathered(ones, points)
     np.testing.assert_allclose(cones[:, 0], DC_OF_ONE, rtol=0.05)   # what stops short of opaque is lost
 

@@ -57,9 +57,11 @@ from viewer.neural.direct import (NEAR_FIELD, SHADOW_OFFSET, VISIBILITY_CELLS, e
                                   emitter_sh_rows, emitting_patches, facings, patch_visibility,
                                   shadow_targets, splat, sun_sh, sun_visibility)
 
-VERSION = 6
+VERSION = 7
 """Bump when the features change: a model card records the version its network was trained on, and
-`viewer.neural.field` refuses a model of a version it cannot feed (`VERSION_CHANNELS`)."""
+`viewer.neural.field` refuses a model of a version it cannot feed (`VERSION_CHANNELS`). Version 7 deals
+the seen rays' directions out over the lattice (`viewer.neural.seen.interleaved_lattices`) where
+version 6 turned each probe's own: the same features, with less noise in any 3x3x3 neighbourhood."""
 FEATURES = (
     "density",          # surface area in the cell / cell face area
     "normal_x", "normal_y", "normal_z",  # area-weighted normals / cell face area
@@ -72,9 +74,10 @@ FEATURES = (
     *(f"seen_{k}" for k in range(sh.SH_COUNT)),  # two bounces gathered by SEEN_RAYS rays a probe, / scale
 )
 CHANNELS = len(FEATURES)
-VERSION_CHANNELS = {4: 30, 6: CHANNELS}
+VERSION_CHANNELS = {4: 30, 6: CHANNELS, 7: CHANNELS}
 """The features a network of each encoding version reads: the first this many of FEATURES (version 4
-had no seen features)."""
+had no seen features; a version-6 network reads version 7's, whose seen light differs from its own by
+the directions' noise alone)."""
 DIRECT = slice(6, 6 + sh.SH_COUNT)
 """Where the direct-light SH sits among the features (the network adds its output to it)."""
 BOUNCE = slice(21, 21 + sh.SH_COUNT)

@@ -8,7 +8,9 @@ the valid probes:
 - voxel cone tracing with 6 and 16 cones a probe (viewer.training.cones);
 - exact rays, 8 to 64 a probe, cast on the scene's triangles (viewer.neural.seen.SeenRays, the network's
   seen feature: each ray takes the light of the voxel whose surface it hits, a back face or nothing
-  brings none; every probe's directions are a Fibonacci lattice turned by a random rotation of its own);
+  brings none; the directions are dealt out over the lattice: every 3x3x3 block of probes shares one
+  Fibonacci lattice, `seen.interleaved_lattices`; the table in docs/TRAINING.md was measured with a
+  lattice turned at random per probe, which leaves the box filtered rungs 1-2 points worse);
 - the solver's own probe rays on the same voxels (256 a probe): what any gather of this light reaches,
   the rest being the target's finer voxels (the dataset's solver runs on 32^3, the ladder on the
   encoder's 24^3).

@@ -1,0 +1,53 @@
+"""The seen rays' directions: dealt out over the probe lattice so that neighbours share one lattice."""
+
+import numpy as np
+import pytest
+
+from viewer.neural.seen import INTERLEAVE, SEED, interleaved_lattices, lattice_rays
+from viewer.probes import sh
+
+
+def block(directions: np.ndarray, side: int, corner) -> np.ndarray:
+    """The directions of the 3x3x3 block of probes whose lowest corner is `corner`."""
+    i, j, k = corner
+    grid = directions.reshape(side, side, side, *directions.shape[1:])
+    return grid[i:i + INTERLEAVE, j:j + INTERLEAVE, k:k + INTERLEAVE].reshape(-1, 3)
+
+
+@pytest.mark.parametrize("corner", [(0, 0, 0), (1, 2, 0), (4, 3, 5)])
+def test_every_3x3x3_block_of_probes_holds_the_whole_lattice_once(corner):
+    """Wherever the block sits (the network's filter is centred on every probe), its 27 probes' rays are
+    the 27 x 16 directions of one Fibonacci lattice, each once."""
+    side, rays = 8, 16
+    directions = interleaved_lattices(side, rays, SEED)
+    whole, _ = sh.sphere_directions(INTERLEAVE ** 3 * rays, seed=SEED)
+    found = block(directions, side, corner)
+    assert found.shape == whole.shape
+    # each direction of the whole lattice is met by exactly one of the block's
+    nearest = np.argmax(found @ whole.T, axis=1)
+    assert np.array_equal(np.sort(nearest), np.arange(len(whole)))
+    np.testing.assert_allclose(found, whole[nearest], atol=1e-12)
+
+
+def test_each_probe_alone_still_looks_all_around():
+    """A probe's own 16 directions are a stride through the lattice's bands of equal area: one in each
+    sixteenth of the sphere's heights, so even unfiltered a probe is not blind to a side."""
+    directions = interleaved_lattices(6, 16, SEED)
+    assert np.allclose(np.linalg.norm(directions, axis=-1), 1.0)
+    assert np.abs(directions.mean(axis=1)).max() < 0.15   # the mean of 16 spread unit vectors
+    # undo the lattice's one turn: then its heights (z) per probe fall one in each of 16 equal bands
+    n = INTERLEAVE ** 3 * 16
+    turn = np.linalg.lstsq(sh.sphere_directions(n)[0], sh.sphere_directions(n, seed=SEED)[0], rcond=None)[0]
+    heights = (directions @ np.linalg.inv(turn))[..., 2]
+    bands = np.floor((1.0 - heights) / 2.0 * 16).astype(int)
+    assert all(np.array_equal(np.sort(b), np.arange(16)) for b in bands)
+
+
+def test_a_cubic_lattice_is_interleaved_and_other_point_sets_are_turned_at_random():
+    """`lattice_rays` deals out directions over a cubic lattice of probes; any other count of points
+    (a few points in a test, a list of free-space points) gets one turned lattice each."""
+    cubic, _ = lattice_rays(4 ** 3, 16, SEED)
+    np.testing.assert_array_equal(cubic, interleaved_lattices(4, 16, SEED))
+    other, basis = lattice_rays(10, 16, SEED)
+    assert other.shape == (10, 16, 3) and basis.shape == (10, 16, 9)
+    assert not np.allclose(other[0], other[1])
