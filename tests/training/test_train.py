@@ -145,8 +145,8 @@ def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
 
 def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
     """The head starts at zero: all the light is the encoding's direct light plus the reflected light,
-    which is the mean of the two bounces (unshadowed, and seen through the box filter); the
-    convolutions read the light through an exportable asinh."""
+    which is the seen light through the box filter (by default; or any mix of it and the unshadowed
+    bounce); the convolutions read the light through an exportable asinh."""
     from viewer.scene import load
     from viewer.training.models import REFLECTED, TOTAL, asinh
 
@@ -156,8 +156,12 @@ def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
         out = ProbeNet(ProbeNetConfig(width=4, hidden=8))(x)
     box = torch.nn.functional.avg_pool3d(torch.nn.functional.pad(x[:, encoding.SEEN], (1,) * 6, mode="replicate"),
                                          3, stride=1)
+    torch.testing.assert_close(out[:, REFLECTED], box)
+    with torch.no_grad():
+        mixed = ProbeNet(ProbeNetConfig(width=4, hidden=8, bounce_gain=0.5, seen_gain=0.5))(x)
     bounce = 0.5 * (x[:, encoding.BOUNCE] + box)
-    torch.testing.assert_close(out[:, REFLECTED], bounce)
-    torch.testing.assert_close(out[:, TOTAL], x[:, encoding.DIRECT] + bounce)
+    torch.testing.assert_close(mixed[:, REFLECTED], bounce)
+    torch.testing.assert_close(out[:, TOTAL], x[:, encoding.DIRECT] + box)
+    torch.testing.assert_close(mixed[:, TOTAL], x[:, encoding.DIRECT] + bounce)
     t = torch.linspace(-400.0, 400.0, 10001)
     torch.testing.assert_close(asinh(t), torch.asinh(t), atol=1e-6, rtol=1e-6)
