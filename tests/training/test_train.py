@@ -38,10 +38,9 @@ def test_loss_falls_and_the_run_resumes(tiny, tmp_path):
     model = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2))
     first = train(model, train_set, val_set, TrainSettings(epochs=30, batch=1, learning_rate=1e-2), run=run,
                   quiet=True)
-    # the untrained network answers with the direct light and the two bounces (zero-initialized head):
-    # training must improve on that; how much depends on the four random rooms (the shipped model's
-    # accuracy is tested apart; the seen bounce's box-filtered start leaves less to gain than the
-    # unshadowed bounce did: 0.193 -> 0.180 here, where a blind network goes 0.235 -> 0.193)
+    # the untrained network answers with the direct light and the seen light box filtered (a
+    # zero-initialized head): training must improve on that; how much depends on the four random rooms
+    # (the shipped model's accuracy is measured apart, docs/TRAINING.md)
     assert np.mean(first.train[-5:]) < 0.97 * np.mean(first.train[:3])
     assert (run / "checkpoint.pt").exists() and (run / "loss.png").exists()
     again = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2))
