@@ -14,9 +14,9 @@ light: albedo x its direct irradiance / pi (`Bounce.leaving`). The directions ar
 lattice (`interleaved_lattices`): the 27 probes of any 3x3x3 block take the 27 disjoint subsets of one
 spherical Fibonacci lattice of 27 x 16 directions, so the neighbourhood that the network's filter
 averages holds 432 evenly spread directions, where 27 independently turned lattices of 16 overlapped
-and left gaps. It is the same cost, and a third less noise: on the solver's converged light, 3x3x3
-box filtered against its probes, 8.0% instead of 8.9% on the paper's seven scenes and 29.4% instead of
-31.1% in 20 validation rooms (median; 32 turned rays a probe give 7.7% and 28.0%).
+and left gaps. The same rays and cost, and less error once filtered: on the solver's converged light,
+3x3x3 box filtered against its probes, 8.0% instead of 8.9% on the paper's seven scenes and 29.4%
+instead of 31.1% in 20 validation rooms (median; 32 turned rays a probe give 7.7% and 28.0%).
 
 The light bounces on, and the seen feature follows it one bounce further (`seen_light`): what the rays
 gathered is read back at the voxels (half a voxel in front, as the direct light is) and reflected again,
