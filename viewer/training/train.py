@@ -218,23 +218,24 @@ def train(model: ProbeNet, train_set: Samples, val_set: Samples, settings: Train
             print(f"epoch {epoch + 1}/{settings.epochs}  train {running / seen:.5f}  val {metrics['loss']:.5f}  "
                   f"{against}  ({history.seconds[-1]:.1f} s)", file=sys.stderr)
         if run:
-            run.mkdir(parents=True, exist_ok=True)
-            torch.save({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
-                        "schedule": schedule.state_dict(), "history": history.__dict__,
-                        "config": model.config.to_dict()}, checkpoint)
-            (run / "history.json").write_text(json.dumps(history.__dict__, indent=1))
+            save_run(run, model, history, optimizer=optimizer.state_dict(), schedule=schedule.state_dict())
             if metrics["loss"] <= min(history.val):
                 # the epoch the export ships: validation wanders by several points between epochs
                 torch.save({"model": model.state_dict(), "history": history.__dict__, "epoch": epoch,
                             "config": model.config.to_dict()}, run / BEST)
     if run and not history.epochs:   # `--epochs 0`: the network as it starts (its inputs' own answer)
-        run.mkdir(parents=True, exist_ok=True)
-        torch.save({"model": model.state_dict(), "history": history.__dict__, "config": model.config.to_dict()},
-                   checkpoint)
-        (run / "history.json").write_text(json.dumps(history.__dict__, indent=1))
+        save_run(run, model, history)
     elif run:
         plot_history(history, run / "loss.png", title=run.name)
     return history
+
+
+def save_run(run: Path, model: ProbeNet, history: History, **state) -> None:
+    """The run's checkpoint (the model, its config, the history and any other `state`) and history.json."""
+    run.mkdir(parents=True, exist_ok=True)
+    torch.save({"model": model.state_dict(), **state, "history": history.__dict__,
+                "config": model.config.to_dict()}, run / "checkpoint.pt")
+    (run / "history.json").write_text(json.dumps(history.__dict__, indent=1))
 
 
 def plot_history(history: History, path: Path, title: str = "") -> None:
