@@ -11,7 +11,7 @@ import numpy as np
 
 from viewer.probes import sh
 from viewer.rays.voxel_rays import VoxelRays
-from viewer.rays.voxels import VoxelGrid
+from viewer.rays.voxels import VoxelGrid, face_facing
 
 NEAR_FIELD = 1.0 / np.pi
 """r^2 + A/pi: the near-field clamp of the transport kernel, so a probe next to a lamp stays finite."""
@@ -42,9 +42,9 @@ def splat(points: np.ndarray, lo: np.ndarray, spacing: np.ndarray, m: int):
 def facings(normal: np.ndarray) -> np.ndarray:
     """(K,) int 0-5: the signed axis each normal (K, 3) is closest to (2 a + 1 for +a, 2 a for -a). Patches
     merge surfaces of one facing only: the two sides of a thin wall in one cell have opposite normals,
-    and merged, their mean normal is zero and the patch shines nowhere."""
-    axis = np.argmax(np.abs(normal), axis=1)
-    return axis * 2 + (np.take_along_axis(normal, axis[:, None], 1)[:, 0] > 0)
+    and merged, their mean normal is zero and the patch shines nowhere. The voxelizer's own index
+    (`voxels.face_facing`: 2 a for +a) of the opposite normal, ties and zero normals alike."""
+    return face_facing(-np.asarray(normal))
 
 
 def emitting_patches(cell: np.ndarray, voxels: VoxelGrid):

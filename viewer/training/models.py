@@ -36,6 +36,14 @@ from torch.nn import functional as F
 from viewer.neural import encoding
 
 
+BOUNCE_GAIN, SEEN_GAIN = 0.0, 1.0
+"""The reflected light's start (`ProbeNetConfig.bounce_gain`, `seen_gain`): the seen light alone,
+through the box filter (learned from there). The unshadowed bounce passes through walls: started at half
+of it and half the seen light, the version-6 model kept 0.4 of it and ended no better on the reflected
+light than the box-filtered seen light alone (33.8-34.0% against 33.2% on 60 validation rooms); started
+from the seen light, the same recipe ends at 32.2-32.5% (docs/TRAINING.md)."""
+
+
 @dataclass(frozen=True)
 class ProbeNetConfig:
     width: int = 16
@@ -48,11 +56,10 @@ class ProbeNetConfig:
     """Stride-2 levels below the probe lattice (M must be divisible by 2^levels)."""
     upsample: str = "trilinear"
     """How a coarse level reaches the finer one: `trilinear` or `nearest` (cheaper, blockier)."""
-    bounce_gain: float = 0.0
-    """The unshadowed bounce's gain in the reflected light at the start of training (learned from there;
-    BOUNCE_GAIN)."""
-    seen_gain: float = 1.0
-    """The filtered seen light's gain at the start of training (learned from there; SEEN_GAIN)."""
+    bounce_gain: float = BOUNCE_GAIN
+    """The unshadowed bounce's gain in the reflected light at the start of training (learned from there)."""
+    seen_gain: float = SEEN_GAIN
+    """The filtered seen light's gain at the start of training (learned from there)."""
     reflected_correction: bool = True
     """Whether the head corrects the reflected light; without, the reflected light is the two bounces
     times their gains alone (the seen one through its learned filter): a linear denoiser of the seen
@@ -136,12 +143,6 @@ class ProbeNet(nn.Module):
 
 
 TOTAL, REFLECTED, VALIDITY = slice(0, 9), slice(9, 18), 18
-BOUNCE_GAIN, SEEN_GAIN = 0.0, 1.0
-"""The reflected light's start (`ProbeNetConfig.bounce_gain`, `seen_gain`): the seen light alone,
-through the box filter (learned from there). The unshadowed bounce passes through walls: started at half
-of it and half the seen light, the version-6 model kept 0.4 of it and ended no better on the reflected
-light than the box-filtered seen light alone (33.8-34.0% against 33.2% on 60 validation rooms); started
-from the seen light, the same recipe ends at 32.2-32.5% (docs/TRAINING.md)."""
 MAGNITUDE_FLOOR = 0.1
 """The head's corrections are relative: the direct light's times |direct DC| + |bounce DC| + this (in
 the encoding's units, where the room's mean direct DC is 1), so one output unit is a tenth of a dim
