@@ -46,8 +46,12 @@ def test_each_probe_alone_still_looks_all_around():
 def test_a_cubic_lattice_is_interleaved_and_other_point_sets_are_turned_at_random():
     """`lattice_rays` deals out directions over a cubic lattice of probes; any other count of points
     (a few points in a test, a list of free-space points) gets one turned lattice each."""
-    cubic, _ = lattice_rays(4 ** 3, 16, SEED)
+    cubic, basis, sets = lattice_rays(4 ** 3, 16, SEED)
     np.testing.assert_array_equal(cubic, interleaved_lattices(4, 16, SEED))
-    other, basis = lattice_rays(10, 16, SEED)
+    # the probes share INTERLEAVE^3 sets of SH weights: each probe's set is its own directions' basis
+    assert basis.shape == (INTERLEAVE ** 3, 16, 9) and sets.shape == (4 ** 3,)
+    np.testing.assert_allclose(basis[sets], sh.basis(cubic) * (4 * np.pi / 16), rtol=1e-6, atol=1e-7)
+    other, basis, sets = lattice_rays(10, 16, SEED)
     assert other.shape == (10, 16, 3) and basis.shape == (10, 16, 9)
+    np.testing.assert_array_equal(sets, np.arange(10))
     assert not np.allclose(other[0], other[1])

@@ -68,7 +68,7 @@ class SeenRays:
         box around those triangles' old and new places (`lattice.moved_box`): the rays that do not pass
         through it (widened by MOVED_MARGIN cells) keep the face they met, and are only landed again."""
         self.count, self.rays, self.probes, self.points, self.seed = int(count), int(rays), len(points), points, seed
-        directions, self._basis = lattice_rays(len(points), self.rays, seed)
+        directions, self._basis, self._sets = lattice_rays(len(points), self.rays, seed)
         before = None
         if (box is not None and previous is not None and previous._faces is not None
                 and (previous.rays, previous.seed) == (self.rays, seed)
@@ -80,7 +80,7 @@ class SeenRays:
         self._faces = None if face is None else (face, t)
         """(P, R) the face each ray met and its distance, for the rays after a move."""
         hits = hits.reshape(-1)
-        self.voxel = np.where(hits < 0, count, hits).astype(np.int64)
+        self.voxel = np.where(hits < 0, count, hits).astype(np.int32)
         """(P x R,) the voxel each ray lands on; `count` where it brings no light."""
 
     def gathered(self, radiance: np.ndarray) -> np.ndarray:
@@ -88,7 +88,7 @@ class SeenRays:
         compiled pass over the rays: half the time of a fancy-indexed copy and a batched product)."""
         radiance = np.asarray(radiance, np.float32)
         padded = np.ascontiguousarray(np.vstack([radiance, np.zeros((1, radiance.shape[1]), np.float32)]))
-        return _gathered(self.voxel.reshape(self.probes, self.rays), self._basis, padded)
+        return _gathered(self.voxel.reshape(self.probes, self.rays), self._sets, self._basis, padded)
 
 
 def seen_light(rays: SeenRays, bounce, albedo: np.ndarray, leaving: np.ndarray,
@@ -128,18 +128,26 @@ def tail_ratio(area: np.ndarray, light: np.ndarray, before: np.ndarray) -> np.nd
 
 
 @lru_cache(maxsize=2)
-def lattice_rays(count: int, rays: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def lattice_rays(count: int, rays: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rays of `count` probes, whatever the scene: their directions (count, rays, 3)
-    (`interleaved_lattices` on a cubic lattice of `count` probes, else `turned_lattices`) and the SH
-    weights that gather what they bring (count, rays, 9) float32, each direction's basis times the Monte
-    Carlo weight of a uniform direction on the sphere, 4 pi / rays. Made once per lattice (read-only):
-    20 ms of a new Cornell box's 120."""
+    (`interleaved_lattices` on a cubic lattice of `count` probes, else `turned_lattices`), and the SH
+    weights that gather what they bring as S distinct sets (S, rays, 9) float32 with the set of each
+    probe (count,) int32: each direction's basis times the Monte Carlo weight of a uniform direction on
+    the sphere, 4 pi / rays. An interleaved lattice has INTERLEAVE^3 sets, 16 KB that stay in the
+    cache while a gather reads them for every probe (a turned lattice has one a probe). Made once per
+    lattice (read-only): 20 ms of a new Cornell box's 120."""
     side = round(count ** (1.0 / 3.0))
-    directions = (interleaved_lattices(side, rays, seed) if side ** 3 == count
-                  else turned_lattices(count, rays, seed))
-    basis = np.ascontiguousarray(sh.basis(directions) * (4.0 * np.pi / rays), np.float32)
-    directions.flags.writeable = basis.flags.writeable = False
-    return directions, basis
+    if side ** 3 == count:
+        distinct, sets = interleaved_subsets(rays, seed), interleaved_sets(side)
+        directions = distinct[sets]
+    else:
+        directions = turned_lattices(count, rays, seed)
+        sets = np.arange(count, dtype=np.int32)
+        distinct = directions
+    basis = np.ascontiguousarray(sh.basis(distinct) * (4.0 * np.pi / rays), np.float32)
+    for array in (directions, basis, sets):
+        array.flags.writeable = False
+    return directions, basis, sets
 
 
 INTERLEAVE = 3
@@ -154,11 +162,22 @@ def interleaved_lattices(side: int, rays: int, seed: int) -> np.ndarray:
     probe (i, j, k) takes every INTERLEAVE^3-th direction from offset (i mod 3) + 3 (j mod 3) + 9 (k mod 3).
     Each probe's subset spans the sphere (one direction in each of `rays` bands of equal area), and any
     3x3x3 block of probes holds the whole lattice (interleaved sampling: Keller and Heidrich 2001)."""
+    return interleaved_subsets(rays, seed)[interleaved_sets(side)]
+
+
+def interleaved_subsets(rays: int, seed: int) -> np.ndarray:
+    """(INTERLEAVE^3, rays, 3): the subsets of the interleaved lattice, subset s every INTERLEAVE^3-th
+    direction from offset s."""
     n = INTERLEAVE ** 3
     whole, _ = sh.sphere_directions(n * rays, seed=seed)
-    subsets = np.stack([whole[offset::n] for offset in range(n)])   # (n, rays, 3)
+    return np.stack([whole[offset::n] for offset in range(n)])
+
+
+def interleaved_sets(side: int) -> np.ndarray:
+    """(side^3,) int32: the subset of the interleaved lattice each probe of a side^3 lattice takes,
+    (i mod 3) + 3 (j mod 3) + 9 (k mod 3)."""
     i, j, k = np.meshgrid(*[np.arange(side) % INTERLEAVE] * 3, indexing="ij")
-    return subsets[(i + INTERLEAVE * j + INTERLEAVE * INTERLEAVE * k).reshape(-1)]
+    return (i + INTERLEAVE * j + INTERLEAVE * INTERLEAVE * k).reshape(-1).astype(np.int32)
 
 
 def turned_lattices(count: int, rays: int, seed: int) -> np.ndarray:
@@ -175,14 +194,14 @@ def turned_lattices(count: int, rays: int, seed: int) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _gathered(voxel, basis, radiance):
-    """(P, 9, C): sum over each probe's rays r of basis[p, r, :] x radiance[voxel[p, r]], probe by probe on
-    every core (an albedo edit gathers 3 bounces, 3 colour passes each: 9 ms of the Cornell box's edit on
-    one)."""
+def _gathered(voxel, sets, basis, radiance):
+    """(P, 9, C): sum over each probe's rays r of basis[sets[p], r, :] x radiance[voxel[p, r]], probe by
+    probe on every core (an albedo edit gathers 3 bounces, 3 colour passes each)."""
     probes, rays = voxel.shape
     channels = radiance.shape[1]
     out = np.zeros((probes, 9, channels), np.float32)
     for p in numba.prange(probes):
+        weights = basis[sets[p]]
         total = np.zeros((channels, 9), np.float32)
         for r in range(rays):
             v = voxel[p, r]
@@ -190,7 +209,7 @@ def _gathered(voxel, basis, radiance):
                 value = radiance[v, c]
                 if value != 0.0:
                     for b in range(9):
-                        total[c, b] += basis[p, r, b] * value
+                        total[c, b] += weights[r, b] * value
         for c in range(channels):
             for b in range(9):
                 out[p, b, c] = total[c, b]
