@@ -123,19 +123,20 @@ def emitter_sh_rows(lights, points: np.ndarray, visible: np.ndarray | None = Non
 
 SH_BLOCK = 256
 """Probes per block of `_emitter_sh`: the patch loop runs over a block that stays in L1, and the probe
-loop inside it vectorizes."""
+loop inside it vectorizes. The blocks are shared out among the cores."""
 
 
-@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy", parallel=True)
 def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_field, out):
     """The terms of `emitter_sh`: points (3, P), radiance (E, C), visible (E, P) when `shadowed`, out
     (C, 9, P)."""
     count = points.shape[1]
-    w = np.empty(SH_BLOCK, np.float32)
-    b = np.empty((9, SH_BLOCK), np.float32)
     one, tiny, zero = np.float32(1.0), np.float32(1e-12), np.float32(0.0)
-    for start in range(0, count, SH_BLOCK):
+    for block in numba.prange((count + SH_BLOCK - 1) // SH_BLOCK):
+        start = block * SH_BLOCK
         n = min(SH_BLOCK, count - start)
+        w = np.empty(SH_BLOCK, np.float32)
+        b = np.empty((9, SH_BLOCK), np.float32)
         px, py, pz = points[0, start:start + n], points[1, start:start + n], points[2, start:start + n]
         for e in range(source.shape[0]):
             sx, sy, sz = source[e, 0], source[e, 1], source[e, 2]
