@@ -84,6 +84,20 @@ BOUNCE = slice(21, 21 + sh.SH_COUNT)
 """Where the one-bounce SH sits (`bounce_sh`: the network's reflected light starts from it)."""
 SEEN = slice(30, 30 + sh.SH_COUNT)
 """Where the seen bounce's SH sits (viewer/neural/seen.py)."""
+COMPRESSED = (slice(FEATURES.index("emission"), DIRECT.stop), slice(BOUNCE.start, CHANNELS))
+"""The features the network's convolutions read through asinh (`compressed`): the light, which spans five
+orders of magnitude within a room."""
+
+
+def compressed(inputs: np.ndarray) -> np.ndarray:
+    """(passes, CHANNELS, M, M, M) float32: the encoded `inputs` as the network's convolutions read them,
+    the light (`COMPRESSED`) through asinh. A network exported with two inputs takes it beside the
+    inputs: numpy's vectorized asinh costs 1.3 ms on a 24^3 lattice's three passes where the eight
+    ONNX operators that spell it cost 4 ms of the network's 19."""
+    out = np.array(inputs, np.float32, copy=True)
+    for part in COMPRESSED:
+        np.arcsinh(out[:, part], out=out[:, part])
+    return out
 
 
 @dataclass(frozen=True)

@@ -146,12 +146,15 @@ class NeuralField:
         """The encoding's features the network reads (the first this many: an older version's)."""
         self.session = open_session(self.card.path, threads)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
-        if len(inputs) != 1 or inputs[0].shape[1] != self.channels:
-            raise ModelError(f"{self.card.path.name}: expects inputs {inputs[0].shape}, "
+        if len(inputs) not in (1, 2) or any(i.shape[1] != self.channels for i in inputs):
+            raise ModelError(f"{self.card.path.name}: expects inputs {', '.join(str(i.shape) for i in inputs)}, "
                              f"the encoding gives (3, {self.channels}, M, M, M)")
         if len(outputs) != 1 or outputs[0].shape[1] != OUTPUTS:
             raise ModelError(f"{self.card.path.name}: gives outputs {outputs[0].shape}, expected (3, {OUTPUTS}, M, M, M)")
         self.input_name = inputs[0].name
+        self.compressed_name = inputs[1].name if len(inputs) == 2 else None
+        """The second input of a network that takes its inputs through asinh too (`encoding.compressed`);
+        None: a network that computes it itself."""
         self._encoder: Encoder | None = None
         self._output: np.ndarray | None = None       # the network's last output, and per colour pass
         self._output_keys: list = [None] * 3         # the (encoder, revision) of the inputs it ran on
@@ -229,7 +232,10 @@ class NeuralField:
         self.passes_run = len(inputs)
         if inputs.shape[1] != self.channels:
             inputs = np.ascontiguousarray(inputs[:, :self.channels])
-        return self.session.run(None, {self.input_name: inputs})[0]
+        feed = {self.input_name: inputs}
+        if self.compressed_name is not None:
+            feed[self.compressed_name] = encoding.compressed(inputs)
+        return self.session.run(None, feed)[0]
 
     def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:
         """Voxelize the scene at the card's resolution, list its occluders, and predict over its bounds."""

@@ -109,7 +109,9 @@ class ProbeNet(nn.Module):
         self.seen_filter = nn.Conv3d(9, 9, 3, padding=1, padding_mode="replicate", groups=9, bias=False)
         nn.init.constant_(self.seen_filter.weight, 1.0 / 27.0)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, x_in: torch.Tensor | None = None) -> torch.Tensor:
+        """`x` the encoded inputs; `x_in` the same through `compress` where the caller made it already
+        (the exported network takes it as its second input: `encoding.compressed`)."""
         if not self.config.seen:
             x = torch.cat([x[:, :encoding.SEEN.start], torch.zeros_like(x[:, encoding.SEEN])], dim=1)
         direct_dc = x[:, encoding.DIRECT.start:encoding.DIRECT.start + 1]
@@ -118,7 +120,7 @@ class ProbeNet(nn.Module):
                                count_include_pad=False)
         magnitude = direct_dc.abs() + bounce_dc.abs() + MAGNITUDE_FLOOR
         reflected_magnitude = 0.5 * (bounce_dc.abs() + seen_dc.abs()) + REFLECTED_FLOOR
-        x_in = compress(x)
+        x_in = compress(x) if x_in is None else x_in
         levels = []
         level = x_in
         for down in self.down:
@@ -155,14 +157,15 @@ gave rooms with walls of albedo 0.01-0.04 five to seven times their true indirec
 
 
 def compress(x: torch.Tensor) -> torch.Tensor:
-    """The inputs as the convolutions read them: emission, direct light and bounce through asinh. They
-    span five orders of magnitude (a probe next to a lamp sees ~300x the room's mean, the far corner a
-    hundredth of it); raw, the few cells by the lamps are all that the first layers' activations hold."""
-    emission, bounce = encoding.FEATURES.index("emission"), encoding.BOUNCE
-    assert encoding.DIRECT.start == emission + 1 and bounce.stop == encoding.SEEN.start
-    assert encoding.SEEN.stop == encoding.CHANNELS
-    return torch.cat([x[:, :emission], asinh(x[:, emission:encoding.DIRECT.stop]),
-                      x[:, encoding.DIRECT.stop:bounce.start], asinh(x[:, bounce.start:])], dim=1)
+    """The inputs as the convolutions read them: the light (emission, direct light, the bounces:
+    `encoding.COMPRESSED`) through asinh. It spans five orders of magnitude (a probe next to a lamp sees
+    ~300x the room's mean, the far corner a hundredth of it); raw, the few cells by the lamps are all
+    that the first layers' activations hold. `encoding.compressed` is the same in numpy."""
+    parts, start = [], 0
+    for part in encoding.COMPRESSED:
+        parts += [x[:, start:part.start], asinh(x[:, part])]
+        start = part.stop
+    return torch.cat(parts + ([x[:, start:]] if start < x.shape[1] else []), dim=1)
 
 
 def asinh(t: torch.Tensor) -> torch.Tensor:
