@@ -69,6 +69,30 @@ def test_direct_feature_is_the_lamps_solid_angle():
     assert value == pytest.approx(expected, rel=0.02)
 
 
+def test_a_probe_near_a_lamp_sums_its_pieces():
+    """A probe 0.2 below a lamp 0.4 wide: one term for the whole lamp misjudges its solid angle; the
+    lamp's pieces (the voxels' light samples) within `near` of the probe give it within 2%."""
+    lamp = ceiling_lamp(half_size=0.2, height=0.95, radiance=10.0)
+    scene = Scene.concatenate("lamp-above-floor", [lamp, box(half_size=1.0, centre=(0, -2.0, 0), name="block")])
+    voxels = voxelize(scene, 32)
+    probe = np.array([[0.0, 0.75, 0.0]])
+    cell = np.zeros(voxels.count, np.int64)   # one patch: the whole lamp
+    lights = encoding.emitting_patches(cell, voxels)
+    pieces = encoding.patch_pieces(cell, voxels, near=1.0)
+    assert len(lights[2]) == 1 and pieces.start.tolist() == [0, len(pieces.area)] and len(pieces.area) > 16
+    u = (np.arange(400) + 0.5) / 400 * 0.4 - 0.2   # the solid angle: cos dA / r^2 over a fine grid
+    x, z = np.meshgrid(u, u)
+    solid_angle = float(np.sum(0.2 / (x * x + 0.04 + z * z) ** 1.5) * (0.4 / 400) ** 2)
+    expected = 10.0 * solid_angle * sh.basis(np.array([0.0, 1.0, 0.0]))[0]
+    whole = encoding.emitter_sh(lights, probe)[0, 0, 0]
+    summed = encoding.emitter_sh(lights, probe, pieces=pieces)[0, 0, 0]
+    assert summed == pytest.approx(expected, rel=0.02)
+    assert abs(whole - expected) > 5 * abs(summed - expected)
+    # beyond `near` the lamp is one term again
+    far = np.array([[0.0, -0.5, 0.0]])
+    np.testing.assert_allclose(encoding.emitter_sh(lights, far, pieces=pieces), encoding.emitter_sh(lights, far))
+
+
 def test_sun_reaches_only_the_cells_under_the_window():
     """A closed room with a hole in the ceiling: straight-down sun lights the column under the hole."""
     room = box(inward=True, albedo=0.5, name="room")

@@ -225,6 +225,7 @@ class Encoder:
         rays gained or lost a patch) form new ones, whose rays are traced and bases computed. Returns
         whether the emitters changed (beyond their radiances)."""
         position, normal, area, radiance = encoding.emitting_patches(self._geometry.cell, voxels)
+        pieces = encoding.patch_pieces(self._geometry.cell, voxels, encoding.NEAR_PIECES * self._geometry.spacing.max())
         target, cluster = self._shadows.targets(position, normal)
         keys = _patch_keys(position, normal, area, target[cluster])
         index = {key: e for e, key in enumerate(keys)}
@@ -253,7 +254,7 @@ class Encoder:
         for members in self._lamps(fresh, position, radiance, voxels.voxel_size):
             weights = radiance[members].max(axis=1)
             basis = emitter_basis(self.points, position[members], normal[members], area[members], weights,
-                                  visible, row[cluster[members]])
+                                  visible, row[cluster[members]], pieces.of(members))
             kept.append(Emitter({keys[e]: float(w) for e, w in zip(members, weights)}, basis,
                                 radiance[members[0]] / weights[0]))
         self.emitters = kept
@@ -339,9 +340,9 @@ def _proportional_channels(before, after) -> np.ndarray:
 
 
 def emitter_basis(points: np.ndarray, position, normal, area, weights, visible: np.ndarray,
-                  ray: np.ndarray) -> np.ndarray:
+                  ray: np.ndarray, pieces: encoding.Pieces | None = None) -> np.ndarray:
     """(9, P) float32: sum over patches of weight x the SH of their light at the probes (P, 3), for
-    radiance 1: `encoding.emitter_sh`'s terms, each patch seen where row `ray[e]` of `visible` (C, P)
-    says so, summed once per emitter instead of per edit."""
+    radiance 1: `encoding.emitter_sh`'s terms (with the patches' `pieces` near them), each patch seen
+    where row `ray[e]` of `visible` (C, P) says so, summed once per emitter instead of per edit."""
     lights = (position, normal, area, np.asarray(weights)[:, None])
-    return encoding.emitter_sh_rows(lights, points, np.asarray(visible)[np.asarray(ray, np.int64)])[0]
+    return encoding.emitter_sh_rows(lights, points, np.asarray(visible)[np.asarray(ray, np.int64)], pieces)[0]

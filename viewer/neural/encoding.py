@@ -53,15 +53,18 @@ from viewer.rays.voxels import VoxelGrid, face_facing
 # The features' parts, re-exported: callers read them as `encoding.<name>`.
 from viewer.neural.bounce import BOUNCE_LATTICE, BOUNCE_PATCH, Bounce, bounce_sh  # noqa: F401
 from viewer.neural.seen import SEEN_RAYS, SeenRays, seen_light  # noqa: F401
-from viewer.neural.direct import (NEAR_FIELD, SHADOW_OFFSET, VISIBILITY_CELLS, emitter_sh,  # noqa: F401
-                                  emitter_sh_rows, emitting_patches, facings, patch_visibility,
+from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBILITY_CELLS, Pieces, emitter_sh,  # noqa: F401
+                                  emitter_sh_rows, emitting_patches, facings, patch_pieces, patch_visibility,
                                   shadow_targets, splat, sun_sh, sun_visibility)
 
-VERSION = 7
+VERSION = 8
 """Bump when the features change: a model card records the version its network was trained on, and
 `viewer.neural.field` refuses a model of a version it cannot feed (`VERSION_CHANNELS`). Version 7 deals
 the seen rays' directions out over the lattice (`viewer.neural.seen.interleaved_lattices`) where
-version 6 turned each probe's own: the same features, with less noise in any 3x3x3 neighbourhood."""
+version 6 turned each probe's own: the same features, with less noise in any 3x3x3 neighbourhood.
+Version 8 sums the lamps' pieces near them (`direct.NEAR_PIECES`) where version 7 took each lattice
+cell's worth of lamp as one term: the same features, the direct light as close to Mitsuba's as the
+solver's."""
 FEATURES = (
     "density",          # surface area in the cell / cell face area
     "normal_x", "normal_y", "normal_z",  # area-weighted normals / cell face area
@@ -74,10 +77,10 @@ FEATURES = (
     *(f"seen_{k}" for k in range(sh.SH_COUNT)),  # two bounces gathered by SEEN_RAYS rays a probe, / scale
 )
 CHANNELS = len(FEATURES)
-VERSION_CHANNELS = {4: 30, 6: CHANNELS, 7: CHANNELS}
-"""The features a network of each encoding version reads: the first this many of FEATURES (version 4
-had no seen features; a version-6 network reads version 7's, whose seen light differs from its own by
-the directions' noise alone)."""
+VERSION_CHANNELS = {8: CHANNELS}
+"""The features a network of each encoding version reads: the first this many of FEATURES. Networks of
+versions 4-7 are refused: they learnt to correct a direct light of one term per lattice cell of lamp and
+overcorrect version 8's (the version-7 network's paper-test went from 6.4% to 9.1% off Mitsuba)."""
 DIRECT = slice(6, 6 + sh.SH_COUNT)
 """Where the direct-light SH sits among the features (the network adds its output to it)."""
 BOUNCE = slice(21, 21 + sh.SH_COUNT)
@@ -200,7 +203,7 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
     visible = None
     if blockers is not None:
         visible = patch_visibility(blockers, points, lights[0], lights[1], lo, spacing)
-    direct = emitter_sh(lights, points, visible)
+    direct = emitter_sh(lights, points, visible, patch_pieces(flat, voxels, NEAR_PIECES * spacing.max()))
     direct += sun_sh(sun, blockers, points)  # (P, 9, 3)
     bounce, seen = np.zeros((cells, sh.SH_COUNT, 3)), np.zeros((cells, sh.SH_COUNT, 3))
     if voxels.count:
