@@ -166,3 +166,24 @@ def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
     torch.testing.assert_close(mixed[:, TOTAL], x[:, encoding.DIRECT] + bounce)
     t = torch.linspace(-400.0, 400.0, 10001)
     torch.testing.assert_close(asinh(t), torch.asinh(t), atol=1e-6, rtol=1e-6)
+
+
+def test_all_the_light_is_the_direct_input_and_the_reflected_light_unless_the_head_corrects_it():
+    """By default the head's direct-light outputs are not used: all the light is the direct input plus
+    the reflected light, however the weights are; with `direct_correction` they are added, relative to
+    the local light."""
+    from viewer.scene import load
+    from viewer.training.models import REFLECTED, TOTAL
+
+    x = torch.from_numpy(encoding.encode_scene(load("cornell"), 8, 16).inputs)
+    torch.manual_seed(3)
+    plain = ProbeNet(ProbeNetConfig(width=4, hidden=8))
+    corrected = ProbeNet(ProbeNetConfig(width=4, hidden=8, direct_correction=True))
+    with torch.no_grad():
+        for p in plain.parameters():
+            p.normal_(0.0, 0.3)
+        corrected.load_state_dict(plain.state_dict())
+        a, b = plain(x), corrected(x)
+    torch.testing.assert_close(a[:, TOTAL], x[:, encoding.DIRECT] + a[:, REFLECTED])
+    torch.testing.assert_close(a[:, REFLECTED], b[:, REFLECTED])
+    assert (b[:, TOTAL] - a[:, TOTAL]).abs().max() > 1e-3

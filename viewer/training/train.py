@@ -284,6 +284,9 @@ def main(argv=None) -> int:
     parser.add_argument("--no-reflected-correction", action="store_true",
                         help="the reflected light is the bounces times their gains alone (the seen one "
                              "filtered): the head corrects the direct light only")
+    parser.add_argument("--direct-correction", action="store_true",
+                        help="the head corrects the direct light input too (all the light is otherwise the "
+                             "direct input plus the reflected light)")
     parser.add_argument("--epochs", type=int, default=TrainSettings.epochs)
     parser.add_argument("--batch", type=int, default=TrainSettings.batch, help="scenes per step")
     parser.add_argument("--lr", type=float, default=TrainSettings.learning_rate)
@@ -312,7 +315,8 @@ def main(argv=None) -> int:
                 " ".join(["python -m viewer.training.train", *(sys.argv[1:] if argv is None else argv)]))
     config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels,
                             seen=not args.without_seen, bounce_gain=args.start_gains[0],
-                            seen_gain=args.start_gains[1], reflected_correction=not args.no_reflected_correction)
+                            seen_gain=args.start_gains[1], reflected_correction=not args.no_reflected_correction,
+                            direct_correction=args.direct_correction)
     model = ProbeNet(config)
     if args.init and not (args.out / "checkpoint.pt").exists():
         model.load_state_dict(torch.load(args.init, weights_only=False)["model"])
