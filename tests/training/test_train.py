@@ -35,17 +35,20 @@ def test_loss_falls_and_the_run_resumes(tiny, tmp_path):
     train_set, val_set = load_split(tiny, "train", 8, quiet=True), load_split(tiny, "val", 8, quiet=True)
     assert train_set.inputs.shape[1:3] == (3, encoding.CHANNELS) and train_set.targets.shape[2] == 18
     run = tmp_path / "run"
-    model = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2))
+    config = ProbeNetConfig(width=4, hidden=8, levels=2)
+    torch.manual_seed(0)
+    model = ProbeNet(config)
     # not the shipped recipe's clipped steps and weight 8 on the reflected light: thirty steps on four
     # rooms are few, and their reflected targets (Mitsuba at 32 directions) are mostly noise
     tiny_recipe = dict(batch=1, learning_rate=1e-2, clip=0.0, reflected_weight=4.0)
     first = train(model, train_set, val_set, TrainSettings(epochs=30, **tiny_recipe), run=run, quiet=True)
     # the untrained network answers with the direct light and the seen light box filtered (a
     # zero-initialized head): training must improve on that; how much depends on the four random rooms
-    # (the shipped model's accuracy is measured apart, docs/TRAINING.md)
-    assert np.mean(first.train[-5:]) < 0.97 * np.mean(first.train[:3])
+    # (about 2% here since the direct input sums the lamps' pieces, 3-5% before; the shipped model's
+    # accuracy is measured apart, docs/TRAINING.md)
+    assert np.mean(first.train[-5:]) < 0.99 * np.mean(first.train[:3])
     assert (run / "checkpoint.pt").exists() and (run / "loss.png").exists()
-    again = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=2))
+    again = ProbeNet(config)
     resumed = train(again, train_set, val_set, TrainSettings(epochs=32, **tiny_recipe), run=run, quiet=True)
     assert resumed.epochs == list(range(32))  # epochs 0-29 from the checkpoint, 30-31 trained now
     assert resumed.train[:30] == first.train
@@ -168,22 +171,23 @@ def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
     torch.testing.assert_close(asinh(t), torch.asinh(t), atol=1e-6, rtol=1e-6)
 
 
-def test_all_the_light_is_the_direct_input_and_the_reflected_light_unless_the_head_corrects_it():
-    """By default the head's direct-light outputs are not used: all the light is the direct input plus
-    the reflected light, however the weights are; with `direct_correction` they are added, relative to
-    the local light."""
+def test_all_the_light_is_the_direct_input_and_the_reflected_light_at_inference():
+    """The head's correction of the direct light is a sink for training: added to all the light in
+    `train()` mode, left out in `eval()` (and so in every export), whatever the weights."""
     from viewer.scene import load
     from viewer.training.models import REFLECTED, TOTAL
 
     x = torch.from_numpy(encoding.encode_scene(load("cornell"), 8, 16).inputs)
     torch.manual_seed(3)
-    plain = ProbeNet(ProbeNetConfig(width=4, hidden=8))
-    corrected = ProbeNet(ProbeNetConfig(width=4, hidden=8, direct_correction=True))
+    model = ProbeNet(ProbeNetConfig(width=4, hidden=8))
+    without = ProbeNet(ProbeNetConfig(width=4, hidden=8, direct_correction=False))
     with torch.no_grad():
-        for p in plain.parameters():
+        for p in model.parameters():
             p.normal_(0.0, 0.3)
-        corrected.load_state_dict(plain.state_dict())
-        a, b = plain(x), corrected(x)
-    torch.testing.assert_close(a[:, TOTAL], x[:, encoding.DIRECT] + a[:, REFLECTED])
-    torch.testing.assert_close(a[:, REFLECTED], b[:, REFLECTED])
-    assert (b[:, TOTAL] - a[:, TOTAL]).abs().max() > 1e-3
+        without.load_state_dict(model.state_dict())
+        training, inference = model.train()(x), model.eval()(x)
+        plain = without.train()(x)
+    torch.testing.assert_close(inference[:, TOTAL], x[:, encoding.DIRECT] + inference[:, REFLECTED])
+    torch.testing.assert_close(plain[:, TOTAL], x[:, encoding.DIRECT] + plain[:, REFLECTED])
+    torch.testing.assert_close(training[:, REFLECTED], inference[:, REFLECTED])
+    assert (training[:, TOTAL] - inference[:, TOTAL]).abs().max() > 1e-3

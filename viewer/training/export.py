@@ -55,6 +55,8 @@ class _TwoInputs(torch.nn.Module):
 
 
 def export_onnx(model: ProbeNet, path: Path, resolution: int) -> None:
+    """`model` as an ONNX file, in inference mode (its training-time sink left out) whatever mode it is in."""
+    model = model.eval()
     example = torch.zeros(3, encoding.CHANNELS, resolution, resolution, resolution)
     path.parent.mkdir(parents=True, exist_ok=True)
     lattice = {0: "passes", 2: "m", 3: "m", 4: "m"}
@@ -64,7 +66,7 @@ def export_onnx(model: ProbeNet, path: Path, resolution: int) -> None:
     # slower, 1.1 ms of the network's 13.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(_TwoInputs(model), (example, example), str(path), input_names=list(INPUT_NAMES),
+        torch.onnx.export(_TwoInputs(model).eval(), (example, example), str(path), input_names=list(INPUT_NAMES),
                           output_names=["probes"], dynamo=False, opset_version=OPSET,
                           dynamic_axes={**{name: lattice for name in INPUT_NAMES}, "probes": lattice})
 

@@ -15,7 +15,7 @@ Why this shape:
   for any lattice size divisible by 2^levels.
 - The shadowed direct light, one unshadowed bounce of it and two bounces seen through exact rays are
   inputs (`viewer.neural.encoding`), and the head's outputs are corrections to them: the reflected
-  light (9 SH) on top of the two bounces, and optionally what the direct input missed (9 SH), each
+  light (9 SH) on top of the two bounces, and in training what the direct input missed (9 SH), each
   times a learned gain, the seen one through a learned 3x3x3 filter per coefficient (it starts as the
   box filter: 16 rays a probe are noisy, and the finest level of the network is otherwise per probe). The corrections are relative
   (times the local light, `MAGNITUDE_FLOOR`) and the convolutions read the light through asinh
@@ -64,12 +64,15 @@ class ProbeNetConfig:
     """Whether the head corrects the reflected light; without, the reflected light is the two bounces
     times their gains alone (the seen one through its learned filter): a linear denoiser of the seen
     light, and the head corrects the direct light and answers the validity only."""
-    direct_correction: bool = False
-    """Whether the head corrects the direct light input (what its shadows and its one term per lattice
-    cell of lamp missed). Off: all the light is the direct input plus the reflected light. With the lamps'
-    pieces in the input (encoding version 8) the correction made the direct light worse than the input
-    alone between the probes (a validation room 6.4% -> 10.8%, a dark room 9.9% -> 12.6%, against
-    Mitsuba, relative to all the light)."""
+    direct_correction: bool = True
+    """Whether the head fits a correction of the direct light in training (9 SH, added to all the light
+    the loss scores). It is a sink, left out at inference (`eval()`, and so in every export): all the
+    light a network gives is the direct input plus the reflected light. With the lamps' pieces in the
+    input (encoding version 8) the correction made the direct light worse than the input alone between
+    the probes (a validation room 6.4% -> 10.8%, a dark room 9.9% -> 12.6% against Mitsuba, relative to
+    all the light); trained without it, the reflected light takes up the direct input's error instead:
+    the same error at free-space points, but images 0.8-0.9 dB further from Mitsuba's (38.3-38.5 dB
+    against 39.2-39.3) and 1% darker."""
     seen: bool = True
     """Whether the network reads the seen bounce (viewer/neural/seen.py); without it, those features are
     zeroed as they come in: the same network blind to visibility beyond the direct light's shadows
@@ -141,7 +144,7 @@ class ProbeNet(nn.Module):
         if self.config.reflected_correction:
             reflected = reflected + out[:, REFLECTED] * reflected_magnitude
         total = x[:, encoding.DIRECT] + reflected
-        if self.config.direct_correction:   # what the direct input's shadows missed
+        if self.config.direct_correction and self.training:   # the sink for the direct input's error
             total = total + out[:, TOTAL] * (direct_dc.abs() + bounce_dc.abs() + MAGNITUDE_FLOOR)
         return torch.cat([total, reflected, out[:, VALIDITY:]], dim=1)
 

@@ -284,9 +284,9 @@ def main(argv=None) -> int:
     parser.add_argument("--no-reflected-correction", action="store_true",
                         help="the reflected light is the bounces times their gains alone (the seen one "
                              "filtered): the head corrects the direct light only")
-    parser.add_argument("--direct-correction", action="store_true",
-                        help="the head corrects the direct light input too (all the light is otherwise the "
-                             "direct input plus the reflected light)")
+    parser.add_argument("--no-direct-correction", action="store_true",
+                        help="train without the head's correction of the direct light, the sink that keeps "
+                             "the direct input's error out of the reflected light (left out at inference)")
     parser.add_argument("--epochs", type=int, default=TrainSettings.epochs)
     parser.add_argument("--batch", type=int, default=TrainSettings.batch, help="scenes per step")
     parser.add_argument("--lr", type=float, default=TrainSettings.learning_rate)
@@ -316,7 +316,7 @@ def main(argv=None) -> int:
     config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels,
                             seen=not args.without_seen, bounce_gain=args.start_gains[0],
                             seen_gain=args.start_gains[1], reflected_correction=not args.no_reflected_correction,
-                            direct_correction=args.direct_correction)
+                            direct_correction=not args.no_direct_correction)
     model = ProbeNet(config)
     if args.init and not (args.out / "checkpoint.pt").exists():
         model.load_state_dict(torch.load(args.init, weights_only=False)["model"])
