@@ -56,8 +56,8 @@ probes do within 6 voxels. A patch merges a cell's worth of lamp: seen from a pr
 one term misjudges its solid angle and direction. Between the probes, against Mitsuba (relative to all
 the light; paper-test, CornellBox-Original, a validation room, a dark room), the direct light was
 8.8 / 8.2 / 24 / 46% off as patches alone, 4.8 / 4.8 / 6.9 / 10.4% with pieces within 3 cells, 3.4 /
-3.5 / 6.4 / 9.9% within 6, where the solver's is 3.0 / 3.2 / 6.2 / 10.1%. It costs a new Cornell box
-1 ms, and 50-180 ms in rooms lit by whole glowing walls (up to 15,000 pieces)."""
+3.5 / 6.4 / 9.9% within 6, where the solver's is 3.0 / 3.2 / 6.2 / 10.1%. It costs a new Cornell box's
+encoding about 8 ms (512 pieces), and 50-180 ms in rooms lit by whole glowing walls (up to 15,000)."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +79,12 @@ class Pieces:
     """(S,) the piece's radiance over its patch's (their largest channels)."""
     near: float
     """Distance from a patch's centre within which a probe sums its pieces."""
+
+    @staticmethod
+    def none(patches: int, near: float = -1.0) -> "Pieces":
+        """No pieces for `patches` patches: every probe takes each patch as one term."""
+        empty = np.zeros((0, 3))
+        return Pieces(np.zeros(patches + 1, np.int64), empty, empty, np.zeros(0), np.zeros(0), float(near))
 
     def of(self, patches: np.ndarray) -> "Pieces":
         """The pieces of `patches` (indices), in their order."""
@@ -116,9 +122,7 @@ def patch_pieces(cell: np.ndarray, voxels: VoxelGrid, near: float) -> Pieces:
     lit = np.flatnonzero(np.any(voxels.emission > 0, axis=1))
     samples = voxels.lights
     if len(lit) == 0 or samples.count == 0:
-        count = 0 if len(lit) == 0 else len(np.unique(cell[lit] * 8 + facings(voxels.normal[lit])))
-        return Pieces(np.zeros(count + 1, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
-                      float(near))
+        return Pieces.none(0 if len(lit) == 0 else len(np.unique(cell[lit] * 8 + facings(voxels.normal[lit]))), near)
     key, group = np.unique(cell[lit] * 8 + facings(voxels.normal[lit]), return_inverse=True)
     group = group.ravel()
     patch_of_voxel = np.full(voxels.count, -1, np.int64)
@@ -189,9 +193,8 @@ def emitter_sh_rows(lights, points: np.ndarray, visible: np.ndarray | None = Non
     f32 = [np.ascontiguousarray(a, np.float32) for a in (np.asarray(points).T, source, normal, area, radiance)]
     seen = np.ones((len(area), 1), np.float32) if visible is None else np.ascontiguousarray(visible, np.float32)
     if pieces is None or len(pieces.area) == 0:
-        pieces = Pieces(np.zeros(len(area) + 1, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
-                        -1.0)
-    near2 = np.float32(pieces.near * abs(pieces.near)) if pieces.near > 0 else np.float32(-1.0)
+        pieces = Pieces.none(len(area))
+    near2 = np.float32(pieces.near * pieces.near if pieces.near > 0 else -1.0)
     parts = [np.ascontiguousarray(a, np.float32) for a in (pieces.position, pieces.normal, pieces.area, pieces.gain)]
     _emitter_sh(*f32, seen, visible is not None, np.float32(NEAR_FIELD), pieces.start, *parts, near2, out)
     return out

@@ -11,7 +11,7 @@ viewer/neural/lattice.py):
   alone: the density and normal features, with the coordinate and extent ones;
 - the emitters: the emitting patches of `encoding.emitting_patches`, in groups that share one colour
   and touch each other (a lamp), each with the shadowed SH of its patches at every probe summed once
-  (`emitter_basis`): each patch's terms times its visibility, traced as `encode` traces it (one ray
+  (`emitter_basis`; the probes near a patch sum its pieces, `encoding.patch_pieces`): each patch's terms times its visibility, traced as `encode` traces it (one ray
   per probe and cluster of patches, `encoding.shadow_targets`). The direct light is linear in the
   emitted radiance, so a lamp's colour or intensity is its basis times a new RGB;
 - the sun's visibility for the last direction (`encoding.sun_visibility`): its irradiance is a factor;
