@@ -212,7 +212,7 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
     pieces of patch e [start[e], start[e + 1]) summed where the probe is nearer than sqrt(near2), out
     (C, 9, P)."""
     count = points.shape[1]
-    one, zero = np.float32(1.0), np.float32(0.0)
+    one, tiny, zero = np.float32(1.0), np.float32(1e-12), np.float32(0.0)
     for block in numba.prange((count + SH_BLOCK - 1) // SH_BLOCK):
         first = block * SH_BLOCK
         n = min(SH_BLOCK, count - first)
@@ -223,27 +223,40 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
             sx, sy, sz = source[e, 0], source[e, 1], source[e, 2]
             mx, my, mz = normal[e, 0], normal[e, 1], normal[e, 2]
             flux, clamp = area[e], area[e] * near_field
-            for i in range(n):
+            for i in range(n):   # the patch as one term: no branch, so the loop vectorizes
                 x, y, z = sx - px[i], sy - py[i], sz - pz[i]
                 r2 = x * x + y * y + z * z
-                if r2 < near2 and start[e + 1] > start[e]:
+                inv = one / np.sqrt(max(r2, tiny))
+                x, y, z = x * inv, y * inv, z * inv
+                weight = max(-(x * mx + y * my + z * mz), zero) * flux / (r2 + clamp)
+                if shadowed:
+                    weight *= visible[e, first + i]
+                w[i] = weight
+                b[0, i] = np.float32(0.282095)
+                b[1, i] = np.float32(0.488603) * y
+                b[2, i] = np.float32(0.488603) * z
+                b[3, i] = np.float32(0.488603) * x
+                b[4, i] = np.float32(1.092548) * x * y
+                b[5, i] = np.float32(1.092548) * y * z
+                b[6, i] = np.float32(0.315392) * (np.float32(3.0) * z * z - one)
+                b[7, i] = np.float32(1.092548) * x * z
+                b[8, i] = np.float32(0.546274) * (x * x - y * y)
+            if start[e + 1] > start[e]:   # probes near the patch: its pieces instead
+                for i in range(n):
+                    x, y, z = sx - px[i], sy - py[i], sz - pz[i]
+                    if x * x + y * y + z * z >= near2:
+                        continue
                     w[i] = visible[e, first + i] if shadowed else one
                     for k in range(9):
                         b[k, i] = zero
+                    if w[i] == zero:
+                        continue
                     for s in range(start[e], start[e + 1]):
                         omega, qx, qy, qz = _solid_angle(piece_position[s, 0] - px[i], piece_position[s, 1] - py[i],
                                                          piece_position[s, 2] - pz[i], piece_normal[s, 0],
                                                          piece_normal[s, 1], piece_normal[s, 2], piece_area[s],
                                                          piece_area[s] * near_field)
                         _add_basis(b, i, omega * piece_gain[s], qx, qy, qz)
-                    continue
-                weight, x, y, z = _solid_angle(x, y, z, mx, my, mz, flux, clamp)
-                if shadowed:
-                    weight *= visible[e, first + i]
-                w[i] = weight
-                for k in range(9):
-                    b[k, i] = zero
-                _add_basis(b, i, one, x, y, z)
             for c in range(radiance.shape[1]):
                 rc = radiance[e, c]
                 if rc == 0:
