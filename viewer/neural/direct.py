@@ -57,7 +57,7 @@ one term misjudges its solid angle and direction. Between the probes, against Mi
 the light; paper-test, CornellBox-Original, a validation room, a dark room), the direct light was
 8.8 / 8.2 / 24 / 46% off as patches alone, 4.8 / 4.8 / 6.9 / 10.4% with pieces within 3 cells, 3.4 /
 3.5 / 6.4 / 9.9% within 6, where the solver's is 3.0 / 3.2 / 6.2 / 10.1%. It costs a new Cornell box's
-encoding about 8 ms (512 pieces), and 50-180 ms in rooms lit by whole glowing walls (up to 15,000)."""
+encoding 3-4 ms (512 pieces), and 50-180 ms in rooms lit by whole glowing walls (up to 15,000)."""
 
 
 @dataclass(frozen=True)
