@@ -78,7 +78,7 @@ def test_a_probe_near_a_lamp_sums_its_pieces():
     probe = np.array([[0.0, 0.75, 0.0]])
     cell = np.zeros(voxels.count, np.int64)   # one patch: the whole lamp
     lights = encoding.emitting_patches(cell, voxels)
-    pieces = encoding.patch_pieces(cell, voxels, near=1.0)
+    pieces = encoding.patch_pieces(cell, voxels, lights[3], near=1.0)
     assert len(lights[2]) == 1 and pieces.start.tolist() == [0, len(pieces.area)] and len(pieces.area) > 16
     u = (np.arange(400) + 0.5) / 400 * 0.4 - 0.2   # the solid angle: cos dA / r^2 over a fine grid
     x, z = np.meshgrid(u, u)

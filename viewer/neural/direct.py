@@ -90,21 +90,28 @@ class Pieces:
         """The pieces of `patches` (indices), in their order."""
         patches = np.asarray(patches, np.int64)
         counts = self.start[patches + 1] - self.start[patches]
-        take = np.concatenate([np.arange(self.start[e], self.start[e + 1]) for e in patches] or [np.zeros(0, np.int64)])
         start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        take = np.arange(start[-1]) + np.repeat(self.start[patches] - start[:-1], counts)
         return Pieces(start, self.position[take], self.normal[take], self.area[take], self.gain[take], self.near)
+
+
+def _patch_groups(cell: np.ndarray, voxels: VoxelGrid) -> tuple[np.ndarray, np.ndarray, int]:
+    """The emitting voxels (K,), the patch of each (K,) and the count of patches: one per lattice cell
+    and facing, in the order of `emitting_patches`."""
+    lit = np.flatnonzero(np.any(voxels.emission > 0, axis=1))
+    if len(lit) == 0:
+        return lit, np.zeros(0, np.int64), 0
+    key, group = np.unique(cell[lit] * 8 + facings(voxels.normal[lit]), return_inverse=True)
+    return lit, group.ravel(), len(key)
 
 
 def emitting_patches(cell: np.ndarray, voxels: VoxelGrid):
     """The emitting voxels merged per lattice cell and facing: (positions (E, 3), normals (E, 3), areas
     (E,), radiance (E, 3)). Seen from the probes (a lattice cell or more away), the pieces of a lamp in
     one cell all arrive from about the same direction, so one patch per cell keeps the feature cheap."""
-    lit = np.flatnonzero(np.any(voxels.emission > 0, axis=1))
-    if len(lit) == 0:
+    lit, group, count = _patch_groups(cell, voxels)
+    if count == 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
-    facing = facings(voxels.normal[lit])
-    key, group = np.unique(cell[lit] * 8 + facing, return_inverse=True)
-    count = len(key)
     a = voxels.area[lit]
     area = np.bincount(group, a, minlength=count)
 
@@ -116,25 +123,22 @@ def emitting_patches(cell: np.ndarray, voxels: VoxelGrid):
     return mean(voxels.position[lit]), normal, area, mean(voxels.emission[lit])
 
 
-def patch_pieces(cell: np.ndarray, voxels: VoxelGrid, near: float) -> Pieces:
-    """The pieces of the patches of `emitting_patches(cell, voxels)`, in its order of patches: each light
-    sample goes to the patch of its voxel (samples of voxels that do not emit are left out)."""
-    lit = np.flatnonzero(np.any(voxels.emission > 0, axis=1))
+def patch_pieces(cell: np.ndarray, voxels: VoxelGrid, radiance: np.ndarray, near: float) -> Pieces:
+    """The pieces of the patches of `emitting_patches(cell, voxels)` (whose radiance (E, 3) is
+    `radiance`), in its order of patches: each light sample goes to the patch of its voxel (samples of
+    voxels that do not emit are left out)."""
+    lit, group, count = _patch_groups(cell, voxels)
     samples = voxels.lights
-    if len(lit) == 0 or samples.count == 0:
-        return Pieces.none(0 if len(lit) == 0 else len(np.unique(cell[lit] * 8 + facings(voxels.normal[lit]))), near)
-    key, group = np.unique(cell[lit] * 8 + facings(voxels.normal[lit]), return_inverse=True)
-    group = group.ravel()
+    if count == 0 or samples.count == 0:
+        return Pieces.none(count, near)
     patch_of_voxel = np.full(voxels.count, -1, np.int64)
     patch_of_voxel[lit] = group
     patch = patch_of_voxel[samples.voxel]
     keep = np.flatnonzero(patch >= 0)
     order = keep[np.argsort(patch[keep], kind="stable")]
     patch = patch[order]
-    start = np.concatenate([[0], np.cumsum(np.bincount(patch, minlength=len(key)))]).astype(np.int64)
-    area = voxels.area[lit]
-    brightest = np.stack([np.bincount(group, area * voxels.emission[lit, c], minlength=len(key))
-                          for c in range(3)], 1).max(axis=1) / np.bincount(group, area, minlength=len(key))
+    start = np.concatenate([[0], np.cumsum(np.bincount(patch, minlength=count))]).astype(np.int64)
+    brightest = np.asarray(radiance).max(axis=1)
     gain = samples.radiance[order].max(axis=1) / np.where(brightest > 0, brightest, 1.0)[patch]
     return Pieces(start, samples.position[order], samples.normal[order], samples.area[order], gain, float(near))
 
@@ -212,7 +216,7 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
     pieces of patch e [start[e], start[e + 1]) summed where the probe is nearer than sqrt(near2), out
     (C, 9, P)."""
     count = points.shape[1]
-    one, tiny, zero = np.float32(1.0), np.float32(1e-12), np.float32(0.0)
+    one, zero = np.float32(1.0), np.float32(0.0)
     for block in numba.prange((count + SH_BLOCK - 1) // SH_BLOCK):
         first = block * SH_BLOCK
         n = min(SH_BLOCK, count - first)
@@ -224,23 +228,11 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
             mx, my, mz = normal[e, 0], normal[e, 1], normal[e, 2]
             flux, clamp = area[e], area[e] * near_field
             for i in range(n):   # the patch as one term: no branch, so the loop vectorizes
-                x, y, z = sx - px[i], sy - py[i], sz - pz[i]
-                r2 = x * x + y * y + z * z
-                inv = one / np.sqrt(max(r2, tiny))
-                x, y, z = x * inv, y * inv, z * inv
-                weight = max(-(x * mx + y * my + z * mz), zero) * flux / (r2 + clamp)
-                if shadowed:
-                    weight *= visible[e, first + i]
-                w[i] = weight
-                b[0, i] = np.float32(0.282095)
-                b[1, i] = np.float32(0.488603) * y
-                b[2, i] = np.float32(0.488603) * z
-                b[3, i] = np.float32(0.488603) * x
-                b[4, i] = np.float32(1.092548) * x * y
-                b[5, i] = np.float32(1.092548) * y * z
-                b[6, i] = np.float32(0.315392) * (np.float32(3.0) * z * z - one)
-                b[7, i] = np.float32(1.092548) * x * z
-                b[8, i] = np.float32(0.546274) * (x * x - y * y)
+                weight, x, y, z = _solid_angle(sx - px[i], sy - py[i], sz - pz[i], mx, my, mz, flux, clamp)
+                w[i] = weight * visible[e, first + i] if shadowed else weight
+                for k in range(9):
+                    b[k, i] = zero
+                _add_basis(b, i, one, x, y, z)
             if start[e + 1] > start[e]:   # probes near the patch: its pieces instead
                 for i in range(n):
                     x, y, z = sx - px[i], sy - py[i], sz - pz[i]

@@ -11,8 +11,9 @@ viewer/neural/lattice.py):
   alone: the density and normal features, with the coordinate and extent ones;
 - the emitters: the emitting patches of `encoding.emitting_patches`, in groups that share one colour
   and touch each other (a lamp), each with the shadowed SH of its patches at every probe summed once
-  (`emitter_basis`; the probes near a patch sum its pieces, `encoding.patch_pieces`): each patch's terms times its visibility, traced as `encode` traces it (one ray
-  per probe and cluster of patches, `encoding.shadow_targets`). The direct light is linear in the
+  (`emitter_basis`; the probes near a patch sum its pieces, `encoding.patch_pieces`): each patch's
+  terms times its visibility, traced as `encode` traces it (one ray per probe and cluster of patches,
+  `encoding.shadow_targets`). The direct light is linear in the
   emitted radiance, so a lamp's colour or intensity is its basis times a new RGB;
 - the sun's visibility for the last direction (`encoding.sun_visibility`): its irradiance is a factor;
 - the one-bounce feature's patches and their last light (`encoding.Bounce`): the bounce is linear in
@@ -225,7 +226,6 @@ class Encoder:
         rays gained or lost a patch) form new ones, whose rays are traced and bases computed. Returns
         whether the emitters changed (beyond their radiances)."""
         position, normal, area, radiance = encoding.emitting_patches(self._geometry.cell, voxels)
-        pieces = encoding.patch_pieces(self._geometry.cell, voxels, encoding.NEAR_PIECES * self._geometry.spacing.max())
         target, cluster = self._shadows.targets(position, normal)
         keys = _patch_keys(position, normal, area, target[cluster])
         index = {key: e for e, key in enumerate(keys)}
@@ -246,8 +246,10 @@ class Encoder:
         fresh = np.flatnonzero(~claimed)
         changed = len(kept) != len(self.emitters) or len(fresh) > 0
         row, visible = np.full(len(target), -1), None   # each traced cluster's row of `visible`
-        if len(fresh):
+        if len(fresh):   # a colour or intensity edit keeps every emitter and needs no pieces
             self.recomputed.append("emitters")
+            pieces = encoding.patch_pieces(self._geometry.cell, voxels, radiance,
+                                           encoding.NEAR_PIECES * self._geometry.spacing.max())
             traced = np.unique(cluster[fresh])
             row[traced] = np.arange(len(traced))
             visible = self._shadows.visibility(target[traced])

@@ -203,7 +203,7 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
     visible = None
     if blockers is not None:
         visible = patch_visibility(blockers, points, lights[0], lights[1], lo, spacing)
-    direct = emitter_sh(lights, points, visible, patch_pieces(flat, voxels, NEAR_PIECES * spacing.max()))
+    direct = emitter_sh(lights, points, visible, patch_pieces(flat, voxels, lights[3], NEAR_PIECES * spacing.max()))
     direct += sun_sh(sun, blockers, points)  # (P, 9, 3)
     bounce, seen = np.zeros((cells, sh.SH_COUNT, 3)), np.zeros((cells, sh.SH_COUNT, 3))
     if voxels.count:

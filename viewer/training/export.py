@@ -42,20 +42,10 @@ def load_run(run: Path) -> ProbeNet:
     return model.eval()
 
 
-class _TwoInputs(torch.nn.Module):
-    """The network as exported: the encoded inputs and the same through asinh (`encoding.compressed`),
-    which numpy computes in a third of the time the ONNX operators took."""
-
-    def __init__(self, model: ProbeNet):
-        super().__init__()
-        self.model = model
-
-    def forward(self, x: torch.Tensor, x_in: torch.Tensor) -> torch.Tensor:
-        return self.model(x, x_in)
-
-
 def export_onnx(model: ProbeNet, path: Path, resolution: int) -> None:
-    """`model` as an ONNX file, in inference mode (its training-time sink left out) whatever mode it is in."""
+    """`model` as an ONNX file of two inputs, the encoded inputs and the same through asinh
+    (`encoding.compressed`: numpy computes it in a third of the time the ONNX operators took), in
+    inference mode (its training-time sink left out) whatever mode it is in."""
     model = model.eval()
     example = torch.zeros(3, encoding.CHANNELS, resolution, resolution, resolution)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -66,7 +56,7 @@ def export_onnx(model: ProbeNet, path: Path, resolution: int) -> None:
     # slower, 1.1 ms of the network's 13.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(_TwoInputs(model).eval(), (example, example), str(path), input_names=list(INPUT_NAMES),
+        torch.onnx.export(model, (example, example), str(path), input_names=list(INPUT_NAMES),
                           output_names=["probes"], dynamo=False, opset_version=OPSET,
                           dynamic_axes={**{name: lattice for name in INPUT_NAMES}, "probes": lattice})
 
