@@ -25,6 +25,10 @@ if [ ${#missing[@]} -gt 0 ]; then
   fi
 fi
 
+# pip keeps no copy of what it downloads: a fresh machine installs once, and the wheels of the test
+# extras (Ray, Mitsuba, onnx) would stay in its cache, on a disk that may be small
+export PIP_NO_CACHE_DIR=1
+
 python=${PYTHON:-python3}
 if [ ! -x .venv/bin/python ]; then
   "$python" -m venv .venv
