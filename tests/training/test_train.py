@@ -129,12 +129,12 @@ def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
             out[:, :9] = self.value  # no direct light: all = reflected
             return out
 
-    settings = TrainSettings(reflected_weight=1.0, solver_weight=0.0)
+    settings = TrainSettings(reflected_weight=1.0, solver_weight=0.0, reflected_loss="local")
     # with the solver's rooms weighted 0, matching Mitsuba's probes costs nothing, the solver's a lot
     assert float(loss_terms(Constant(2.0), batch, settings)[0]) == pytest.approx(0.0, abs=1e-9)
     assert float(loss_terms(Constant(1.0), batch, settings)[0]) == pytest.approx(0.5)  # 1^2 / (1 + 1)
     # without Mitsuba's probes every room is scored against the solver's
-    solver_only = TrainSettings(reflected_weight=1.0, solver_weight=1.0, mitsuba=False)
+    solver_only = TrainSettings(reflected_weight=1.0, solver_weight=1.0, mitsuba=False, reflected_loss="local")
     assert float(loss_terms(Constant(1.0), batch, solver_only)[0]) == pytest.approx(0.0, abs=1e-9)
     assert float(loss_terms(Constant(2.0), batch, solver_only)[0]) == pytest.approx(0.5)
     # the room-relative loss: each room's squared error over its reflected light's energy
@@ -145,12 +145,20 @@ def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
     red = Batch(batch.pick, batch.x, y * torch.tensor([1.0, 1.0, 1e-4] * 2)[:, None, None, None, None],
                 batch.valid, unbiased, has)
     assert float(loss_terms(Constant(1.0), red, relative)[0]) == pytest.approx(1.0 / 2.0, rel=1e-3)
+    # the validation's own score: each room's relative RMSE (not its square), averaged over the rooms
+    rmse = TrainSettings(reflected_weight=1.0, solver_weight=1.0, mitsuba=False, reflected_loss="rmse")
+    assert float(loss_terms(Constant(3.0), batch, rmse)[0]) == pytest.approx(2.0)   # |3 - 1| / 1
+    assert float(loss_terms(Constant(1.0), red, rmse)[0]) == pytest.approx(np.sqrt(0.5), rel=1e-3)
+    # the reflected light's own local weight: 1 / (|its DC| + the room's mean |DC|) = 1/2 here
+    local = TrainSettings(reflected_weight=1.0, solver_weight=1.0, mitsuba=False, reflected_loss="reflected")
+    assert float(loss_terms(Constant(3.0), batch, local)[0]) == pytest.approx(2.0)   # (3 - 1)^2 / 2
 
 
 def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
     """The head starts at zero: all the light is the encoding's direct light plus the reflected light,
-    which is the seen light through the box filter (by default; or any mix of it and the unshadowed
-    bounce); the convolutions read the light through an exportable asinh."""
+    which is the seen light through the box filter over the probes, weighted by their open share (by
+    default; or any mix of it and the unshadowed bounce); the convolutions read the light through an
+    exportable asinh."""
     from viewer.scene import load
     from viewer.training.models import REFLECTED, TOTAL, asinh
 
@@ -158,8 +166,12 @@ def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
     x = torch.from_numpy(enc.inputs)
     with torch.no_grad():
         out = ProbeNet(ProbeNetConfig(width=4, hidden=8))(x)
-    box = torch.nn.functional.avg_pool3d(torch.nn.functional.pad(x[:, encoding.SEEN], (1,) * 6, mode="replicate"),
-                                         3, stride=1)
+    def pool(t):
+        return torch.nn.functional.avg_pool3d(torch.nn.functional.pad(t, (1,) * 6, mode="replicate"), 3, stride=1)
+
+    opened = x[:, encoding.OPEN:encoding.OPEN + 1]   # each probe weighted by its rays' open share
+    assert float(opened.min()) == 0.0 and float(opened.max()) == 1.0   # the probes inside the boxes are closed
+    box = pool(x[:, encoding.SEEN] * opened) / pool(opened).clamp_min(1.0 / 27.0)
     torch.testing.assert_close(out[:, REFLECTED], box)
     with torch.no_grad():
         mixed = ProbeNet(ProbeNetConfig(width=4, hidden=8, bounce_gain=0.5, seen_gain=0.5))(x)

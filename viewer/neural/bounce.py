@@ -115,16 +115,20 @@ class Bounce:
                              np.stack([w for _, w in self._front]).astype(np.float32))
         return _reflected(*self._corners, self._lobe, np.ascontiguousarray(light, np.float32))
 
-    def sh(self, albedo: np.ndarray, direct: np.ndarray, channels: np.ndarray | None = None) -> np.ndarray:
-        """(P, 9, 3) `bounce_sh` for the voxels' `albedo` (K, 3) under `direct` (P, 9, 3). Only the colour
-        `channels` (3,) bool (default all) are brought up to date; the others hold an earlier call's
-        values."""
+    def sh(self, albedo: np.ndarray, direct: np.ndarray, channels: np.ndarray | None = None,
+           irradiance: np.ndarray | None = None) -> np.ndarray:
+        """(P, 9, 3) `bounce_sh` for the voxels' `albedo` (K, 3) under `direct` (P, 9, 3), or with
+        `irradiance` (K, 3) under that light on the voxels themselves (`irradiance.voxel_direct`; then
+        `direct` is not read). Only the colour `channels` (3,) bool (default all) are brought up to
+        date; the others hold an earlier call's values."""
         channels = np.ones(3, bool) if channels is None else np.asarray(channels, bool)
         if self._count == 0:
             return np.zeros((self.m ** 3, sh.SH_COUNT, 3))
-        if self._direct is None or not np.array_equal(direct, self._direct):
-            self._leaving_per_albedo = self._leaving(direct).astype(np.float64)
-            self._direct = np.array(direct, copy=True)
+        light = direct if irradiance is None else irradiance
+        if self._direct is None or self._direct.shape != np.shape(light) or not np.array_equal(light, self._direct):
+            self._leaving_per_albedo = (self._leaving(direct) if irradiance is None
+                                        else np.asarray(irradiance, np.float64) / np.pi).astype(np.float64)
+            self._direct = np.array(light, copy=True)
         radiance = self._mean(albedo * self._leaving_per_albedo)  # (patches, 3)
         if self._gathered is None:
             change, rows = np.where(channels, radiance, 0.0), np.arange(self._count)

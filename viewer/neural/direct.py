@@ -228,7 +228,7 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
             mx, my, mz = normal[e, 0], normal[e, 1], normal[e, 2]
             flux, clamp = area[e], area[e] * near_field
             for i in range(n):   # the patch as one term: no branch, so the loop vectorizes
-                weight, x, y, z = _solid_angle(sx - px[i], sy - py[i], sz - pz[i], mx, my, mz, flux, clamp)
+                weight, x, y, z = solid_angle(sx - px[i], sy - py[i], sz - pz[i], mx, my, mz, flux, clamp)
                 w[i] = weight * visible[e, first + i] if shadowed else weight
                 for k in range(9):
                     b[k, i] = zero
@@ -244,7 +244,7 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
                     if w[i] == zero:
                         continue
                     for s in range(start[e], start[e + 1]):
-                        omega, qx, qy, qz = _solid_angle(piece_position[s, 0] - px[i], piece_position[s, 1] - py[i],
+                        omega, qx, qy, qz = solid_angle(piece_position[s, 0] - px[i], piece_position[s, 1] - py[i],
                                                          piece_position[s, 2] - pz[i], piece_normal[s, 0],
                                                          piece_normal[s, 1], piece_normal[s, 2], piece_area[s],
                                                          piece_area[s] * near_field)
@@ -260,7 +260,7 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy", inline="always")
-def _solid_angle(x, y, z, mx, my, mz, flux, clamp):
+def solid_angle(x, y, z, mx, my, mz, flux, clamp):
     """(cos_e A / (r^2 + A / pi), the unit direction) of a patch at offset (x, y, z) from the probe,
     facing (mx, my, mz); 0 where its back faces the probe."""
     r2 = x * x + y * y + z * z
@@ -298,3 +298,4 @@ def sun_visibility(blockers: VoxelRays | None, points: np.ndarray, direction: np
     if blockers is None:
         return np.ones(len(points))
     return blockers.escapes(points, direction).astype(np.float64)
+

@@ -39,6 +39,7 @@ from __future__ import annotations
 import itertools
 import time
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 from scipy import ndimage
@@ -46,7 +47,7 @@ from scipy import ndimage
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
-from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, SEEN, Encoding
+from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, OPEN, SEEN, Encoding
 from viewer.neural.lattice import LatticeGeometry, LatticeShadows, moved_box
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
@@ -67,6 +68,8 @@ class Emitter:
     basis: np.ndarray
     """(9, P) float32: sum over the patches of w x their SH at the probes (radiance 1), times their
     visibility."""
+    received: np.ndarray
+    """(K,) float32: the same for the voxels' irradiance (`irradiance.voxel_direct`)."""
     radiance: np.ndarray
     """(3,) the current radiance per unit weight."""
 
@@ -95,6 +98,7 @@ class Encoder:
         """How long the last `encode` spent casting the seen rays (a new geometry or new occluders)."""
         self._geometry: LatticeGeometry | None = None
         self._shadows: LatticeShadows | None = None
+        self._voxel_shadows: LatticeShadows | None = None   # the same rays from the voxels' surfaces
         self._albedo = self._emission = None        # the voxels' (K, 3) of the last call
         self._albedo_feature = None                 # (3, cells) float32
         self._emitted = None                        # (cells, 3) splatted emitted radiance x area
@@ -135,8 +139,12 @@ class Encoder:
         if shadows_changed:
             self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing,
                                            None if box is None else self._shadows, box)
-            self.emitters = []   # every basis holds the old shadows
             self.recomputed.append("shadows")
+        if shadows_changed:
+            self.emitters = []   # every basis holds the old shadows
+        if shadows_changed or geometry_changed:
+            self._voxel_shadows = LatticeShadows(blockers, encoding.surface_points(voxels), self.lo,
+                                                 self._geometry.spacing)
         g = self._geometry
         albedo_changed = (np.ones(3, bool) if geometry_changed
                           else ~_same_columns(self._albedo, voxels.albedo))
@@ -147,7 +155,7 @@ class Encoder:
         emitters_changed = False
         if light_changed:
             self._emitted = g.gather(voxels.emission)
-            emitters_changed = self._update_emitters(voxels)
+            emitters_changed = self._update_emitters(voxels, geometry_changed)
             self.recomputed.append("emission")
         sun_moved = not _same_direction(direction, self._sun[0])
         if (sun_moved or shadows_changed) and direction is not None:
@@ -163,14 +171,14 @@ class Encoder:
         if self._last is not None and unchanged.all():
             inputs = self._last.inputs
         else:
-            inputs = self._assemble(voxels, direct, scale, unchanged)
+            inputs = self._assemble(voxels, direct, self._received(voxels, direction, irradiance), scale, unchanged)
         self.revisions += ~unchanged
         self._last = Encoding(inputs=inputs, scale=scale.astype(np.float32), lo=self.lo, hi=self.hi)
         self._last_voxels = voxels
         return self._last
 
     # ---- the parts ----------------------------------------------------------------------------------
-    def _assemble(self, voxels: VoxelGrid, direct: np.ndarray, scale: np.ndarray,
+    def _assemble(self, voxels: VoxelGrid, direct: np.ndarray, received: np.ndarray, scale: np.ndarray,
                   unchanged: np.ndarray) -> np.ndarray:
         """(3, CHANNELS, M, M, M) float32, as `encode` lays it out; passes in `unchanged` keep the
         previous encoding's values (equal to round-off), so the network's output for them still holds.
@@ -180,7 +188,7 @@ class Encoder:
         redo = np.ones(3, bool) if self._last is None else ~unchanged
         if self._bounce is None or not self._bounce.fits(voxels):
             self._bounce = encoding.Bounce(voxels, self.lo, self.hi, m)
-        bounce = self._bounce.sh(voxels.albedo, direct.transpose(2, 1, 0), redo)  # (P, 9, 3)
+        bounce = self._bounce.sh(voxels.albedo, direct.transpose(2, 1, 0), redo, received)  # (P, 9, 3)
         seen = np.zeros((len(self.points), sh.SH_COUNT, 3), np.float32)
         if self._seen is not None and voxels.count:
             albedo = voxels.albedo[:, redo]
@@ -190,6 +198,7 @@ class Encoder:
         inputs = np.empty((3, CHANNELS, m ** 3), np.float32)
         previous = None if self._last is None else self._last.inputs.reshape(3, CHANNELS, -1)
         emitted = self._emitted.T / g.cell_area
+        opened = 1.0 if self._seen is None or not voxels.count else self._seen.open
         for c in range(3):
             if unchanged[c] and previous is not None:
                 inputs[c] = previous[c]
@@ -200,6 +209,7 @@ class Encoder:
             np.multiply(direct[c], np.float32(inv[c]), out=inputs[c, DIRECT])
             inputs[c, BOUNCE] = bounce[:, :, c].T * inv[c]
             inputs[c, SEEN] = seen[:, :, c].T * inv[c]
+            inputs[c, OPEN] = opened
         inputs = inputs.reshape(3, CHANNELS, m, m, m)
         inputs.flags.writeable = False  # shared with the next encoding when it is the same
         return inputs
@@ -220,17 +230,29 @@ class Encoder:
                     direct[c] += (delta * irradiance[c]).astype(np.float32)[:, None] * visible[None, :]
         return direct
 
-    def _update_emitters(self, voxels: VoxelGrid) -> bool:
+    def _received(self, voxels: VoxelGrid, direction, irradiance) -> np.ndarray:
+        """(K, 3) the voxels' irradiance straight from the emitters and the sun (`encoding.voxel_direct`)."""
+        out = np.zeros((voxels.count, 3))
+        for emitter in self.emitters:
+            out += emitter.received.astype(np.float64)[:, None] * emitter.radiance[None]
+        if direction is not None and np.any(irradiance > 0):
+            sun = SimpleNamespace(direction=direction, irradiance=irradiance)
+            out += encoding.sun_irradiance(sun, self._voxel_shadows.sun_visibility(direction), voxels.normal)
+        return out
+
+    def _update_emitters(self, voxels: VoxelGrid, new_voxels: bool) -> bool:
         """Match the emitting patches to the emitters kept so far; patches of no kept emitter (a lamp
         moved or resized, a new light, a colour no longer shared, a patch whose cluster of visibility
-        rays gained or lost a patch) form new ones, whose rays are traced and bases computed. Returns
-        whether the emitters changed (beyond their radiances)."""
+        rays gained or lost a patch) form new ones, whose rays are traced and bases computed. With
+        `new_voxels` (the geometry changed, the occluders did not) the kept emitters' voxel bases are
+        computed again for the new voxels. Returns whether the emitters changed (beyond their
+        radiances)."""
         position, normal, area, radiance = encoding.emitting_patches(self._geometry.cell, voxels)
         target, cluster = self._shadows.targets(position, normal)
         keys = _patch_keys(position, normal, area, target[cluster])
         index = {key: e for e, key in enumerate(keys)}
         claimed = np.zeros(len(keys), bool)
-        kept = []
+        kept, stale = [], []
         for emitter in self.emitters:
             members = [index.get(key) for key in emitter.weights]
             if any(e is None for e in members) or claimed[members].any():
@@ -243,22 +265,41 @@ class Encoder:
                 emitter.radiance = per_weight
                 claimed[members] = True
                 kept.append(emitter)
+                if new_voxels:
+                    stale.append((emitter, np.array(members), weights))
         fresh = np.flatnonzero(~claimed)
         changed = len(kept) != len(self.emitters) or len(fresh) > 0
+        lamps = self._lamps(fresh, position, radiance, voxels.voxel_size)
+        if not lamps and not stale:   # a colour or intensity edit keeps every emitter and needs no pieces
+            self.emitters = kept
+            return changed
+        pieces = encoding.patch_pieces(self._geometry.cell, voxels, radiance,
+                                       encoding.NEAR_PIECES * self._geometry.spacing.max())
         row, visible = np.full(len(target), -1), None   # each traced cluster's row of `visible`
-        if len(fresh):   # a colour or intensity edit keeps every emitter and needs no pieces
+        if len(fresh):
             self.recomputed.append("emitters")
-            pieces = encoding.patch_pieces(self._geometry.cell, voxels, radiance,
-                                           encoding.NEAR_PIECES * self._geometry.spacing.max())
             traced = np.unique(cluster[fresh])
             row[traced] = np.arange(len(traced))
             visible = self._shadows.visibility(target[traced])
-        for members in self._lamps(fresh, position, radiance, voxels.voxel_size):
+        voxel_row = np.full(len(target), -1)   # the same for the voxels' rays, which the stale need too
+        traced = np.unique(np.concatenate([cluster[fresh]] + [cluster[m] for _, m, _ in stale]))
+        voxel_row[traced] = np.arange(len(traced))
+        on_voxels = self._voxel_shadows.visibility(target[traced])
+        surface = (encoding.surface_points(voxels), voxels.normal)
+
+        def received(members, weights):
+            patches = (position[members], normal[members], area[members], weights[:, None])
+            return encoding.emitter_irradiance_rows(patches, *surface, on_voxels[voxel_row[cluster[members]]],
+                                                    pieces.of(members))[0]
+
+        for emitter, members, weights in stale:
+            emitter.received = received(members, weights)
+        for members in lamps:
             weights = radiance[members].max(axis=1)
             basis = emitter_basis(self.points, position[members], normal[members], area[members], weights,
                                   visible, row[cluster[members]], pieces.of(members))
             kept.append(Emitter({keys[e]: float(w) for e, w in zip(members, weights)}, basis,
-                                radiance[members[0]] / weights[0]))
+                                received(members, weights), radiance[members[0]] / weights[0]))
         self.emitters = kept
         return changed
 

@@ -23,8 +23,8 @@ Four choices make a small network generalize beyond the layouts it was trained o
   (docs/TRAINING.md).
 - **One bounce as an input.** The reflected light, which the renderer shades, is a gather over the whole
   room, beyond what a small network's receptive field carries well: `bounce_sh` reflects the direct
-  light once off every surface (albedo x irradiance / pi) and gathers it at a coarse lattice, without
-  shadows.
+  light once off every surface (albedo x irradiance / pi, the irradiance summed at each voxel with its
+  own shadow rays: viewer/neural/irradiance.py) and gathers it at a coarse lattice, without shadows.
 - **The bounce, seen.** Gathered without visibility, light passes through walls, and no network gets
   back which surfaces a probe sees. The `seen` features gather the light reflected once and twice with
   SEEN_RAYS exact rays a probe (viewer/neural/seen.py): noisy, but shadowed. The network learns the
@@ -53,18 +53,23 @@ from viewer.rays.voxels import VoxelGrid, face_facing
 # The features' parts, re-exported: callers read them as `encoding.<name>`.
 from viewer.neural.bounce import BOUNCE_LATTICE, BOUNCE_PATCH, Bounce, bounce_sh  # noqa: F401
 from viewer.neural.seen import SEEN_RAYS, SeenRays, seen_light  # noqa: F401
+from viewer.neural.irradiance import (emitter_irradiance_rows, sun_irradiance, surface_points,  # noqa: F401
+                                      voxel_direct)
 from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBILITY_CELLS, Pieces, emitter_sh,  # noqa: F401
                                   emitter_sh_rows, emitting_patches, facings, patch_pieces, patch_visibility,
                                   shadow_targets, splat, sun_sh, sun_visibility)
 
-VERSION = 8
+VERSION = 9
 """Bump when the features change: a model card records the version its network was trained on, and
 `viewer.neural.field` refuses a model of a version it cannot feed (`VERSION_CHANNELS`). Version 7 deals
 the seen rays' directions out over the lattice (`viewer.neural.seen.interleaved_lattices`) where
 version 6 turned each probe's own: the same features, with less noise in any 3x3x3 neighbourhood.
 Version 8 sums the lamps' pieces near them (`direct.NEAR_PIECES`) where version 7 took each lattice
 cell's worth of lamp as one term: the same features, the direct light as close to Mitsuba's as the
-solver's."""
+solver's. Version 9 starts the bounces from the direct light on each voxel (`irradiance.voxel_direct`)
+where version 8 read it from the probes' direct SH: the same features, the bounce and seen ones from
+the solver's own direct light on the surfaces, and adds the seen rays' open share (`OPEN`) by which
+the network weighs the probes it filters."""
 FEATURES = (
     "density",          # surface area in the cell / cell face area
     "normal_x", "normal_y", "normal_z",  # area-weighted normals / cell face area
@@ -75,19 +80,24 @@ FEATURES = (
     "extent_x", "extent_y", "extent_z",  # lattice extent per axis / the largest
     *(f"bounce_{k}" for k in range(sh.SH_COUNT)),  # one bounce of the direct light, unshadowed, / scale
     *(f"seen_{k}" for k in range(sh.SH_COUNT)),  # two bounces gathered by SEEN_RAYS rays a probe, / scale
+    "open",             # the share of those rays that leave the probe into the open (0 inside a solid)
 )
 CHANNELS = len(FEATURES)
-VERSION_CHANNELS = {8: CHANNELS}
+VERSION_CHANNELS = {9: CHANNELS}
 """The features a network of each encoding version reads: the first this many of FEATURES. Networks of
 versions 4-7 are refused: they learnt to correct a direct light of one term per lattice cell of lamp and
-overcorrect version 8's (the version-7 network's paper-test went from 6.4% to 9.1% off Mitsuba)."""
+overcorrect version 8's (the version-7 network's paper-test went from 6.4% to 9.1% off Mitsuba), and
+version 8's learnt the reflected light of surfaces lit as the probes' SH lit them."""
 DIRECT = slice(6, 6 + sh.SH_COUNT)
 """Where the direct-light SH sits among the features (the network adds its output to it)."""
 BOUNCE = slice(21, 21 + sh.SH_COUNT)
 """Where the one-bounce SH sits (`bounce_sh`: the network's reflected light starts from it)."""
 SEEN = slice(30, 30 + sh.SH_COUNT)
 """Where the seen bounce's SH sits (viewer/neural/seen.py)."""
-COMPRESSED = (slice(FEATURES.index("emission"), DIRECT.stop), slice(BOUNCE.start, CHANNELS))
+OPEN = FEATURES.index("open")
+"""The seen rays' open share (`SeenRays.open`): the weight of each probe in the network's filter of the
+seen light, so that a probe beside a wall does not average in the dark of the probes inside it."""
+COMPRESSED = (slice(FEATURES.index("emission"), DIRECT.stop), slice(BOUNCE.start, SEEN.stop))
 """The features the network's convolutions read through asinh (`compressed`): the light, which spans five
 orders of magnitude within a room."""
 
@@ -203,12 +213,14 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
     visible = None
     if blockers is not None:
         visible = patch_visibility(blockers, points, lights[0], lights[1], lo, spacing)
-    direct = emitter_sh(lights, points, visible, patch_pieces(flat, voxels, lights[3], NEAR_PIECES * spacing.max()))
+    pieces = patch_pieces(flat, voxels, lights[3], NEAR_PIECES * spacing.max())
+    direct = emitter_sh(lights, points, visible, pieces)
     direct += sun_sh(sun, blockers, points)  # (P, 9, 3)
-    bounce, seen = np.zeros((cells, sh.SH_COUNT, 3)), np.zeros((cells, sh.SH_COUNT, 3))
+    bounce, seen, rays = np.zeros((cells, sh.SH_COUNT, 3)), np.zeros((cells, sh.SH_COUNT, 3)), None
     if voxels.count:
         once = Bounce(voxels, lo, hi, m)
-        bounce = once.sh(voxels.albedo, direct)
+        received = voxel_direct(voxels, lights, pieces, blockers, sun, lo, spacing)
+        bounce = once.sh(voxels.albedo, direct, irradiance=received)
         rays = seen_rays(blockers, voxels, points)
         if rays is not None:
             seen = seen_light(rays, once, voxels.albedo, once.leaving(voxels.albedo))
@@ -227,4 +239,5 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
     inputs[:, 18:21] = (extent / extent.max())[:, None]
     inputs[:, BOUNCE] = (bounce * inv).transpose(2, 1, 0)
     inputs[:, SEEN] = (seen * inv).transpose(2, 1, 0)
+    inputs[:, OPEN] = 1.0 if rays is None else rays.open
     return Encoding(inputs=inputs.reshape(3, CHANNELS, m, m, m), scale=scale.astype(np.float32), lo=lo, hi=hi)

@@ -39,6 +39,7 @@ import numba
 import numpy as np
 
 from viewer.probes import sh
+from viewer.rays.dda import BACKFACE
 from viewer.rays.voxel_rays import VoxelRays
 
 SEEN_RAYS = 16
@@ -79,6 +80,9 @@ class SeenRays:
         """`traced`: how many of the rays were traced (the others landed again)."""
         self._faces = None if face is None else (face, t)
         """(P, R) the face each ray met and its distance, for the rays after a move."""
+        self.open = 1.0 - (hits == BACKFACE).mean(axis=-1).reshape(-1).astype(np.float32)
+        """(P,) the share of each probe's rays that leave it through the front of a surface or into the
+        open: near 0 inside a solid, whose rays meet the backs of its faces."""
         hits = hits.reshape(-1)
         self.voxel = np.where(hits < 0, count, hits).astype(np.int32)
         """(P x R,) the voxel each ray lands on; `count` where it brings no light."""

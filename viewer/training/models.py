@@ -114,7 +114,9 @@ class ProbeNet(nn.Module):
         self.bounce_gain = nn.Parameter(torch.tensor(float(config.bounce_gain)))
         self.seen_gain = nn.Parameter(torch.tensor(float(config.seen_gain)))
         # the seen bounce's denoiser at the probes' own resolution: one 3x3x3 kernel per SH coefficient,
-        # starting as the box filter (which takes its raw 62% to 30% on the validation rooms)
+        # starting as the box filter (which takes its raw 62% to 30% on the validation rooms), each
+        # probe weighted by its open share and the sum divided by the neighbourhood's (a normalized
+        # convolution: a probe by a wall no longer averages in the dark of the probes inside it)
         self.seen_filter = nn.Conv3d(9, 9, 3, padding=1, padding_mode="replicate", groups=9, bias=False)
         nn.init.constant_(self.seen_filter.weight, 1.0 / 27.0)
 
@@ -122,12 +124,14 @@ class ProbeNet(nn.Module):
         """`x` the encoded inputs; `x_in` the same through `compress` where the caller made it already
         (the exported network takes it as its second input: `encoding.compressed`)."""
         if not self.config.seen:
-            x = torch.cat([x[:, :encoding.SEEN.start], torch.zeros_like(x[:, encoding.SEEN])], dim=1)
+            x = torch.cat([x[:, :encoding.SEEN.start], torch.zeros_like(x[:, encoding.SEEN]), x[:, encoding.SEEN.stop:]],
+                          dim=1)
         direct_dc = x[:, encoding.DIRECT.start:encoding.DIRECT.start + 1]
         bounce_dc = x[:, encoding.BOUNCE.start:encoding.BOUNCE.start + 1]
         seen_dc = F.avg_pool3d(x[:, encoding.SEEN.start:encoding.SEEN.start + 1], 3, stride=1, padding=1,
                                count_include_pad=False)
         reflected_magnitude = 0.5 * (bounce_dc.abs() + seen_dc.abs()) + REFLECTED_FLOOR
+        opened = x[:, encoding.OPEN:encoding.OPEN + 1]
         x_in = compress(x) if x_in is None else x_in
         levels = []
         level = x_in
@@ -139,7 +143,8 @@ class ProbeNet(nn.Module):
             hidden = self.project[i](levels[i]) + self._up(hidden)
         hidden = F.relu(self.local(x_in) + self._up(hidden))
         out = self.head(hidden)
-        seen = self.seen_filter(x[:, encoding.SEEN])
+        seen = self.seen_filter(x[:, encoding.SEEN] * opened) / F.avg_pool3d(
+            F.pad(opened, (1,) * 6, mode="replicate"), 3, stride=1).clamp_min(1.0 / 27.0)
         reflected = self.bounce_gain * x[:, encoding.BOUNCE] + self.seen_gain * seen
         if self.config.reflected_correction:
             reflected = reflected + out[:, REFLECTED] * reflected_magnitude

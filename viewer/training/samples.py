@@ -239,8 +239,8 @@ def _cached(root: Path, split: str, container: str, refs: list[str], tag: str, e
             workers: int, quiet: bool, key_extra, encode: bool = True) -> dict[str, np.ndarray] | None:
     files = sorted({ref.partition("#")[0] for ref in refs})
     rooms = [(room_of(ref), Path(ref.partition("#")[0]).stat().st_size) for ref in refs]
-    key = hashlib.sha1(json.dumps([CACHE_VERSION, encoding.VERSION, tag, key_extra, resolution, rooms,
-                                   [Path(f).name for f in files]]).encode()).hexdigest()[:12]
+    key = hashlib.sha1(json.dumps([CACHE_VERSION, encoding.VERSION, list(encoding.FEATURES), tag, key_extra,
+                                   resolution, rooms, [Path(f).name for f in files]]).encode()).hexdigest()[:12]
     folder = root / "cache" / split / f"{Path(container).stem}-{tag}-m{resolution}-{key}"
     if not (folder / "done").exists():
         if not encode:
