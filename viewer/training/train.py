@@ -75,8 +75,8 @@ class TrainSettings:
     (width 8, the same rooms and steps; the indirect light against Mitsuba at free-space points, medians
     of the public scenes / 20 validation rooms / 4 dark rooms), `local` trained the network to 16.8% /
     25.0% / 26.5% and `reflected` to 16.0% / 23.8% / 24.4%, both worse than the untrained network's
-    12.0% / 21.8% / 23.1%: weighed probe by probe, the fit traded the bright light by the lamps, which
-    the score counts most, for the dim corners'. `rmse` trained it to 11.6% / 20.3% / 22.9%."""
+    12.0% / 21.8% / 23.1%: weighed probe by probe, the bright light by the lamps, which the score
+    counts most, counts least. `rmse` trained it to 11.6% / 20.3% / 22.9%."""
     clip: float = 1.0
     """Largest gradient norm a step takes (0: no clipping). The median step's norm is about 0.5 and one
     in ten passes 1; unclipped, every run jumped at its third epoch (the same batch of the same seed) to
