@@ -189,19 +189,26 @@ def emitter_sh_rows(lights, points: np.ndarray, visible: np.ndarray | None = Non
     """`emitter_sh` as (C, 9, P) float32 for a radiance of C channels (lights[3] is (E, C)), with the
     visibility as (E, P) rows: the layout the compiled loop works in (`viewer.neural.encoder` keeps one
     channel per emitter, a radiance of 1 times its weights)."""
-    source, normal, area, radiance = lights
-    radiance = np.asarray(radiance)   # (E, C)
-    out = np.zeros((radiance.shape[1], sh.SH_COUNT, len(points)), np.float32)
-    if len(area) == 0:
+    out = np.zeros((np.shape(lights[3])[1], sh.SH_COUNT, len(points)), np.float32)
+    if len(lights[2]) == 0:
         return out
-    f32 = [np.ascontiguousarray(a, np.float32) for a in (np.asarray(points).T, source, normal, area, radiance)]
+    _emitter_sh(np.ascontiguousarray(np.asarray(points).T, np.float32), *kernel_terms(lights, visible, pieces), out)
+    return out
+
+
+def kernel_terms(lights, visible: np.ndarray | None, pieces: Pieces | None) -> tuple:
+    """The compiled loops' arguments after their points (`_emitter_sh`, `irradiance._emitter_irradiance`):
+    the patches' positions, normals, areas and radiance (E, C) as float32, their visibility rows (E, P)
+    or one row of ones, whether those shadow, the near-field clamp, and the pieces (their starts,
+    positions, normals, areas and gains, and the square of the distance within which they count)."""
+    source, normal, area, radiance = lights
+    f32 = [np.ascontiguousarray(a, np.float32) for a in (source, normal, area, radiance)]
     seen = np.ones((len(area), 1), np.float32) if visible is None else np.ascontiguousarray(visible, np.float32)
     if pieces is None or len(pieces.area) == 0:
         pieces = Pieces.none(len(area))
     near2 = np.float32(pieces.near * pieces.near if pieces.near > 0 else -1.0)
     parts = [np.ascontiguousarray(a, np.float32) for a in (pieces.position, pieces.normal, pieces.area, pieces.gain)]
-    _emitter_sh(*f32, seen, visible is not None, np.float32(NEAR_FIELD), pieces.start, *parts, near2, out)
-    return out
+    return (*f32, seen, visible is not None, np.float32(NEAR_FIELD), pieces.start, *parts, near2)
 
 
 SH_BLOCK = 256

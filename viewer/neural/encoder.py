@@ -139,9 +139,8 @@ class Encoder:
         if shadows_changed:
             self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing,
                                            None if box is None else self._shadows, box)
-            self.recomputed.append("shadows")
-        if shadows_changed:
             self.emitters = []   # every basis holds the old shadows
+            self.recomputed.append("shadows")
         if shadows_changed or geometry_changed:
             self._voxel_shadows = LatticeShadows(blockers, encoding.surface_points(voxels), self.lo,
                                                  self._geometry.spacing)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from viewer.neural.direct import NEAR_FIELD, SH_BLOCK, Pieces, solid_angle, patch_visibility, sun_visibility
+from viewer.neural.direct import SH_BLOCK, Pieces, kernel_terms, patch_visibility, solid_angle, sun_visibility
 from viewer.rays.voxels import VoxelGrid
 
 SURFACE_OFFSET = 0.1
@@ -47,19 +47,11 @@ def emitter_irradiance_rows(lights, points: np.ndarray, normals: np.ndarray, vis
     each times the receiver's cosine instead of projected on SH. Read from the probes' SH instead, a
     surface beside a lamp misses the light its cosine catches: L2 SH spread a small bright lamp over the
     sphere, and the lattice's interpolation blurs its 1 / r^2 over a cell."""
-    source, normal, area, radiance = lights
-    radiance = np.asarray(radiance)
-    out = np.zeros((radiance.shape[1], len(points)), np.float32)
-    if len(area) == 0 or len(points) == 0:
+    out = np.zeros((np.shape(lights[3])[1], len(points)), np.float32)
+    if len(lights[2]) == 0 or len(points) == 0:
         return out
-    f32 = [np.ascontiguousarray(a, np.float32)
-           for a in (np.asarray(points).T, np.asarray(normals).T, source, normal, area, radiance)]
-    seen = np.ones((len(area), 1), np.float32) if visible is None else np.ascontiguousarray(visible, np.float32)
-    if pieces is None or len(pieces.area) == 0:
-        pieces = Pieces.none(len(area))
-    near2 = np.float32(pieces.near * pieces.near if pieces.near > 0 else -1.0)
-    parts = [np.ascontiguousarray(a, np.float32) for a in (pieces.position, pieces.normal, pieces.area, pieces.gain)]
-    _emitter_irradiance(*f32, seen, visible is not None, np.float32(NEAR_FIELD), pieces.start, *parts, near2, out)
+    f32 = [np.ascontiguousarray(np.asarray(a).T, np.float32) for a in (points, normals)]
+    _emitter_irradiance(*f32, *kernel_terms(lights, visible, pieces), out)
     return out
 
 
