@@ -239,7 +239,11 @@ def neural_method(path: Path, root: Path = ROOT) -> Method:
             field = NeuralField(path)
         except ModelError as exc:
             raise MethodUnavailable(str(exc)) from None
-        return lambda scene, points: field.solve(scene, include_emitted=True)
+        def produce(scene, points):
+            field.forget()   # a loaded scene's cost: the kept encoder would find a repeat unchanged
+            return field.solve(scene, include_emitted=True)
+
+        return produce
 
     try:
         label = str(path.resolve().relative_to(root))
