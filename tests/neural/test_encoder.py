@@ -167,8 +167,8 @@ def test_a_lamp_switched_off_retraces_the_lamp_that_shares_its_shadow_rays():
     lo, hi = scene.bounds
     voxels, blockers, _ = encoded(scene)
     spacing = (hi - lo) / 16
-    cell = np.clip(np.floor((voxels.position - lo) / spacing).astype(np.int64), 0, 15)
-    position, normal, _, radiance = encoding.emitting_patches((cell[:, 0] * 16 + cell[:, 1]) * 16 + cell[:, 2], voxels)
+    position, normal, _, radiance = encoding.emitting_patches(encoding.lattice_cells(voxels.position, lo, spacing, 16),
+                                                              voxels)
     _, cluster = encoding.shadow_targets(blockers, position, normal, lo, spacing)
     warm, cool = radiance[:, 0] > radiance[:, 2] * 2, radiance[:, 2] > radiance[:, 0] * 2
     assert set(cluster[warm]) & set(cluster[cool]), "the lamps should share a cluster of rays"

@@ -15,8 +15,7 @@ def voxel_direct(scene: Scene, m: int):
     lo, hi = scene.bounds
     grid = voxelize(scene, m)
     spacing = (hi - lo) / m
-    cell = np.clip(np.floor((grid.position - lo) / spacing).astype(np.int64), 0, m - 1)
-    flat = (cell[:, 0] * m + cell[:, 1]) * m + cell[:, 2]
+    flat = encoding.lattice_cells(grid.position, lo, spacing, m)
     lights = encoding.emitting_patches(flat, grid)
     pieces = encoding.patch_pieces(flat, grid, lights[3], encoding.NEAR_PIECES * spacing.max())
     return grid, encoding.voxel_direct(grid, lights, pieces, encoding.occluders(scene, grid), scene.sun, lo, spacing)

@@ -41,6 +41,13 @@ def splat(points: np.ndarray, lo: np.ndarray, spacing: np.ndarray, m: int):
     return out
 
 
+def lattice_cells(points: np.ndarray, lo: np.ndarray, spacing: np.ndarray, m: int) -> np.ndarray:
+    """(P,) int64 the flat index ((i x m + j) x m + k) of the lattice cell each point (P, 3) lies in,
+    clamped to the lattice."""
+    cell = np.clip(np.floor((points - lo) / spacing).astype(np.int64), 0, m - 1)
+    return (cell[:, 0] * m + cell[:, 1]) * m + cell[:, 2]
+
+
 def facings(normal: np.ndarray) -> np.ndarray:
     """(K,) int 0-5: the signed axis each normal (K, 3) is closest to (2 a + 1 for +a, 2 a for -a). Patches
     merge surfaces of one facing only: the two sides of a thin wall in one cell have opposite normals,

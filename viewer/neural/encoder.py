@@ -286,19 +286,18 @@ class Encoder:
         on_voxels = self._voxel_shadows.visibility(target[traced])
         surface = (encoding.surface_points(voxels), voxels.normal)
 
-        def received(members, weights):
+        def received(members, weights, own):
             patches = (position[members], normal[members], area[members], weights[:, None])
-            return encoding.emitter_irradiance_rows(patches, *surface, on_voxels[voxel_row[cluster[members]]],
-                                                    pieces.of(members))[0]
+            return encoding.emitter_irradiance_rows(patches, *surface, on_voxels[voxel_row[cluster[members]]], own)[0]
 
         for emitter, members, weights in stale:
-            emitter.received = received(members, weights)
+            emitter.received = received(members, weights, pieces.of(members))
         for members in lamps:
-            weights = radiance[members].max(axis=1)
+            weights, own = radiance[members].max(axis=1), pieces.of(members)
             basis = emitter_basis(self.points, position[members], normal[members], area[members], weights,
-                                  visible, row[cluster[members]], pieces.of(members))
+                                  visible, row[cluster[members]], own)
             kept.append(Emitter({keys[e]: float(w) for e, w in zip(members, weights)}, basis,
-                                received(members, weights), radiance[members[0]] / weights[0]))
+                                received(members, weights, own), radiance[members[0]] / weights[0]))
         self.emitters = kept
         return changed
 

@@ -55,9 +55,9 @@ from viewer.neural.bounce import BOUNCE_LATTICE, BOUNCE_PATCH, Bounce, bounce_sh
 from viewer.neural.seen import SEEN_RAYS, SeenRays, seen_light  # noqa: F401
 from viewer.neural.irradiance import (emitter_irradiance_rows, sun_irradiance, surface_points,  # noqa: F401
                                       voxel_direct)
-from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBILITY_CELLS, Pieces, emitter_sh,  # noqa: F401
-                                  emitter_sh_rows, emitting_patches, facings, patch_pieces, patch_visibility,
-                                  shadow_targets, splat, sun_sh, sun_visibility)
+from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBILITY_CELLS,  # noqa: F401
+                                  Pieces, emitter_sh, emitter_sh_rows, emitting_patches, facings, lattice_cells,
+                                  patch_pieces, patch_visibility, shadow_targets, splat, sun_sh, sun_visibility)
 
 VERSION = 9
 """Bump when the features change: a model card records the version its network was trained on, and
@@ -190,8 +190,7 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
     spacing = (hi - lo) / m
     face_area = np.array([spacing[1] * spacing[2], spacing[0] * spacing[2], spacing[0] * spacing[1]])
     cell_area = float(np.mean(face_area))
-    cell = np.clip(np.floor((voxels.position - lo) / spacing).astype(np.int64), 0, m - 1)
-    flat = (cell[:, 0] * m + cell[:, 1]) * m + cell[:, 2]
+    flat = lattice_cells(voxels.position, lo, spacing, m)
     cells = m ** 3
     corners = splat(voxels.position, lo, spacing, m)
 

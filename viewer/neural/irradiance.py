@@ -16,16 +16,13 @@ import numba
 import numpy as np
 
 from viewer.neural.direct import SH_BLOCK, Pieces, kernel_terms, patch_visibility, solid_angle, sun_visibility
-from viewer.rays.voxels import VoxelGrid
-
-SURFACE_OFFSET = 0.1
-"""The voxels' rays (to the lamps and the sun) start this many voxels off their surface along its
-normal, as the physical solver's do: half a voxel off (where the probes' SH was read), the outer face of
-a room's wall starts outside the scene and sees the sun."""
+from viewer.rays.voxels import SURFACE_OFFSET, VoxelGrid
 
 
 def surface_points(voxels: VoxelGrid) -> np.ndarray:
-    """(K, 3) where each voxel receives its direct light and starts its shadow rays."""
+    """(K, 3) where each voxel receives its direct light and starts its shadow rays, SURFACE_OFFSET voxels
+    in front of it as the solver's rays start (half a voxel off, where the probes' SH was read, the outer
+    face of a room's wall started outside the scene and saw the sun)."""
     return voxels.position + SURFACE_OFFSET * voxels.voxel_size * voxels.normal
 
 

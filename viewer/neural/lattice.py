@@ -31,8 +31,7 @@ class LatticeGeometry:
         weights = np.stack([weight for _, weight in corners], axis=1).ravel()
         self.splat = sparse.csc_matrix((weights, rows, np.arange(0, len(rows) + 1, len(corners))),
                                        shape=(cells, voxels.count))
-        cell = np.clip(np.floor((voxels.position - lo) / spacing).astype(np.int64), 0, m - 1)
-        self.cell = (cell[:, 0] * m + cell[:, 1]) * m + cell[:, 2]
+        self.cell = encoding.lattice_cells(voxels.position, lo, spacing, m)
         self.density = self.splat @ voxels.area
         self.safe = np.where(self.density > 0, self.density, 1.0)
         normals = self.splat @ (voxels.area[:, None] * voxels.normal)

@@ -29,10 +29,7 @@ from viewer.probes import sh
 from viewer.probes.grid import ProbeGrid, fill_waves
 from viewer.scene import DirectionalLight, Scene
 from viewer.rays.voxel_rays import VoxelRays
-from viewer.rays.voxels import VoxelGrid, Voxelization, voxelize_with_faces
-
-SURFACE_OFFSET = 0.1
-"""Rays leave a surface this many voxels off it, along its normal (in front of its own patch)."""
+from viewer.rays.voxels import SURFACE_OFFSET, VoxelGrid, Voxelization, voxelize_with_faces  # noqa: F401
 LAMP_SHARE = 0.1
 """Emitters whose total area is at most this share of the scene's are lamps: small and bright, their
 light is integrated over fine light samples with visibility (next-event estimation). Larger emitters (a

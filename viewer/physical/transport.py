@@ -28,14 +28,11 @@ from scipy import sparse
 
 from viewer.rays.raymarch import Tracer
 from viewer.scene import DirectionalLight
-from viewer.rays.voxels import FACINGS, VoxelGrid
+from viewer.rays.voxels import FACINGS, SURFACE_OFFSET, VoxelGrid  # noqa: F401  (SURFACE_OFFSET: re-exported)
 
 KERNELS = ("physical", "paper")
 CLUSTER_RESOLUTION = 16
 """Visibility between far voxels is traced between clusters of a grid about this fine (see _Visibility)."""
-SURFACE_OFFSET = 0.1
-"""Visibility rays start and end this many voxels off the surface, along its normal, so that they start
-in front of their own surface."""
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,10 @@ if TYPE_CHECKING:  # scipy is imported when a voxelization needs it
     from scipy import sparse
 
 MAX_LIGHT_SAMPLES = 2048
+SURFACE_OFFSET = 0.1
+"""Rays from a voxel's surface (to the lamps, the sun, other voxels) start this many voxels off it along
+its normal, in front of its own surface; further off, the outer face of a room's wall would start
+outside the scene. The physical solver and the neural encoding both use it."""
 FACINGS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 
 

@@ -55,8 +55,7 @@ def scene_rows(scene) -> dict:
     grid = voxelize(scene, m)
     blockers = encoding.occluders(scene, grid)
     spacing = (hi - lo) / m
-    cell = np.clip(np.floor((grid.position - lo) / spacing).astype(np.int64), 0, m - 1)
-    flat = (cell[:, 0] * m + cell[:, 1]) * m + cell[:, 2]
+    flat = encoding.lattice_cells(grid.position, lo, spacing, m)
     lights = encoding.emitting_patches(flat, grid)
     pieces = encoding.patch_pieces(flat, grid, lights[3], encoding.NEAR_PIECES * spacing.max())
     probes = ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3)
@@ -81,8 +80,8 @@ def scene_rows(scene) -> dict:
     for name, light in lights_on_surfaces.items():
         for how, weight in (("box", np.ones(m ** 3)), ("open", rays.open)):
             grid_sh = filtered(np.asarray(light, np.float64), weight, m).reshape(m, m, m, 9, 3)
-            row[f"{name}, {how}"] = relative_rmse(ProbeGrid(lo, hi, grid_sh, np.ones((m,) * 3, bool)).interpolate(points),
-                                                  truth)
+            everywhere = ProbeGrid(lo, hi, grid_sh, np.ones((m,) * 3, bool))
+            row[f"{name}, {how}"] = relative_rmse(everywhere.interpolate(points), truth)
     row["solver on the same voxels"] = relative_rmse(solver.probe_grid(False).interpolate(points), truth)
     return row
 
