@@ -264,5 +264,11 @@ def test_after_a_move_the_seen_rays_land_where_rays_cast_afresh_do(name, group, 
     after = encoding.seen_rays(after_blockers, voxels, points, before, moved_box(blockers, after_blockers))
     fresh = encoding.seen_rays(after_blockers, voxels, points)
     assert 0 < after.traced < len(fresh.voxel) and fresh.traced == len(fresh.voxel)
-    assert np.array_equal(after.voxel, fresh.voxel)
+    (face, t), (fresh_face, fresh_t) = after._faces, fresh._faces
+    assert np.array_equal(t, fresh_t)
+    # Where two coplanar faces meet a ray at the same distance (a box's base on the floor), Embree's
+    # choice between them follows its hierarchy, which the move rebuilt: either face is right there.
+    same = (face == fresh_face).reshape(-1)
+    assert same.mean() > 0.999
+    assert np.array_equal(after.voxel[same], fresh.voxel[same])
     assert not np.array_equal(before.voxel, fresh.voxel)
