@@ -132,8 +132,9 @@ def test_a_wall_between_the_lamp_and_a_probe_casts_its_shadow():
 
 
 def test_the_bounce_is_the_lit_walls_reflected_light():
-    """One bounce follows the albedo linearly: black walls reflect nothing, white walls twice what grey
-    ones do; it is there wherever the walls are lit and scaled out like the direct light."""
+    """The bounce feature follows the albedo: black walls reflect nothing, white walls more than twice
+    what grey ones do (their light bounces on: every bounce the seen light follows is in it); it is
+    there wherever the walls are lit and scaled out like the direct light."""
     lamp = ceiling_lamp(half_size=0.3, height=0.95, radiance=5.0)
 
     def bounce(albedo):
@@ -145,7 +146,8 @@ def test_the_bounce_is_the_lit_walls_reflected_light():
     white, _ = bounce(0.8)
     assert np.all(black == 0)
     assert grey[:, 0].min() > 0
-    np.testing.assert_allclose(white, 2 * grey, rtol=1e-4, atol=1e-7 * np.abs(grey).max())
+    ratio = white[:, 0] / grey[:, 0]
+    assert ratio.min() > 2.2 and ratio.max() < 2.0 / (1.0 - 0.8)   # walls of 0.8 reflect at most 0.8 a bounce
     # the lamp lights the floor, not the ceiling: the bounce comes from below (Y_1-1 < 0), and most
     # steeply under the dark ceiling
     tilt = grey[0, 1, 4, :, 4] / grey[0, 0, 4, :, 4]
@@ -171,7 +173,9 @@ def test_both_sides_of_a_thin_wall_reflect_apart():
 
     one_sided, two_sided = bounce(lit_side), bounce(faces)
     assert one_sided.min() > 0
-    np.testing.assert_allclose(two_sided, one_sided, rtol=0.02)
+    # the bounce carries every bounce of the seen light, which the modelled back changes a little (the
+    # rays from behind meet its front instead of the lit side's back)
+    np.testing.assert_allclose(two_sided, one_sided, rtol=0.07)
 
 
 def test_a_kept_bounce_gathers_only_the_patches_whose_light_changed():
@@ -297,5 +301,38 @@ def test_the_seen_light_carries_every_bounce_of_a_closed_room(monkeypatch, albed
     first = rays.gathered(leaving)[:, 0].mean()
     reflected = once.reflected(voxel_albedo, rays.gathered(leaving))
     assert abs(seen.tail_ratio(once.area, reflected, leaving).mean() - albedo) < 0.08
-    every = seen.seen_light(rays, once, voxel_albedo, leaving)[:, 0].mean()
+    every = seen.seen_light(rays, once, voxel_albedo, leaving)[0][:, 0].mean()
     assert every / first == pytest.approx(1.0 / (1.0 - albedo), rel=0.2)
+
+
+def test_the_seen_filter_stops_at_a_wall():
+    """`SeenRays.filtered`, which the further bounces read the seen light through: the open-weighted
+    3x3x3 box of the probes, where a neighbour across a surface counts as the probe itself. Light on
+    one side of a wall from floor to ceiling stays on that side; with no wall it is the plain
+    open-weighted box (the lattice's faces repeated outward)."""
+    from scipy import ndimage
+
+    from viewer.probes.grid import ProbeGrid
+
+    room = box(inward=True, albedo=0.5, name="room")
+    v = np.array([[0.4, 1.0, -1.0], [0.4, 1.0, 1.0], [0.4, -1.0, 1.0], [0.4, -1.0, -1.0]])
+    wall = Scene("wall", v, np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]]), 0.8, 0.0, 0, ("wall",))
+    for scene, walled in ((Scene.concatenate("split", [room, wall]), True), (room, False)):
+        lo, hi = scene.bounds
+        grid = voxelize(scene, 16)
+        points = ProbeGrid.positions_for(lo, hi, 8).reshape(-1, 3)
+        rays = encoding.seen_rays(encoding.occluders(scene, grid), grid, points)
+        light = np.zeros((len(points), 9, 2), np.float32)
+        light[points[:, 0] < 0.4, 0, 0] = 1.0
+        light[:, :, 1] = np.random.default_rng(5).random((len(points), 9))
+        out = rays.filtered(light)
+        if walled:
+            assert not rays.links[0].all() and rays.links[1:].all()
+            np.testing.assert_array_equal(out[points[:, 0] > 0.4, 0, 0], 0.0)
+            np.testing.assert_allclose(out[points[:, 0] < 0.4, 0, 0], 1.0, rtol=1e-6)
+        else:
+            assert rays.links.all()
+            w = rays.open.reshape(8, 8, 8).astype(np.float64)
+            num = ndimage.uniform_filter(light.reshape(8, 8, 8, 18) * w[..., None], size=(3, 3, 3, 1), mode="nearest")
+            den = np.maximum(ndimage.uniform_filter(w, size=3, mode="nearest"), 1.0 / 27.0)
+            np.testing.assert_allclose(out, (num / den[..., None]).reshape(out.shape), rtol=1e-5, atol=1e-6)

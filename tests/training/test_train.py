@@ -156,8 +156,9 @@ def test_the_reflected_loss_prefers_mitsuba_probes_where_a_room_has_them():
 
 def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
     """The head starts at zero: all the light is the encoding's direct light plus the reflected light,
-    which is the seen light through the box filter over the probes, weighted by their open share (by
-    default; or any mix of it and the unshadowed bounce); the convolutions read the light through an
+    which is the seen light through the box filter over the probes, weighted by their open share, with
+    the fine detail of the unshadowed bounce that the filter took, in the share of it the rays see (by
+    default; or any mix of that and the unshadowed bounce); the convolutions read the light through an
     exportable asinh."""
     from viewer.scene import load
     from viewer.training.models import REFLECTED, TOTAL, asinh
@@ -171,8 +172,15 @@ def test_an_untrained_probenet_answers_the_direct_light_and_the_bounce():
 
     opened = x[:, encoding.OPEN:encoding.OPEN + 1]   # each probe weighted by its rays' open share
     assert float(opened.min()) == 0.0 and float(opened.max()) == 1.0   # the probes inside the boxes are closed
-    box = pool(x[:, encoding.SEEN] * opened) / pool(opened).clamp_min(1.0 / 27.0)
+    seen = pool(x[:, encoding.SEEN] * opened) / pool(opened).clamp_min(1.0 / 27.0)
+    unshadowed = x[:, encoding.BOUNCE]
+    smooth = pool(unshadowed * opened) / pool(opened).clamp_min(1.0 / 27.0)
+    ratio = seen[:, :1] / smooth[:, :1]
+    assert float(smooth[:, 0].min()) > 0 and 0.0 < float(ratio.median()) < 1.5   # the rays see part of it
+    box = seen + ratio.clamp(0.0, 4.0) * (unshadowed - smooth)
     torch.testing.assert_close(out[:, REFLECTED], box)
+    fine = unshadowed - smooth   # the detail: no part of the DC that the filter keeps
+    assert float((fine[:, 0] * opened[:, 0]).mean().abs()) < 0.1 * float(unshadowed[:, 0].mean())
     with torch.no_grad():
         mixed = ProbeNet(ProbeNetConfig(width=4, hidden=8, bounce_gain=0.5, seen_gain=0.5))(x)
     bounce = 0.5 * (x[:, encoding.BOUNCE] + box)

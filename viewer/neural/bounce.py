@@ -81,23 +81,35 @@ class Bounce:
                    ((self.position, voxels.position), (self.normal, voxels.normal), (self.area, voxels.area)))
 
     def _mean(self, values: np.ndarray) -> np.ndarray:
-        """(patches, 3) the voxels' (K, 3) `values` averaged over each patch by area."""
+        """(patches, C) the voxels' (K, C) `values` averaged over each patch by area."""
         return np.stack([np.bincount(self._patch, self.area * values[:, k], minlength=self._count)
-                         for k in range(3)], 1) / self._patch_area[:, None]
+                         for k in range(values.shape[1])], 1) / self._patch_area[:, None]
 
     def gathered(self, radiance: np.ndarray) -> np.ndarray:
-        """(P, 9, 3) the light of the voxels leaving with `radiance` (K, 3), gathered at the probes as `sh`
-        gathers the bounce (patches as points, no shadows): what this gather makes of any surface light
-        (`viewer.training.bounce_floor` gives it the solver's)."""
+        """(P, 9, C) the light of the voxels leaving with `radiance` (K, C), gathered at the probes as `sh`
+        gathers the bounce (patches as points, no shadows): the encoding's `bounce` input takes the
+        surfaces' light of every bounce this way (`seen_light`), and `viewer.training.bounce_floor` the
+        solver's."""
+        channels = np.shape(radiance)[1]
         if self._count == 0:
-            return np.zeros((self.m ** 3, sh.SH_COUNT, 3))
+            return np.zeros((self.m ** 3, sh.SH_COUNT, channels))
         lights = (self._patch_position, self._patch_normal, self._patch_area, self._mean(radiance))
         coarse = emitter_sh(lights, self._points)
-        return (self._spread @ coarse.reshape(len(self._points), -1)).reshape(-1, sh.SH_COUNT, 3)
+        return (self._spread @ coarse.reshape(len(self._points), -1)).reshape(-1, sh.SH_COUNT, channels)
+
+    def light(self, direct: np.ndarray | None, irradiance: np.ndarray | None = None) -> None:
+        """Light the voxels by `direct` (P, 9, 3), SH at the probes read half a voxel in front of each, or
+        by their own `irradiance` (K, 3) (`irradiance.voxel_direct`; then `direct` is not read): what
+        `leaving` reflects. Kept while the light stays equal."""
+        light = direct if irradiance is None else irradiance
+        if self._direct is None or self._direct.shape != np.shape(light) or not np.array_equal(light, self._direct):
+            self._leaving_per_albedo = (self._leaving(direct) if irradiance is None
+                                        else np.asarray(irradiance, np.float64) / np.pi).astype(np.float64)
+            self._direct = np.array(light, copy=True)
 
     def leaving(self, albedo: np.ndarray) -> np.ndarray:
         """(K, 3) the radiance each voxel of `albedo` (K, 3) reflects under the direct light of the last
-        `sh` call: what the seen rays gather (viewer/neural/seen.py)."""
+        `light` or `sh` call: what the seen rays gather (viewer/neural/seen.py)."""
         return albedo * self._leaving_per_albedo
 
     def reflected(self, albedo: np.ndarray, light: np.ndarray) -> np.ndarray:
@@ -124,11 +136,7 @@ class Bounce:
         channels = np.ones(3, bool) if channels is None else np.asarray(channels, bool)
         if self._count == 0:
             return np.zeros((self.m ** 3, sh.SH_COUNT, 3))
-        light = direct if irradiance is None else irradiance
-        if self._direct is None or self._direct.shape != np.shape(light) or not np.array_equal(light, self._direct):
-            self._leaving_per_albedo = (self._leaving(direct) if irradiance is None
-                                        else np.asarray(irradiance, np.float64) / np.pi).astype(np.float64)
-            self._direct = np.array(light, copy=True)
+        self.light(direct, irradiance)
         radiance = self._mean(albedo * self._leaving_per_albedo)  # (patches, 3)
         if self._gathered is None:
             change, rows = np.where(channels, radiance, 0.0), np.arange(self._count)

@@ -16,13 +16,13 @@ viewer/neural/lattice.py):
   `encoding.shadow_targets`). The direct light is linear in the
   emitted radiance, so a lamp's colour or intensity is its basis times a new RGB;
 - the sun's visibility for the last direction (`encoding.sun_visibility`): its irradiance is a factor;
-- the one-bounce feature's patches and their last light (`encoding.Bounce`): the bounce is linear in
-  the patches' radiance, so an albedo edit gathers only the patches of the recoloured surfaces.
+- the bounce feature's patches and the voxels' last direct light (`encoding.Bounce`);
 - the seen rays (`encoding.seen_rays`), cast once per geometry and occluders: any edit of light or
-  colour gathers the voxels' new once-reflected light along them, without casting.
+  colour gathers the voxels' new reflected light along them, without casting, and gathers the same
+  light again from the patches without shadows (the bounce feature).
 
 So an emission colour or intensity edit is a few products over the cached bases, and an albedo edit
-recomputes the albedo feature and gathers the changed patches' bounce; neither traces a ray. New
+recomputes the albedo feature and the bounces of the passes it changes; neither traces a ray. New
 occluders (a moved lamp or object: the triangles cast other shadows) recompute every basis and the
 sun's visibility. With the same occluders, patches that start emitting or change cluster get new bases,
 traced for their clusters alone (the other emitters keep theirs), and a new geometry recomputes the
@@ -181,18 +181,20 @@ class Encoder:
                   unchanged: np.ndarray) -> np.ndarray:
         """(3, CHANNELS, M, M, M) float32, as `encode` lays it out; passes in `unchanged` keep the
         previous encoding's values (equal to round-off), so the network's output for them still holds.
-        The bounce (`encoding.Bounce`) is brought up to date for the other passes only, and after an
-        albedo edit gathers only the patches whose light changed."""
+        The seen and bounce features are gathered again for the other passes only."""
         g, m = self._geometry, self.resolution
         redo = np.ones(3, bool) if self._last is None else ~unchanged
         if self._bounce is None or not self._bounce.fits(voxels):
             self._bounce = encoding.Bounce(voxels, self.lo, self.hi, m)
-        bounce = self._bounce.sh(voxels.albedo, direct.transpose(2, 1, 0), redo, received)  # (P, 9, 3)
         seen = np.zeros((len(self.points), sh.SH_COUNT, 3), np.float32)
-        if self._seen is not None and voxels.count:
-            albedo = voxels.albedo[:, redo]
-            seen[..., redo] = encoding.seen_light(self._seen, self._bounce, albedo,
-                                                  self._bounce.leaving(voxels.albedo)[:, redo])
+        bounce = np.zeros((len(self.points), sh.SH_COUNT, 3))
+        if voxels.count and redo.any():
+            self._bounce.light(None, received)
+            surface = self._bounce.leaving(voxels.albedo)[:, redo]
+            if self._seen is not None:
+                seen[..., redo], surface = encoding.seen_light(self._seen, self._bounce, voxels.albedo[:, redo],
+                                                               surface)
+            bounce[..., redo] = self._bounce.gathered(surface)
         inv = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1.0), 0.0)
         inputs = np.empty((3, CHANNELS, m ** 3), np.float32)
         previous = None if self._last is None else self._last.inputs.reshape(3, CHANNELS, -1)

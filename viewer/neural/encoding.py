@@ -59,7 +59,7 @@ from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBI
                                   Pieces, emitter_sh, emitter_sh_rows, emitting_patches, facings, lattice_cells,
                                   patch_pieces, patch_visibility, shadow_targets, splat, sun_sh, sun_visibility)
 
-VERSION = 9
+VERSION = 10
 """Bump when the features change: a model card records the version its network was trained on, and
 `viewer.neural.field` refuses a model of a version it cannot feed (`VERSION_CHANNELS`). Version 7 deals
 the seen rays' directions out over the lattice (`viewer.neural.seen.interleaved_lattices`) where
@@ -69,7 +69,10 @@ cell's worth of lamp as one term: the same features, the direct light as close t
 solver's. Version 9 starts the bounces from the direct light on each voxel (`irradiance.voxel_direct`)
 where version 8 read it from the probes' direct SH: the same features, the bounce and seen ones from
 the solver's own direct light on the surfaces, and adds the seen rays' open share (`OPEN`) by which
-the network weighs the probes it filters."""
+the network weighs the probes it filters. Version 10 reads each further bounce back through the
+open-weighted filter (`seen.seen_light`) and gathers the surfaces' light of every bounce without shadows
+as the `bounce` input (version 9: the first bounce alone), from which the network takes the fine
+detail its filter of the seen light blurs (`viewer.training.models.ProbeNet`)."""
 FEATURES = (
     "density",          # surface area in the cell / cell face area
     "normal_x", "normal_y", "normal_z",  # area-weighted normals / cell face area
@@ -78,20 +81,22 @@ FEATURES = (
     *(f"direct_{k}" for k in range(sh.SH_COUNT)),  # emitter + sun SH, shadows traced, / scale
     "coord_x", "coord_y", "coord_z",  # probe position in [-1, 1] over the lattice
     "extent_x", "extent_y", "extent_z",  # lattice extent per axis / the largest
-    *(f"bounce_{k}" for k in range(sh.SH_COUNT)),  # one bounce of the direct light, unshadowed, / scale
-    *(f"seen_{k}" for k in range(sh.SH_COUNT)),  # two bounces gathered by SEEN_RAYS rays a probe, / scale
+    *(f"bounce_{k}" for k in range(sh.SH_COUNT)),  # the seen light's surfaces gathered unshadowed, / scale
+    *(f"seen_{k}" for k in range(sh.SH_COUNT)),  # the surfaces' reflected light through SEEN_RAYS rays, / scale
     "open",             # the share of those rays that leave the probe into the open (0 inside a solid)
 )
 CHANNELS = len(FEATURES)
-VERSION_CHANNELS = {9: CHANNELS}
+VERSION_CHANNELS = {10: CHANNELS}
 """The features a network of each encoding version reads: the first this many of FEATURES. Networks of
 versions 4-7 are refused: they learnt to correct a direct light of one term per lattice cell of lamp and
 overcorrect version 8's (the version-7 network's paper-test went from 6.4% to 9.1% off Mitsuba), and
-version 8's learnt the reflected light of surfaces lit as the probes' SH lit them."""
+version 8's learnt the reflected light of surfaces lit as the probes' SH lit them, and version 9's a
+`bounce` input of the first bounce alone, with no detail taken from it."""
 DIRECT = slice(6, 6 + sh.SH_COUNT)
 """Where the direct-light SH sits among the features (the network adds its output to it)."""
 BOUNCE = slice(21, 21 + sh.SH_COUNT)
-"""Where the one-bounce SH sits (`bounce_sh`: the network's reflected light starts from it)."""
+"""Where the unshadowed gather of the seen light's surfaces sits (`Bounce.gathered`: smooth, exact
+between the probes, leaking through walls)."""
 SEEN = slice(30, 30 + sh.SH_COUNT)
 """Where the seen bounce's SH sits (viewer/neural/seen.py)."""
 OPEN = FEATURES.index("open")
@@ -218,11 +223,12 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
     bounce, seen, rays = np.zeros((cells, sh.SH_COUNT, 3)), np.zeros((cells, sh.SH_COUNT, 3)), None
     if voxels.count:
         once = Bounce(voxels, lo, hi, m)
-        received = voxel_direct(voxels, lights, pieces, blockers, sun, lo, spacing)
-        bounce = once.sh(voxels.albedo, direct, irradiance=received)
+        once.light(direct, voxel_direct(voxels, lights, pieces, blockers, sun, lo, spacing))
+        surface = once.leaving(voxels.albedo)
         rays = seen_rays(blockers, voxels, points)
         if rays is not None:
-            seen = seen_light(rays, once, voxels.albedo, once.leaving(voxels.albedo))
+            seen, surface = seen_light(rays, once, voxels.albedo, surface)
+        bounce = once.gathered(surface)
     scale = np.maximum(direct[:, 0, :], 0.0).mean(axis=0)
     inv = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1.0), 0.0)
 

@@ -68,10 +68,10 @@ def scene_rows(scene) -> dict:
     solver.update(scene)
 
     def seen(irradiance):
-        return encoding.seen_light(rays, once, grid.albedo, (grid.albedo * irradiance / np.pi).astype(np.float32))
+        return encoding.seen_light(rays, once, grid.albedo, (grid.albedo * irradiance / np.pi).astype(np.float32))[0]
 
     lights_on_surfaces = {
-        "probes": encoding.seen_light(rays, once, grid.albedo, once.leaving(grid.albedo)),
+        "probes": encoding.seen_light(rays, once, grid.albedo, once.leaving(grid.albedo))[0],
         "voxels": seen(encoding.voxel_direct(grid, lights, pieces, blockers, scene.sun, lo, spacing))}
     if solver.geometry.voxels.count == grid.count:   # the solver's voxels are the encoder's
         lights_on_surfaces["solver direct"] = seen(solver.lighting.direct)
