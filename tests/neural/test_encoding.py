@@ -93,6 +93,33 @@ def test_a_probe_near_a_lamp_sums_its_pieces():
     np.testing.assert_allclose(encoding.emitter_sh(lights, far, pieces=pieces), encoding.emitter_sh(lights, far))
 
 
+def test_the_gather_sums_every_patch_at_every_probe_with_its_shadow():
+    """The compiled gather against the sum written out in numpy: patches of random places, facings, areas
+    and colours (one colour black), shadowed per patch and probe, over more probes than one block holds."""
+    from viewer.neural.direct import NEAR_FIELD, SH_BLOCK
+
+    rng = np.random.default_rng(3)
+    patches, probes = 37, 2 * SH_BLOCK + 29
+    points, source = rng.random((probes, 3)), rng.random((patches, 3))
+    normal = rng.normal(size=(patches, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    area, radiance = rng.random(patches) * 0.01, rng.random((patches, 3))
+    radiance[:, 1] = 0.0
+    visible = (rng.random((probes, patches)) > 0.3).astype(np.float64)
+    offset = source[None] - points[:, None]                                   # (P, E, 3)
+    r2 = np.sum(offset * offset, axis=2)
+    direction = offset / np.sqrt(r2)[..., None]
+    weight = np.maximum(-np.sum(direction * normal[None], axis=2), 0.0) * area / (r2 + area * NEAR_FIELD)
+    bases = sh.basis(direction.reshape(-1, 3)).reshape(probes, patches, sh.SH_COUNT)
+    expected = np.einsum("pe,pek,ec->pkc", weight * visible, bases, radiance)
+    got = encoding.emitter_sh((source, normal, area, radiance), points, visible)
+    np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-6 * np.abs(expected).max())
+    assert np.all(got[:, :, 1] == 0.0)
+    unshadowed = np.einsum("pe,pek,ec->pkc", weight, bases, radiance)
+    np.testing.assert_allclose(encoding.emitter_sh((source, normal, area, radiance), points), unshadowed,
+                               rtol=1e-4, atol=1e-6 * np.abs(unshadowed).max())
+
+
 def test_sun_reaches_only_the_cells_under_the_window():
     """A closed room with a hole in the ceiling: straight-down sun lights the column under the hole."""
     room = box(inward=True, albedo=0.5, name="room")
