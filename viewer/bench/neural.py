@@ -23,6 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from viewer.neural import encoding
@@ -201,6 +202,7 @@ def main(argv=None) -> int:
     add_write(parser, "write the tables into docs/PERFORMANCE.md")
     args = parser.parse_args(argv)
     neural.CLOCK = time.thread_time   # the stages' CPU time: the machine may be busy with other work
+    numba.set_num_threads(1)   # the compiled loops on this thread too: another thread's time is not on its clock
     field = NeuralField(args.model)
     results = {}
     for name in [] if args.configs_only else args.scenes:
