@@ -60,8 +60,9 @@ def test_onnx_equals_torch(exported):
 
 def test_a_network_of_one_input_gives_the_same_probes(exported, tmp_path):
     """Networks are exported with the asinh of their inputs as a second input (numpy computes it faster
-    than the ONNX operators); a network that computes it itself, as earlier exports did, still loads
-    and gives the same probes."""
+    than the ONNX operators) and their seen filter's products as two more (compiled code computes them
+    faster than onnxruntime's grouped 3D convolution); a network that computes all of it itself, as
+    earlier exports did, still loads and gives the same probes."""
     model, path = exported
     single = tmp_path / "single.onnx"
     example = torch.zeros(3, encoding.CHANNELS, 8, 8, 8)
@@ -72,7 +73,8 @@ def test_a_network_of_one_input_gives_the_same_probes(exported, tmp_path):
     card.update(file=single.name, sha256=neural.file_sha256(single))
     single.with_suffix(".json").write_text(json.dumps(card))
     one, two = neural.NeuralField(single), neural.NeuralField(path)
-    assert one.compressed_name is None and two.compressed_name == "compressed"
+    assert one.input_names == ["inputs"]
+    assert two.input_names == ["inputs", "compressed", "seen_filtered", "bounce_filtered"]
     scene = load("cornell")
     np.testing.assert_allclose(one.solve(scene).coefficients, two.solve(scene).coefficients, rtol=1e-4, atol=1e-5)
 
@@ -323,3 +325,14 @@ def test_a_colour_edit_keeps_the_geometrys_validity_vote(exported, monkeypatch):
     assert np.array_equal(kept.valid, first.valid)
     again = field.predict(recoloured, scene.sun, lo, hi, encoding.occluders(scene, recoloured), include_emitted=False)
     assert again.valid.flat[0] != first.valid.flat[0]     # new blockers: a new geometry's own vote
+
+
+def test_a_network_that_takes_its_filter_needs_the_kernels_on_its_card(exported, tmp_path):
+    model, path = exported
+    card = json.loads(path.with_suffix(".json").read_text())
+    del card["inputs"]["filtered"]["kernels"]
+    copy = tmp_path / "no-kernels.onnx"
+    copy.write_bytes(path.read_bytes())
+    copy.with_suffix(".json").write_text(json.dumps({**card, "file": copy.name}))
+    with pytest.raises(neural.ModelError, match="kernels"):
+        neural.NeuralField(copy)

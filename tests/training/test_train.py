@@ -80,8 +80,10 @@ def test_export_runs_in_the_neural_source(tiny, tmp_path):
     with torch.no_grad():
         answer = ProbeNet(config)(torch.from_numpy(inputs)).numpy()
     import onnxruntime
-    exported = onnxruntime.InferenceSession(str(tmp_path / "start.onnx")).run(
-        None, {"inputs": inputs, "compressed": encoding.compressed(inputs)})[0]
+    from viewer.neural.network_feed import feed
+    session = onnxruntime.InferenceSession(str(tmp_path / "start.onnx"))
+    exported = session.run(None, feed([i.name for i in session.get_inputs()], inputs, export.kernels(
+        ProbeNet(config))))[0]
     np.testing.assert_allclose(exported[:, :18], answer[:, :18], atol=1e-5)   # whatever the random weights
 
 

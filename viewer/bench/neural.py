@@ -138,7 +138,9 @@ def network_configs(configs, probes: int, repeats: int) -> list[tuple[str, int, 
     """(config, parameters, median ms) of onnxruntime alone on the Cornell box's encoded inputs."""
     import torch
 
+    from viewer.neural.network_feed import feed
     from viewer.training.export import export_onnx
+    from viewer.training.export import kernels as export_kernels
     from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
 
     scene = scenes.load("cornell")
@@ -158,8 +160,10 @@ def network_configs(configs, probes: int, repeats: int) -> list[tuple[str, int, 
             path = Path(folder) / f"{name}.onnx"
             export_onnx(model, path, probes)
             session = open_session(path, threads=1)
-            def network():   # the asinh of the inputs included, as the field computes it
-                session.run(None, {"inputs": inputs, "compressed": encoding.compressed(inputs)})
+            names, kernels = [i.name for i in session.get_inputs()], export_kernels(model)
+
+            def network():   # the asinh of the inputs and the seen filter included, as the field computes them
+                session.run(None, feed(names, inputs, kernels))
 
             for _ in range(3):
                 network()

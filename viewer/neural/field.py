@@ -22,6 +22,7 @@ from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.neural.domain import Domain, Shape, measure, outside
 from viewer.neural.encoder import Encoder
+from viewer.neural.network_feed import FILTERED, feed
 from viewer.probes.grid import ProbeGrid
 from viewer.resources import DEFAULT_MODEL
 from viewer.scene import Scene
@@ -146,15 +147,23 @@ class NeuralField:
         """The encoding's features the network reads (the first this many: an older version's)."""
         self.session = open_session(self.card.path, threads)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
-        if len(inputs) not in (1, 2) or any(i.shape[1] != self.channels for i in inputs):
+        encoded = [i for i in inputs if i.name not in FILTERED]
+        if len(encoded) not in (1, 2) or any(i.shape[1] != self.channels for i in encoded):
             raise ModelError(f"{self.card.path.name}: expects inputs {', '.join(str(i.shape) for i in inputs)}, "
                              f"the encoding gives (3, {self.channels}, M, M, M)")
         if len(outputs) != 1 or outputs[0].shape[1] != OUTPUTS:
             raise ModelError(f"{self.card.path.name}: gives outputs {outputs[0].shape}, expected (3, {OUTPUTS}, M, M, M)")
-        self.input_name = inputs[0].name
-        self.compressed_name = inputs[1].name if len(inputs) == 2 else None
-        """The second input of a network that takes its inputs through asinh too (`encoding.compressed`);
-        None: a network that computes it itself."""
+        self.input_names = [i.name for i in inputs]
+        """The encoded inputs first, then those made from them (`network_feed.feed`): the same through asinh
+        where the network does not compute it itself, and its seen filter's products where it takes them."""
+        self.kernels = None
+        """(9, 27) the seen filter's kernels from the card, for a network that takes their products."""
+        if any(name in FILTERED for name in self.input_names):
+            try:
+                self.kernels = np.asarray(self.card.data["inputs"]["filtered"]["kernels"], np.float32).reshape(9, 27)
+            except (KeyError, TypeError, ValueError) as exc:
+                raise ModelError(f"{self.card.path.name}: takes its seen filter's products, but its card has no "
+                                 f"9 x 27 kernels for them ({exc})") from None
         self._encoder: Encoder | None = None
         self._output: np.ndarray | None = None       # the network's last output, and per colour pass
         self._output_keys: list = [None] * 3         # the (encoder, revision) of the inputs it ran on
@@ -232,10 +241,7 @@ class NeuralField:
         self.passes_run = len(inputs)
         if inputs.shape[1] != self.channels:
             inputs = np.ascontiguousarray(inputs[:, :self.channels])
-        feed = {self.input_name: inputs}
-        if self.compressed_name is not None:
-            feed[self.compressed_name] = encoding.compressed(inputs)
-        return self.session.run(None, feed)[0]
+        return self.session.run(None, feed(self.input_names, inputs, self.kernels))[0]
 
     def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:
         """Voxelize the scene at the card's resolution, list its occluders, and predict over its bounds."""

@@ -20,6 +20,7 @@ import torch
 from viewer.neural import encoding
 from viewer.neural.domain import Domain
 from viewer.neural.field import OUTPUTS, file_sha256
+from viewer.neural.network_feed import FILTERED, feed
 from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
 from viewer.training.samples import ENCODING_VOXELS
 
@@ -59,6 +60,90 @@ def export_onnx(model: ProbeNet, path: Path, resolution: int) -> None:
         torch.onnx.export(model, (example, example), str(path), input_names=list(INPUT_NAMES),
                           output_names=["probes"], dynamo=False, opset_version=OPSET,
                           dynamic_axes={**{name: lattice for name in INPUT_NAMES}, "probes": lattice})
+    split_filters(path)
+
+
+def split_filters(path: Path) -> np.ndarray | None:
+    """Move ProbeNet's seen filter out of the exported graph at `path` (rewritten in place): each grouped
+    3x3x3 convolution of a replicate-padded product of encoding channels and the open share becomes a
+    graph input named for the channels (`network_feed.FILTERED`), which the runtime computes
+    (`network_feed.filtered`: onnxruntime has no depthwise 3D convolution), and the nodes that only fed
+    it go. Returns its kernels (9, 27); None where the graph has no such convolution (left as it is)."""
+    import onnx
+    from onnx import helper, numpy_helper
+
+    model = onnx.load(str(path))
+    graph = model.graph
+    producer = {out: node for node in graph.node for out in node.output}
+    weights = {item.name: item for item in graph.initializer}
+    replaced, kernels = {}, None
+    for node in list(graph.node):
+        if node.op_type != "Conv" or len(node.input) < 2 or node.input[1] not in weights:
+            continue
+        group = next((helper.get_attribute_value(a) for a in node.attribute if a.name == "group"), 1)
+        weight = numpy_helper.to_array(weights[node.input[1]])
+        pad = producer.get(node.input[0])
+        if group != 9 or weight.shape != (9, 1, 3, 3, 3) or pad is None or pad.op_type != "Pad":
+            continue
+        name = _filtered_channels(producer.get(pad.input[0]), producer, weights)
+        if name is not None:
+            replaced[node.output[0]] = name
+            graph.node.remove(node)
+            kernels = weight.reshape(9, 27)
+    if not replaced:
+        return None
+    for node in graph.node:
+        for k, name in enumerate(node.input):
+            node.input[k] = replaced.get(name, name)
+    graph.input.extend(helper.make_tensor_value_info(name, onnx.TensorProto.FLOAT, ["passes", 9, "m", "m", "m"])
+                       for name in replaced.values())
+    _drop_unused(graph)
+    onnx.checker.check_model(model)
+    onnx.save(model, str(path))
+    return kernels
+
+
+def _filtered_channels(product, producer: dict, weights: dict) -> str | None:
+    """The `network_feed.FILTERED` name of a Mul node of a Slice of the graph's `inputs` (9 channels from
+    where a FILTERED entry starts) and another factor; None if it is not one."""
+    from onnx import numpy_helper
+
+    from viewer.neural.network_feed import FILTERED
+
+    def constant(name):
+        if name in weights:
+            return numpy_helper.to_array(weights[name])
+        node = producer.get(name)
+        if node is not None and node.op_type == "Constant":
+            return numpy_helper.to_array(node.attribute[0].t)
+        return None
+
+    if product is None or product.op_type != "Mul":
+        return None
+    for factor in product.input:
+        part = producer.get(factor)
+        if part is None or part.op_type != "Slice" or part.input[0] != INPUT_NAMES[0]:
+            continue
+        start, stop = constant(part.input[1]), constant(part.input[2])
+        for name, channels in FILTERED.items():
+            if start is not None and stop is not None and (int(start[0]), int(stop[0])) == (channels.start,
+                                                                                            channels.stop):
+                return name
+    return None
+
+
+def _drop_unused(graph) -> None:
+    """Remove the nodes whose outputs nothing reads, again until none is left, and the unread weights."""
+    while True:
+        read = {name for node in graph.node for name in node.input} | {out.name for out in graph.output}
+        unused = [node for node in graph.node if not any(out in read for out in node.output)]
+        if not unused:
+            break
+        for node in unused:
+            graph.node.remove(node)
+    read = {name for node in graph.node for name in node.input}
+    for item in [item for item in graph.initializer if item.name not in read]:
+        graph.initializer.remove(item)
 
 
 INPUT_NAMES = ("inputs", "compressed")
@@ -74,7 +159,7 @@ def max_difference(model: ProbeNet, path: Path, inputs: np.ndarray) -> float:
     session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
     inputs = inputs.astype(np.float32)
     compressed = encoding.compressed(inputs)   # both given the viewer's asinh: torch's differs a little
-    ours = session.run(None, {"inputs": inputs, "compressed": compressed})[0]
+    ours = session.run(None, feed([i.name for i in session.get_inputs()], inputs, kernels(model)))[0]
     with torch.no_grad():
         theirs = model.eval()(torch.from_numpy(inputs), torch.from_numpy(compressed)).numpy()
     return float(np.abs(ours - theirs).max() / max(1.0, float(np.abs(theirs).max())))
@@ -100,6 +185,13 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
                              "scale (mean direct radiance DC over the probes, shadows traced), outputs multiplied by it",
             "second_input": {"name": "compressed", "features": "the same, the light through asinh: channels "
                              + ", ".join(f"{part.start}-{part.stop - 1}" for part in encoding.COMPRESSED)},
+            "filtered": {"inputs": graph_filters(path),
+                         "what": "the seen filter's products, which the graph takes as inputs where it lists "
+                                 "them: the channels " + ", ".join(f"{name} {part.start}-{part.stop - 1}"
+                                                                  for name, part in FILTERED.items())
+                                 + " times the open share, each convolved with its 3x3x3 kernel, edges repeated "
+                                   "(viewer.neural.network_feed)",
+                         "kernels": kernels(model).tolist()},
         },
         "outputs": {"name": "probes", "channels": OUTPUTS,
                     "layout": "0-8 SH of all incident light, 9-17 SH of the light reflected by surfaces, "
@@ -113,6 +205,19 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
     }
     path.with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n")
     return card
+
+
+def kernels(model: ProbeNet) -> np.ndarray:
+    """(9, 27) float32 the seen filter's kernels, as the card carries them."""
+    return model.seen_filter.weight.detach().numpy().reshape(9, 27).astype(np.float32)
+
+
+def graph_filters(path: Path) -> list[str]:
+    """The `network_feed.FILTERED` inputs the graph at `path` takes."""
+    import onnxruntime as ort
+
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    return [i.name for i in session.get_inputs() if i.name in FILTERED]
 
 
 def export(run: Path, out: Path, resolution: int, inputs: np.ndarray, training: dict, metrics: dict,

@@ -1,0 +1,49 @@
+"""The neural source's time against the solver's (viewer/bench/share.py): the edits it times, the group a
+user would drag, and its answers to bad input."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from viewer.bench import scans, share
+from viewer.scene import load
+from viewer.scene.types import Scene
+
+
+def test_the_group_moved_is_the_object_not_a_wall_or_the_lamp():
+    assert share.moved_group(load("cornell")) == "small-box"    # the boxes tie on triangles: the smaller
+    ball = trimesh.creation.icosphere(subdivisions=1)
+    scan = Scene("ball", ball.vertices, ball.faces, np.full((len(ball.faces), 3), 0.5),
+                 np.zeros((len(ball.faces), 3)), np.zeros(len(ball.faces), np.int64), ("ball",))
+    assert share.moved_group(scans.scan_room(scan, 200)) == "ball"
+
+
+def test_each_edit_changes_what_it_says_and_nothing_else():
+    scene = load("cornell")
+    edited = share.edits(scene, "small-box")
+    assert list(edited) == ["albedo", "lamp moved", "small-box moved"]
+    assert np.array_equal(edited["albedo"].vertices, scene.vertices)
+    assert not np.array_equal(edited["albedo"].albedo, scene.albedo)
+    for what, group in (("lamp moved", "light"), ("small-box moved", "small-box")):
+        moved = np.any(edited[what].vertices != scene.vertices, axis=1)
+        owners = np.unique(scene.face_group[np.any(moved[scene.faces], axis=1)])
+        assert [scene.groups[g] for g in owners] == [group]
+        assert np.array_equal(edited[what].albedo, scene.albedo)
+
+
+def test_the_command_prints_every_edit_with_its_share(capsys):
+    assert share.main(["cornell", "--repeats", "1"]) == 0
+    rows = [line.split("|")[1:-1] for line in capsys.readouterr().out.splitlines()
+            if line.startswith("| Cornell") or line.startswith("| cornell")]
+    table = {cells[1].strip(): [float(c) for c in cells[2:]] for cells in rows}
+    assert set(table) == {"albedo", "lamp moved", "small-box moved", "new scene"}
+    for neural, solver, ratio in table.values():
+        assert neural > 0 and solver > 0 and ratio == pytest.approx(neural / solver, rel=0.05, abs=0.01)   # whole milliseconds
+
+
+@pytest.mark.parametrize("argv", [["cornell", "--move", "no-such-group"], ["no-such-scene"]])
+def test_bad_input_is_one_line_and_status_2(argv, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        share.main(argv)
+    assert exit_.value.code == 2
+    assert "error:" in capsys.readouterr().err.strip().splitlines()[-1]

@@ -1,0 +1,130 @@
+"""The neural source's time against the physical solver's, edit by edit on the same scene: the neural
+source's speed bar (a new scene or a moved object in at most a third of the solver's time).
+
+    python -m viewer.bench.share [SCENE ...] [--move GROUP] [--repeats 5] [--threads N]
+
+For each scene: the largest group's albedo, the brightest lamp moved by a tenth of the scene, a group
+moved as far (`--move`; by default the non-emitting group of the most triangles, the smaller by area
+where two tie: a box room's small box, a scan room's scan) and a new scene (each source made afresh).
+An edit flips the scene to the edited one and back, every update timed from the edit to the probes:
+`NeuralGI.update` (voxelizing, every ray and the network included) against `PhysicalGI.update` and its
+`probe_grid`, the two in turn, so that both meet the machine's same moments. Medians of `repeats`
+updates (four times as many for the albedo), wall-clock milliseconds on all the cores, the share the
+neural source's time is of the solver's. The network runs on one thread unless `--threads` (the
+viewer's: viewer.ui.neural_source.NETWORK_THREADS).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+import numpy as np
+
+from viewer import scene as scenes
+from viewer.bench.edit_methods import Edit
+from viewer.cli_parsing import add_repeats
+from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI
+from viewer.physical.gi import GISettings, PhysicalGI
+from viewer.scene import Scene, SceneError
+from viewer.ui.scene_edits import emitter_group
+
+
+def moved_group(scene: Scene) -> str | None:
+    """The non-emitting group with the most triangles (the smaller by area of a tie): what a user drags."""
+    lit = set(np.unique(scene.face_group[np.any(scene.emission > 0, axis=1)]).tolist())
+    count = np.bincount(scene.face_group, minlength=len(scene.groups))
+    area = np.bincount(scene.face_group, scene.face_areas, minlength=len(scene.groups))
+    candidates = [g for g in range(len(scene.groups)) if g not in lit and count[g] > 0]
+    if not candidates:
+        return None
+    return scene.groups[min(candidates, key=lambda g: (-count[g], area[g]))]
+
+
+def edits(scene: Scene, group: str | None) -> dict[str, Scene]:
+    """The edits timed, each against `scene` (the new scene is timed apart)."""
+    settings = GISettings()
+    out = {"albedo": Edit(settings, "colour").edited(scene)}
+    if emitter_group(scene) is not None:
+        out["lamp moved"] = Edit(settings, "lamp").edited(scene)
+    if group is not None:
+        lo, hi = scene.bounds
+        move = np.eye(4)
+        move[0, 3] = 0.1 * float(hi[0] - lo[0])
+        out[f"{group} moved"] = scene.transformed_group(group, move)
+    return out
+
+
+def _ms(function) -> float:
+    clock = time.perf_counter()
+    function()
+    return 1000 * (time.perf_counter() - clock)
+
+
+def _solve(solver: PhysicalGI, scene: Scene) -> None:
+    solver.update(scene)
+    solver.probe_grid(include_emitted=False)
+
+
+def measure(scene: Scene, field: NeuralField, group: str | None, repeats: int) -> dict[str, tuple[float, float]]:
+    """{edit: (neural ms, solver ms)}: medians, the two sources in turn."""
+    rows = {}
+    for what, edited in edits(scene, group).items():
+        field.forget()
+        neural, solver = NeuralGI(field), PhysicalGI(GISettings())
+        neural.update(scene)
+        _solve(solver, scene)
+        times: tuple[list, list] = ([], [])
+        flip = [scene, edited]
+        for _ in range(4 * repeats if what == "albedo" else repeats):
+            flip.reverse()
+            times[0].append(_ms(lambda: neural.update(flip[0])))
+            times[1].append(_ms(lambda: _solve(solver, flip[0])))
+        rows[what] = (statistics.median(times[0]), statistics.median(times[1]))
+    times = ([], [])
+    for _ in range(repeats):
+        field.forget()
+        times[0].append(_ms(lambda: NeuralGI(field).update(scene)))
+        times[1].append(_ms(lambda: _solve(PhysicalGI(GISettings()), scene)))
+    rows["new scene"] = (statistics.median(times[0]), statistics.median(times[1]))
+    return rows
+
+
+def table(results: dict[str, dict[str, tuple[float, float]]]) -> list[str]:
+    lines = ["| scene | edit | neural ms | solver ms | share |", "| --- | --- | --- | --- | --- |"]
+    for name, rows in results.items():
+        lines += [f"| {name} | {what} | {a:.0f} | {b:.0f} | {a / b:.2f} |" for what, (a, b) in rows.items()]
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m viewer.bench.share", description=__doc__.split("\n\n")[0])
+    parser.add_argument("scenes", nargs="*", default=["cornell"])
+    parser.add_argument("--move", help="the group moved (default: the non-emitting group of the most triangles)")
+    parser.add_argument("--threads", type=int, default=1, help="onnxruntime's threads (the viewer's: up to 4)")
+    add_repeats(parser, 5)
+    args = parser.parse_args(argv)
+    field = NeuralField(DEFAULT_MODEL, threads=args.threads)
+    results = {}
+    for name in args.scenes:
+        try:
+            scene = scenes.load(name)
+        except SceneError as exc:
+            parser.error(str(exc))
+        if args.move is not None and args.move not in scene.groups:
+            parser.error(f"{name} has no group {args.move!r} (its groups: {', '.join(scene.groups)})")
+        group = args.move if args.move is not None else moved_group(scene)
+        measure(scene, field, group, 1)   # compile and warm up first
+        results[scene.name] = measure(scene, field, group, args.repeats)
+        print("\n".join(table({scene.name: results[scene.name]})[2:]), flush=True)
+    print("\n".join(["", *table(results), "",
+                     f"`python -m viewer.bench.share {' '.join(args.scenes)} --threads {args.threads} --repeats "
+                     f"{args.repeats}`, {time.strftime('%Y-%m-%d')}, 1-minute load average {os.getloadavg()[0]:.1f} "
+                     f"on {os.cpu_count()} cores."]))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
