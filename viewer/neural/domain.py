@@ -20,6 +20,7 @@ from __future__ import annotations
 import sys
 from dataclasses import asdict, dataclass, fields
 
+import numba
 import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
@@ -214,19 +215,33 @@ def _lights(scene: Scene, emitting: np.ndarray, shape: Shape) -> list[Light]:
 
 def _open_sides(triangles: np.ndarray, areas: np.ndarray, normals: np.ndarray, lo: np.ndarray,
                 hi: np.ndarray) -> int:
-    """How many of the six sides of the scene's box surfaces do not cover (`COVERED`)."""
-    tolerance = SIDE_TOLERANCE * float((hi - lo).max())
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)   # (F, 3) each triangle's box
-    open_sides = 0
-    for axis in range(3):
-        others = [a for a in range(3) if a != axis]
-        side = float(np.prod((hi - lo)[others]))
-        facing = np.abs(normals[:, axis]) > 0.7
-        for plane in (lo[axis], hi[axis]):
-            on = facing & (low[:, axis] >= plane - tolerance) & (high[:, axis] <= plane + tolerance)
-            open_sides += bool(areas[on].sum() < COVERED * side)
-    return open_sides
+    """How many of the six sides of the scene's box surfaces do not cover (`COVERED`): the area of the
+    faces facing each side's axis (|normal| > 0.7 along it) that lie within SIDE_TOLERANCE of its plane,
+    in one compiled pass over the faces (a 68k-triangle scan: 8 ms in numpy, every time an object moved)."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    covered = _side_areas(np.ascontiguousarray(triangles, np.float64), np.ascontiguousarray(areas, np.float64),
+                          np.ascontiguousarray(normals, np.float64), lo, hi,
+                          SIDE_TOLERANCE * float((hi - lo).max()))
+    extent = hi - lo
+    sides = np.repeat([extent[1] * extent[2], extent[0] * extent[2], extent[0] * extent[1]], 2)
+    return int(np.sum(covered < COVERED * sides))
+
+
+@numba.njit(cache=True, nogil=True)
+def _side_areas(triangles, areas, normals, lo, hi, tolerance):
+    """(6,) the area of the faces lying on each side of the box [lo, hi] (low, high side of x, y, z)."""
+    out = np.zeros(6)
+    for f in range(triangles.shape[0]):
+        for axis in range(3):
+            if abs(normals[f, axis]) <= 0.7:
+                continue
+            a, b, c = triangles[f, 0, axis], triangles[f, 1, axis], triangles[f, 2, axis]
+            low, high = min(a, b, c), max(a, b, c)
+            if low >= lo[axis] - tolerance and high <= lo[axis] + tolerance:
+                out[2 * axis] += areas[f]
+            if low >= hi[axis] - tolerance and high <= hi[axis] + tolerance:
+                out[2 * axis + 1] += areas[f]
+    return out
 
 
 SIDE_NAMES = {"ceiling": "ceiling", "floor": "floor", "wall": "wall"}
