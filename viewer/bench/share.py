@@ -16,7 +16,6 @@ viewer's: viewer.ui.neural_source.NETWORK_THREADS).
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import time
@@ -25,7 +24,7 @@ import numpy as np
 
 from viewer import scene as scenes
 from viewer.bench.edit_methods import Edit
-from viewer.cli_parsing import add_repeats
+from viewer.cli_parsing import add_repeats, tool_parser
 from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI
 from viewer.physical.gi import GISettings, PhysicalGI
 from viewer.scene import Scene, SceneError
@@ -100,7 +99,7 @@ def table(results: dict[str, dict[str, tuple[float, float]]]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m viewer.bench.share", description=__doc__.split("\n\n")[0])
+    parser = tool_parser(__doc__, prog="python -m viewer.bench.share")
     parser.add_argument("scenes", nargs="*", default=["cornell"])
     parser.add_argument("--move", help="the group moved (default: the non-emitting group of the most triangles)")
     parser.add_argument("--threads", type=int, default=1, help="onnxruntime's threads (the viewer's: up to 4)")
