@@ -16,6 +16,14 @@ from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 
 
+def moved_a_tenth(scene: Scene, group: str) -> Scene:
+    """`scene` with `group` moved along x by a tenth of the scene's width: the benchmarks' drag."""
+    lo, hi = scene.bounds
+    move = np.eye(4)
+    move[0, 3] = 0.1 * float(hi[0] - lo[0])
+    return scene.transformed_group(group, move)
+
+
 class Edit:
     """An edit's time to converged probes: untimed (`before`), the scene is edited away and relit; timed,
     the edit comes back to the scene itself (so the error is the scene's own) and the probes are
@@ -36,10 +44,7 @@ class Edit:
         group = emitter_group(scene)
         if group is None:
             return scene.with_sun(None)
-        lo, hi = scene.bounds
-        move = np.eye(4)
-        move[0, 3] = 0.1 * float(hi[0] - lo[0])
-        return scene.transformed_group(group, move)
+        return moved_a_tenth(scene, group)
 
     def before(self, scene: Scene) -> None:
         from viewer.physical.gi import PhysicalGI

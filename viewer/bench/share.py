@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 from viewer import scene as scenes
-from viewer.bench.edit_methods import Edit
+from viewer.bench.edit_methods import Edit, moved_a_tenth
 from viewer.cli_parsing import add_repeats, tool_parser
 from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI
 from viewer.physical.gi import GISettings, PhysicalGI
@@ -49,10 +49,7 @@ def edits(scene: Scene, group: str | None) -> dict[str, Scene]:
     if emitter_group(scene) is not None:
         out["lamp moved"] = Edit(settings, "lamp").edited(scene)
     if group is not None:
-        lo, hi = scene.bounds
-        move = np.eye(4)
-        move[0, 3] = 0.1 * float(hi[0] - lo[0])
-        out[f"{group} moved"] = scene.transformed_group(group, move)
+        out[f"{group} moved"] = moved_a_tenth(scene, group)
     return out
 
 
