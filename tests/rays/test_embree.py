@@ -3,6 +3,7 @@ every core and without Python's lock; where it cannot load, the caster uses embr
 that parallel loops take their items in (`spread`)."""
 
 import threading
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -124,3 +125,50 @@ def test_spread_visits_every_item_once_in_runs_of_neighbours(count):
         assert run[0] % embree.RUN == 0 and (len(run) % embree.RUN == 0 or run[-1] == count - 1)
     if count > 4 * embree.RUN:
         assert len(runs) > 1
+
+
+def moved(scene, name: str, offset):
+    """`scene` with the group `name` moved by `offset`."""
+    vertices = scene.vertices.copy()
+    group = scene.groups.index(name)
+    corners = np.unique(scene.faces[scene.face_group == group])
+    vertices[corners] += offset
+    return replace(scene, vertices=vertices)
+
+
+@needs_embree
+@pytest.mark.parametrize("group", ["light", "small-box"])
+def test_a_caster_made_after_a_move_answers_as_a_fresh_one(group):
+    """A caster made from the previous one after a lamp or a box moved builds the moved faces apart (the
+    rest keeps its hierarchy) and meets the same faces at the same distances, barycentrics and sides as
+    a caster made afresh, through Python and from compiled loops; the next move of the same faces keeps
+    the same hierarchy of the others, and a move of most faces builds one hierarchy again."""
+    from viewer.rays import dda
+    from viewer.rays.voxel_rays import VoxelRays
+    from viewer.rays.voxels import voxelize_with_faces
+
+    scene = load("cornell")
+    first = cast.TriangleCaster(scene)
+    once = moved(scene, group, [0.05, -0.02, 0.03])
+    again = moved(once, group, [-0.1, 0.0, 0.02])
+    step = cast.TriangleCaster(once, previous=first)
+    assert step._stayed is not None and len(step.faces) == len(first.faces)
+    after = cast.TriangleCaster(again, previous=step)
+    assert after._stayed[1] is step._stayed[1]
+    fresh = cast.TriangleCaster(again)
+    origins, directions = rays(np.asarray(again.triangles, np.float32), 20000)
+    ours, theirs = after.closest_hits(origins, directions), fresh.closest_hits(origins, directions)
+    assert np.mean(theirs.face >= 0) > 0.8   # the box is open at the front
+    assert np.isin(theirs.face, np.flatnonzero(again.face_group == again.groups.index(group))).sum() > 20
+    for field in ("face", "t", "u", "v", "front"):
+        np.testing.assert_array_equal(getattr(ours, field), getattr(theirs, field))
+    lengths = np.random.default_rng(2).uniform(0.05, 1.5, len(origins))
+    np.testing.assert_array_equal(after.blocked(origins, directions, lengths),
+                                  fresh.blocked(origins, directions, lengths))
+    voxelization = voxelize_with_faces(again, 16)
+    grid, cells = voxelization.grid, dda.Cells.of(voxelization, again)
+    compiled = VoxelRays(again, cells, caster=after).bundle_hits(grid.position[:200], directions[:32])
+    np.testing.assert_array_equal(compiled, VoxelRays(again, cells, caster=fresh).bundle_hits(grid.position[:200],
+                                                                                              directions[:32]))
+    everything = scene.vertices + [0.01, 0.0, 0.0]
+    assert cast.TriangleCaster(replace(again, vertices=everything), previous=after)._stayed is None

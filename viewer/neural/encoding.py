@@ -168,17 +168,20 @@ class Occluders(VoxelRays):
     `landing`, the same triangles listed on the voxels' own grid, where the seen rays land (one Embree
     hierarchy serves both)."""
 
-    def __init__(self, scene, voxels: VoxelGrid, backend: str | None = None):
+    def __init__(self, scene, voxels: VoxelGrid, backend: str | None = None, previous: "Occluders | None" = None):
+        """`previous`: the occluders of the same faces before some of them moved (`VoxelRays`)."""
         k = SHADOW_CELLS
         backend = backend or ("embree" if embree_available() else "dda")
         grid = (scene, voxels.lo, voxels.voxel_size / k, voxels.resolution * k)
-        super().__init__(scene, dda.Cells.unlisted(*grid) if backend == "embree" else dda.Cells.blocking(*grid), backend)
+        super().__init__(scene, dda.Cells.unlisted(*grid) if backend == "embree" else dda.Cells.blocking(*grid), backend,
+                         previous=previous)
         self.landing = VoxelRays(scene, landing_cells(scene, voxels), self.backend, self.caster)
 
 
-def occluders(scene, voxels: VoxelGrid) -> Occluders:
-    """The `Occluders` of `scene`'s triangles, for the voxels made from it."""
-    return Occluders(scene, voxels)
+def occluders(scene, voxels: VoxelGrid, previous: Occluders | None = None) -> Occluders:
+    """The `Occluders` of `scene`'s triangles, for the voxels made from it; `previous`: those of the same
+    faces before some of them moved."""
+    return Occluders(scene, voxels, previous=previous if isinstance(previous, Occluders) else None)
 
 
 def landing_cells(scene, voxels: VoxelGrid) -> dda.Cells:

@@ -275,7 +275,7 @@ class SceneVoxels:
         self._colours = None
         self._grid = self.voxelization.grid
         self.voxels_of(scene)   # colours by the faces' shares from the start: every edit's come the same way
-        self.blockers = encoding.occluders(scene, self._grid)
+        self.blockers = encoding.occluders(scene, self._grid, None if previous is None else previous.blockers)
         """The occluders of these triangles, one object for every colour edit (the encoder keeps its
         shadows while it is given the same)."""
         self.seconds = clock_now() - clock

@@ -45,7 +45,7 @@ def after_moving(before: Geometry, scene: Scene, voxelization: Voxelization,
             or not np.array_equal(grid.lo, old.lo) or len(scene.faces) != before.faces.shape[1]):
         return None
     cells = dda.Cells.of(voxelization, scene)
-    rays = VoxelRays(scene, cells, before.rays.backend)
+    rays = VoxelRays(scene, cells, before.rays.backend, previous=before.rays)
     keys = np.asarray(voxelization.keys, np.int64)
     changed = changed_cells(before.cells, before.voxel_keys, cells, keys)
     occupied = np.count_nonzero(np.diff(cells.first))

@@ -31,6 +31,9 @@ try:   # optional at run time: the DDA answers the same questions without it, sl
 except ImportError:   # pragma: no cover - depends on the installation
     rtcore_scene = TriangleMesh = None
 
+MOVED_SHARE = 0.5
+"""A caster made from a previous one builds the moved faces apart while they are at most this share of
+the faces (a lamp, an object); past it, one hierarchy of all the faces costs as much."""
 NO_FACE = -1
 """Hits.face of a ray that meets nothing within its length."""
 EMBREE_CHUNK = 1 << 14
@@ -89,16 +92,25 @@ class TriangleCaster:
     """A scene's triangles, ready for rays: an Embree hierarchy, or the DDA's cells."""
 
     _faces: np.ndarray | None = None
-    """The scene faces Embree holds (`usable_faces`); None for the DDA, whose cells hold them all."""
+    """The scene faces Embree holds (`usable_faces`), in the order it numbers them; None for the DDA, whose
+    cells hold them all."""
     _hull: np.ndarray | None = None
     """`_hull_corners`, once asked."""
     _direct: "embree.Scene | None" = None
     """Embree called from compiled loops (viewer.rays.embree); None where only embreex's binding works."""
+    _triangles: np.ndarray | None = None
+    """(F, 3, 3) the scene's triangles, to tell which faces a later caster's scene moved."""
+    _stayed: "tuple[np.ndarray, embree.Hierarchy] | None" = None
+    """(faces, their hierarchy) of the faces that stayed, where this caster was made from a previous one
+    with some faces moved: the next move of the same faces keeps it."""
 
-    def __init__(self, scene, cells: dda.Cells | None = None, backend: str | None = None):
+    def __init__(self, scene, cells: dda.Cells | None = None, backend: str | None = None,
+                 previous: "TriangleCaster | None" = None):
         """`cells`: the scene's dda.Cells (any grid, Cells.blocking will do) when the caller has them, for
         the DDA backend; `backend`: "embree", "dda", or None for Embree where it is installed ("embreex":
-        Embree through embreex's own binding, which holds Python's lock: for comparisons)."""
+        Embree through embreex's own binding, which holds Python's lock: for comparisons). `previous`:
+        the caster of the same faces before some of them moved (a dragged lamp or object), whose
+        hierarchy of the faces that stayed is kept where it has one (`_parted`)."""
         backend = backend or ("embree" if embree_available() else "dda")
         if backend in ("embree", "embreex") and not embree_available():
             raise ValueError("the embree backend needs the embreex package")
@@ -113,16 +125,42 @@ class TriangleCaster:
             return
         triangles = np.asarray(scene.triangles, np.float64)
         faces = usable_faces(scene)
+        self._triangles = triangles
+        parts = self._parted(triangles, faces, previous) if backend == "embree" else None
+        if parts is not None:
+            faces = np.concatenate([parts[0], parts[1]])
         self._embrace(np.ascontiguousarray(triangles[faces], np.float32), faces, triangles[:, 0],
-                      triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0], backend == "embree")
+                      triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0], backend == "embree",
+                      parts)
 
-    def _embrace(self, mesh, faces, v0, e1, e2, direct: bool = True) -> None:
+    def _parted(self, triangles: np.ndarray, faces: np.ndarray, previous: "TriangleCaster | None"):
+        """(faces that stayed, faces that moved, the hierarchy of those that stayed) where `previous`
+        holds the same faces with at most MOVED_SHARE of them elsewhere now; the hierarchy is the
+        previous one's where it held the same faces apart, else made here. None: one hierarchy of all."""
+        if (previous is None or previous._direct is None or not embree.available()
+                or previous._triangles.shape != triangles.shape):
+            return None
+        moved = np.any(previous._triangles != triangles, axis=(1, 2))[faces]
+        count = int(moved.sum())
+        if count == 0 or count > MOVED_SHARE * len(faces):
+            return None
+        stayed, went = faces[~moved], faces[moved]
+        kept = previous._stayed
+        if kept is not None and np.array_equal(kept[0], stayed):
+            return stayed, went, kept[1]
+        return stayed, went, embree.Hierarchy(np.ascontiguousarray(triangles[stayed], np.float32))
+
+    def _embrace(self, mesh, faces, v0, e1, e2, direct: bool = True, parts=None) -> None:
         self.mesh = np.ascontiguousarray(mesh, np.float32)
         """(usable faces, 3, 3) float32: the corners Embree holds."""
         self._faces = np.ascontiguousarray(faces, np.int64)
         self.v0, self.e1, self.e2 = (np.ascontiguousarray(a, np.float64) for a in (v0, e1, e2))
         if direct and embree.available():   # called from compiled loops: all cores, without Python's lock
-            self._direct = embree.Scene(self.mesh)
+            if parts is None:
+                self._direct = embree.Scene(self.mesh)
+            else:
+                self._stayed = (parts[0], parts[2])
+                self._direct = embree.Scene(parts[2], self.mesh[len(parts[0]):])
         else:
             self._embree = rtcore_scene.EmbreeScene()
             TriangleMesh(self._embree, self.mesh)
