@@ -294,7 +294,8 @@ def test_coarse_samples_cast_half_their_rays_and_repeat_the_rest(backend, monkey
     assert sample_moved.any() and np.isin(faces[sample_moved], box_faces).all()
     moved_points[sample_moved] += [0.03, 0.0, 0.02]
     moved_caster = TriangleCaster(moved, dda.Cells.of(voxelize_with_faces(moved, 16), moved), backend)
-    after = half.after_moving(sample_moved, pixel_moved, pixel_points, moved.triangles[keep][moved_faces],
+    landed = half.landing[0]
+    after = half.after_moving(sample_moved, pixel_moved[landed], pixel_points[landed], moved.triangles[keep][moved_faces],
                               2.0 * TEXEL, moved_points, normals, moved_caster, *layout)
     afresh = GatherRays.of(moved_points, normals, moved_caster, *layout, 72, coarse=coarse)
     np.testing.assert_array_equal(after.hits, afresh.hits)

@@ -154,7 +154,7 @@ def test_a_caster_made_after_a_move_answers_as_a_fresh_one(group):
     step = cast.TriangleCaster(once, previous=first)
     assert step._stayed is not None and len(step.faces) == len(first.faces)
     after = cast.TriangleCaster(again, previous=step)
-    assert after._stayed[1] is step._stayed[1]
+    assert after._stayed is step._stayed
     fresh = cast.TriangleCaster(again)
     origins, directions = rays(np.asarray(again.triangles, np.float32), 20000)
     ours, theirs = after.closest_hits(origins, directions), fresh.closest_hits(origins, directions)
@@ -162,6 +162,10 @@ def test_a_caster_made_after_a_move_answers_as_a_fresh_one(group):
     assert np.isin(theirs.face, np.flatnonzero(again.face_group == again.groups.index(group))).sum() > 20
     for field in ("face", "t", "u", "v", "front"):
         np.testing.assert_array_equal(getattr(ours, field), getattr(theirs, field))
+    normals, points = directions[:500], origins[:500] + directions[:500] * np.linspace(0, 3, 500)[:, None]
+    outward = fresh.nothing_ahead(points, normals, 1e-3)
+    assert 0 < outward.sum() < len(points)
+    np.testing.assert_array_equal(after.nothing_ahead(points, normals, 1e-3), outward)
     lengths = np.random.default_rng(2).uniform(0.05, 1.5, len(origins))
     np.testing.assert_array_equal(after.blocked(origins, directions, lengths),
                                   fresh.blocked(origins, directions, lengths))

@@ -140,12 +140,14 @@ def cast_rays(frame_args: tuple, todo: np.ndarray, caster, face_tile, tile_origi
                                                   tile_n, int(width))
 
 
-def caster_of(scene: Scene, early: tuple[Scene, Future] | None = None) -> TriangleCaster:
+def caster_of(scene: Scene, early: tuple[Scene, Future] | None = None,
+              previous: TriangleCaster | None = None) -> TriangleCaster:
     """The rays' caster of a geometry, for the gather and the weights: Embree where it is installed (no
     cells to list: 20-125 ms of a new Cornell box), else the DDA over a VISIBILITY_VOXELS grid of cells;
-    `early`'s, (scene, future), where it was started for this scene."""
+    `early`'s, (scene, future), where it was started for this scene. `previous`: the caster of the same
+    faces before some moved (a dragged lamp), whose hierarchy of the others Embree keeps."""
     if early is not None and early[0] is scene:
         return early[1].result()
     if embree_available():
-        return TriangleCaster(scene)
+        return TriangleCaster(scene, previous=previous)
     return TriangleCaster(scene, dda.Cells.blocking(scene, *grid_frame(scene, VISIBILITY_VOXELS), VISIBILITY_VOXELS))

@@ -81,6 +81,7 @@ class BakedIndirectLight:
         interpolates with their weights: the same for every lattice (`_dark` fills in what differs)."""
         self._caster: TriangleCaster | None = None
         """The rays' caster of the installed geometry (Embree where installed, else the DDA's cells)."""
+        self._moved_from: TriangleCaster | None = None   # before a move: the next keeps its unmoved faces' hierarchy
         self._early = None if caster is None else (scene, caster)   # `caster_of(scene)`, started by the caller
         self.gather_rays = gather_rays
         """Final-gather rays per sample (viewer/gpu/final_gather.py); 0: the probes' light alone."""
@@ -161,6 +162,7 @@ class BakedIndirectLight:
         fragment, as for a new scene."""
         self.lightmap, self.scene = lightmap, scene
         self._geometry += 1
+        self._moved_from = self._caster if self._caster is not None else self._moved_from
         self._caster, self._direct, self._reflectance = None, None, None
         self._kept = {}
         self.stale = self._bake is not None
@@ -208,7 +210,8 @@ class BakedIndirectLight:
         made = self._made
         if made is not None and made[0] == geometry:
             return made[1], made[2]
-        caster = self._caster if self._caster is not None and not rays else caster_of(scene, self._early)
+        caster = self._caster if self._caster is not None and not rays else caster_of(scene, self._early,
+                                                                                       self._moved_from)
         gather = None
         if self.gather_rays and rays:
             points, normals, normal_id = self._sample_points(lightmap)
@@ -259,14 +262,12 @@ class BakedIndirectLight:
         _, old_lightmap, old_rays = self._traced
         tiles = lightmap.texel_faces[self._samples[self._records[0]]]
         sample_moved = np.isin(np.concatenate([tiles, tiles]), moved)
-        pixels, faces = self._covered
-        pixel_moved = np.zeros(lightmap.covered.size * 2, bool)
-        pixel_moved[pixels[np.isin(faces, moved)]] = True
-        pixel_points = np.zeros((lightmap.covered.size * 2, 3))
-        pixel_points[pixels] = np.concatenate([old_lightmap.texel_points] * 2)
+        pixels, faces = self._covered   # the fronts' pixels first, ascending; each back's is its front's + width
+        landed = old_rays.landing[0]
+        texel = np.searchsorted(pixels[:len(pixels) // 2], landed - np.where(landed % (2 * width) >= width, width, 0))
         corners = scene.triangles[keep][moved]
-        return old_rays.after_moving(sample_moved, pixel_moved, pixel_points, corners, 2.0 * lightmap.texel,
-                                     points, normals, *layout)
+        return old_rays.after_moving(sample_moved, np.isin(faces[texel], moved), old_lightmap.texel_points[texel],
+                                     corners, 2.0 * lightmap.texel, points, normals, *layout)
 
     def _moved_tiles(self, scene: Scene, lightmap: BakedDirectLight) -> np.ndarray | None:
         """The tiles (non-degenerate faces) that moved since the last rays were traced, when only some
@@ -284,10 +285,8 @@ class BakedIndirectLight:
 
     def _install(self, key: tuple, bake: SurfaceBake, caster: TriangleCaster | None = None,
                  gather: tuple | None = None) -> None:
-        if caster is not None:
-            self._caster = caster
-        if gather is not None:
-            self._gather = gather
+        self._caster = caster if caster is not None else self._caster
+        self._gather = gather if gather is not None else self._gather
         self.stale = False
         self.installs += 1
         self._bake, self.weights_key = bake, key

@@ -82,6 +82,26 @@ def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first, which.ravel()
 
 
+def _hull_of(corners: np.ndarray) -> np.ndarray:
+    """The corners of the convex hull of `corners` (all of them where the hull is flat or they are too few)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        return corners[ConvexHull(corners).vertices]
+    except (QhullError, ValueError):
+        return corners
+
+
+@dataclass
+class _Stayed:
+    """The faces that stayed through a move, kept across a drag: their hierarchy, and their hull's corners
+    once asked (a 68k-triangle scan's took 26 ms)."""
+
+    faces: np.ndarray
+    hierarchy: "embree.Hierarchy"
+    hull: np.ndarray | None = None
+
+
 def usable_faces(scene) -> np.ndarray:
     """The faces rays can meet: those of area above 1e-12 of the largest (as the DDA lists them)."""
     areas = scene.face_areas
@@ -100,9 +120,9 @@ class TriangleCaster:
     """Embree called from compiled loops (viewer.rays.embree); None where only embreex's binding works."""
     _triangles: np.ndarray | None = None
     """(F, 3, 3) the scene's triangles, to tell which faces a later caster's scene moved."""
-    _stayed: "tuple[np.ndarray, embree.Hierarchy] | None" = None
-    """(faces, their hierarchy) of the faces that stayed, where this caster was made from a previous one
-    with some faces moved: the next move of the same faces keeps it."""
+    _stayed: _Stayed | None = None
+    """The faces that stayed, where this caster was made from a previous one with some faces moved: the
+    next move of the same faces keeps them."""
 
     def __init__(self, scene, cells: dda.Cells | None = None, backend: str | None = None,
                  previous: "TriangleCaster | None" = None):
@@ -134,9 +154,9 @@ class TriangleCaster:
                       parts)
 
     def _parted(self, triangles: np.ndarray, faces: np.ndarray, previous: "TriangleCaster | None"):
-        """(faces that stayed, faces that moved, the hierarchy of those that stayed) where `previous`
-        holds the same faces with at most MOVED_SHARE of them elsewhere now; the hierarchy is the
-        previous one's where it held the same faces apart, else made here. None: one hierarchy of all."""
+        """(faces that stayed, faces that moved, `_Stayed` of the former) where `previous` holds the same
+        faces with at most MOVED_SHARE of them elsewhere now; the previous one's `_Stayed` where it held
+        the same faces apart, else made here. None: one hierarchy of all."""
         if (previous is None or previous._direct is None or not embree.available()
                 or previous._triangles.shape != triangles.shape):
             return None
@@ -146,9 +166,9 @@ class TriangleCaster:
             return None
         stayed, went = faces[~moved], faces[moved]
         kept = previous._stayed
-        if kept is not None and np.array_equal(kept[0], stayed):
-            return stayed, went, kept[1]
-        return stayed, went, embree.Hierarchy(np.ascontiguousarray(triangles[stayed], np.float32))
+        if kept is not None and np.array_equal(kept.faces, stayed):
+            return stayed, went, kept
+        return stayed, went, _Stayed(stayed, embree.Hierarchy(np.ascontiguousarray(triangles[stayed], np.float32)))
 
     def _embrace(self, mesh, faces, v0, e1, e2, direct: bool = True, parts=None) -> None:
         self.mesh = np.ascontiguousarray(mesh, np.float32)
@@ -159,8 +179,8 @@ class TriangleCaster:
             if parts is None:
                 self._direct = embree.Scene(self.mesh)
             else:
-                self._stayed = (parts[0], parts[2])
-                self._direct = embree.Scene(parts[2], self.mesh[len(parts[0]):])
+                self._stayed = parts[2]
+                self._direct = embree.Scene(parts[2].hierarchy, self.mesh[len(parts[0]):])
         else:
             self._embree = rtcore_scene.EmbreeScene()
             TriangleMesh(self._embree, self.mesh)
@@ -199,15 +219,19 @@ class TriangleCaster:
         flat). Qhull takes the corners as they are, shared ones repeated: sorting them out first took the
         272k-triangle scan 1.4 s instead of 0.2."""
         if self._hull is None:
-            from scipy.spatial import ConvexHull, QhullError
             faces = slice(None) if self._faces is None else self._faces
-            v0, e1, e2 = self.v0[faces], self.e1[faces], self.e2[faces]
-            corners = np.concatenate([v0, v0 + e1, v0 + e2])
-            try:
-                self._hull = corners[ConvexHull(corners).vertices]
-            except (QhullError, ValueError):   # flat, or too few corners: every corner is on the hull
-                self._hull = corners
+            if self._stayed is None:
+                self._hull = _hull_of(self._corners(faces))
+            else:   # the hull of the faces that stayed (kept across a drag) and the moved faces' corners
+                stayed = self._stayed
+                if stayed.hull is None:
+                    stayed.hull = _hull_of(self._corners(stayed.faces))
+                self._hull = _hull_of(np.concatenate([stayed.hull, self._corners(self._faces[len(stayed.faces):])]))
         return self._hull
+
+    def _corners(self, faces) -> np.ndarray:
+        v0, e1, e2 = self.v0[faces], self.e1[faces], self.e2[faces]
+        return np.concatenate([v0, v0 + e1, v0 + e2])
 
     @staticmethod
     def marching(cells: dda.Cells) -> "TriangleCaster":
