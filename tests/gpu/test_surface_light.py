@@ -276,7 +276,12 @@ def test_a_moved_lamp_retraces_only_what_changed_and_shows_the_probes_meanwhile(
             fresh.renderer.set_scene(moved)
             fresh.renderer.set_probes(cornell_probes)
             fresh.render_hdr(view="indirect")
-            np.testing.assert_array_equal(renderer._indirect._gather[0].hits, fresh.renderer._indirect._gather[0].hits)
+            ours, theirs = renderer._indirect._gather, fresh.renderer._indirect._gather
+            np.testing.assert_array_equal(ours[0].hits, theirs[0].hits)
+            # and only the samples near the lamp were filtered again, to the rows filtering all of them gives
+            assert 0 < ours[1].filtered < 0.5 * theirs[1].filtered
+            np.testing.assert_array_equal(ours[1].near, theirs[1].near)
+            np.testing.assert_array_equal(ours[1].tent, theirs[1].tent)
         finally:
             fresh.release()
     finally:

@@ -49,7 +49,8 @@ def test_a_small_tiles_sample_reads_the_nearest_records_that_face_its_way(cut_bo
     indirect, lightmap, _ = cut_box
     samples = indirect._samples
     records, own = indirect._records
-    rays, (near, tent), _ = indirect._gather
+    rays, filtered, _ = indirect._gather
+    near, tent = filtered.near, filtered.tent
     small = texel_samples.small_tiles(lightmap, samples)
     assert small.sum() > 5000
     points = lightmap.texel_points[samples].astype(np.float64)

@@ -30,8 +30,8 @@ from viewer.gpu.context import finish
 from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.gpu.lightmap_update import (Landing, Reached, gather_reflected, gather_texels, reflectance, with_lit,
                                         texture_ratio)
-from viewer.gpu.texel_samples import (dark_fill, gather_records, small_tiles, strided_samples, tent_neighbours,
-                                     texel_rows, weight_rows)
+from viewer.gpu.tent import Tent, tent_neighbours
+from viewer.gpu.texel_samples import dark_fill, gather_records, small_tiles, strided_samples, texel_rows, weight_rows
 from viewer.probes.weights import SurfaceBake, SurfaceWeights, lobe_normals
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
@@ -85,7 +85,7 @@ class BakedIndirectLight:
         self._early = None if caster is None else (scene, caster)   # `caster_of(scene)`, started by the caller
         self.gather_rays = gather_rays
         """Final-gather rays per sample (viewer/gpu/final_gather.py); 0: the probes' light alone."""
-        self._gather: tuple[GatherRays, tuple, Landing] | None = None   # rays, `tent_neighbours`, their Landing
+        self._gather: tuple[GatherRays, Tent, Landing] | None = None   # rays, `tent_neighbours`, their Landing
         self._records: tuple[np.ndarray, np.ndarray] | None = None   # `gather_records`, once per layout
         self._sample_rows, self._all_texels = np.arange(len(self._pixels)), None   # the latter made if asked
         self._direct: tuple | None = None   # each pixel's direct irradiance and its (3,) scale, read back per bake
@@ -221,7 +221,8 @@ class BakedIndirectLight:
             traced = self._gather_rays(scene, lightmap, caster, points[records], normals[normal_id[records]])
             landing = Landing.of(traced.landing[0], self._texel_pixels, self._texel_rows, lightmap.texel_faces,
                                  len(self._image))
-            gather = (traced, tent_neighbours(lightmap, self._samples, *self._records, traced), landing)
+            before = None if self._gather is None else self._gather[1]   # the same samples: kept where no record moved
+            gather = (traced, tent_neighbours(lightmap, self._samples, *self._records, traced, before), landing)
             self._traced = (scene, lightmap, traced)
         self._made = (geometry, caster, gather)
         return caster, gather
@@ -308,13 +309,14 @@ class BakedIndirectLight:
                 self._all_texels = np.arange(len(self._texel_pixels))
             values, texels = self._bake.irradiance(probes.coefficients), self._all_texels
         else:
-            rays, (near, tent), _ = self._gather
+            rays, filtered, _ = self._gather
             landing, albedo, reflected = self._reflected()
             values = self._bake.irradiance(probes.coefficients, self._values, landing.samples)
             values[dark] = values[lit]
             gather_reflected(values, landing.rows, landing.weights, albedo, reflected, self._scratch)
             samples, texels = self._reached.samples, self._reached.texels
-            gather_texels(rays.irradiance(self._scratch), near, tent, self._sample_rows, values, samples)
+            gather_texels(rays.irradiance(self._scratch), filtered.near, filtered.tent, self._sample_rows, values,
+                          samples)
         values[dark] = values[lit]
         gather_texels(values, *self._texel_rows, self._texel_pixels, self._image, texels)
         self.texture.write(self._image)
@@ -324,10 +326,10 @@ class BakedIndirectLight:
         """(landing, albedo, albedo x direct irradiance) of the pixels the gather's rays land on."""
         self._read_direct()
         if self._landing is None:   # once per install
-            rays, (near, tent), landing = self._gather
+            rays, filtered, landing = self._gather
             self._landing = replace(landing, samples=with_lit(landing.samples, *self._dark))
-            self._reached = Reached.of(rays.landed, near, tent, *self._texel_rows, self._dark)
-            self._scratch, self._values = (np.empty((n, 3), np.float32) for n in (len(rays.landing[0]), len(near)))
+            self._reached = Reached.of(rays.landed, filtered.near, filtered.tent, *self._texel_rows, self._dark)
+            self._scratch, self._values = (np.empty((n, 3), np.float32) for n in (len(rays.landing[0]), len(filtered.near)))
             self._reflectance = self._texture_ratio = None
             if self._written:   # the texels no light reaches stay 0 (a new image is 0 without a write)
                 self._image[:] = 0.0
