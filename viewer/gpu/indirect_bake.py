@@ -23,7 +23,7 @@ import moderngl
 import numpy as np
 
 from viewer import wake
-from viewer.rays.cast import TriangleCaster, distinct_rows
+from viewer.rays.cast import TriangleCaster
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.gather_cast import caster_of
 from viewer.gpu.context import finish
@@ -31,7 +31,8 @@ from viewer.gpu.direct_bake import BakedDirectLight, same_atlas
 from viewer.gpu.lightmap_update import (Landing, Reached, gather_reflected, gather_texels, reflectance, with_lit,
                                         texture_ratio)
 from viewer.gpu.tent import Tent, tent_neighbours
-from viewer.gpu.texel_samples import dark_fill, gather_records, small_tiles, strided_samples, texel_rows, weight_rows
+from viewer.gpu.texel_samples import (dark_fill, gather_records, sample_points, small_tiles, strided_samples, texel_rows,
+                                     weight_rows)
 from viewer.probes.weights import SurfaceBake, SurfaceWeights, lobe_normals
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
@@ -110,7 +111,7 @@ class BakedIndirectLight:
         """Counts `moved` calls: work started for an earlier geometry is dropped."""
         self._made: tuple[int, TriangleCaster, tuple | None] | None = None
         """(geometry, caster, gather or None) the last weights were made with: what the next job reuses."""
-        self._points: tuple[BakedDirectLight, tuple] | None = None   # `_sample_points`' lightmap and answer
+        self._points: tuple | None = None   # `_sample_points`' lightmap, answer and rounded face normals
         self._traced: tuple[Scene, BakedDirectLight, GatherRays] | None = None
         """The scene and lightmap the last gather rays were traced for, and the rays (a moved lamp's job
         traces again only the rays the move can change)."""
@@ -233,15 +234,8 @@ class BakedIndirectLight:
         cached = self._points
         if cached is not None and cached[0] is lightmap:
             return cached[1]
-        faces = lightmap.texel_faces
-        face_normal = np.zeros((int(faces.max()) + 1 if len(faces) else 0, 3))
-        face_normal[faces] = lightmap.texel_normals
-        rounded = np.round(np.concatenate([face_normal, -face_normal]), 6)
-        first, ids = distinct_rows(rounded)   # a sort of numbers, not of rows: 0.3 s of a 68k-triangle scan
-        faces = faces[self._samples]
-        normal_id = np.concatenate([ids[faces], ids[len(face_normal) + faces]])
-        points = (np.concatenate([lightmap.texel_points[self._samples]] * 2), rounded[first], normal_id)
-        self._points = (lightmap, points)
+        points, rounded = sample_points(lightmap, self._samples, None if cached is None else cached[1:])
+        self._points = (lightmap, points, rounded)
         return points
 
     def _gather_rays(self, scene: Scene, lightmap: BakedDirectLight, caster: TriangleCaster, points: np.ndarray,

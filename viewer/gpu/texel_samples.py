@@ -210,3 +210,21 @@ def borrowing(lightmap: BakedDirectLight, samples: np.ndarray) -> np.ndarray:
     """(S,) bool: the samples of tiles with several whose points were pulled onto their triangle's edges
     (`gather_records`)."""
     return (lightmap.tile_n[lightmap.texel_faces[samples]] > SAMPLE_STRIDE) & ~lightmap.texel_inside[samples]
+
+
+def sample_points(lightmap: BakedDirectLight, samples: np.ndarray, before: tuple | None = None) -> tuple[tuple, np.ndarray]:
+    """((points (2S, 3), normals (N, 3), normal_id (2S,)), rounded): the samples of both sides, the distinct
+    normals (the back sides' negated) and each sample's, and every face's normal of both sides rounded.
+    `before`: this function's answer for the same samples before a move, whose distinct normals stay where
+    no face turned (finding them is a sort: 34 ms of a 68k-triangle scan)."""
+    faces = lightmap.texel_faces
+    face_normal = np.zeros((int(faces.max()) + 1 if len(faces) else 0, 3))
+    face_normal[faces] = lightmap.texel_normals
+    rounded = np.round(np.concatenate([face_normal, -face_normal]), 6)
+    if before is not None and np.array_equal(before[1], rounded):
+        normals, normal_id = before[0][1:]
+    else:
+        first, ids = distinct_rows(rounded)   # a sort of numbers, not of rows: 0.3 s of a 68k-triangle scan
+        faces = faces[samples]
+        normals, normal_id = rounded[first], np.concatenate([ids[faces], ids[len(face_normal) + faces]])
+    return (np.concatenate([lightmap.texel_points[samples]] * 2), normals, normal_id), rounded
