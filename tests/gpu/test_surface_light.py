@@ -282,6 +282,10 @@ def test_a_moved_lamp_retraces_only_what_changed_and_shows_the_probes_meanwhile(
             assert 0 < ours[1].filtered < 0.5 * theirs[1].filtered
             np.testing.assert_array_equal(ours[1].near, theirs[1].near)
             np.testing.assert_array_equal(ours[1].tent, theirs[1].tent)
+            # the probe weights too: weighed again near the lamp alone, the same as weighing every sample
+            kept = next(iter(renderer._indirect._weighed.values()))[1]
+            assert 0 < kept.weighed < 0.5 * len(kept.points)
+            np.testing.assert_array_equal(renderer._indirect._bake.weights, fresh.renderer._indirect._bake.weights)
         finally:
             fresh.release()
     finally:

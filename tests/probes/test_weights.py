@@ -163,3 +163,37 @@ def test_coarse_points_share_rounded_lobe_normals_and_the_others_keep_theirs():
     assert change.max() < 0.03
     same_ids, same = probe_weights.lobe_normals(normals, normal_id, np.zeros(len(normal_id), bool))
     assert same is normals and np.array_equal(same_ids, normal_id)
+
+
+@pytest.mark.skipif(not embree_available(), reason="the weights after a move are kept for Embree's casters")
+def test_weights_after_a_move_are_those_of_weighing_every_point():
+    """The Cornell box's small box moved and a few probes turned invalid: the points that moved, those
+    whose segments can meet the box's old or new place and those next to a probe that changed are
+    weighed again, a minority, and every point's weights are those that weighing all of them gives."""
+    from dataclasses import replace
+
+    scene = load("cornell")
+    vertices = scene.vertices.copy()
+    box_faces = scene.face_group == scene.groups.index("small-box")
+    vertices[np.unique(scene.faces[box_faces])] += [0.06, 0.0, -0.04]
+    moved = replace(scene, vertices=vertices)
+    points, face = surface_points(scene, 6000, seed=4)
+    after = points.copy()
+    on_box = box_faces[face]
+    after[on_box] += [0.06, 0.0, -0.04]
+    normals = scene.face_normals[face]
+    probes = random_probes(scene, 12, seed=1, valid_fraction=0.97)
+    valid = probes.valid.copy()
+    valid[2, 3, 4], valid[9, 1, 5] = ~valid[2, 3, 4], ~valid[9, 1, 5]
+    flipped = replace(probes, valid=valid)
+    caster, moved_caster = TriangleCaster(scene), TriangleCaster(moved)
+    before = probe_weights.Weighed.of(points, normals, probes, caster)
+    box = probe_weights.moved_box(caster, moved_caster)
+    kept = SurfaceWeights.after_moving(before, after, normals, flipped, moved_caster, box)
+    fresh = SurfaceWeights.of(after, normals, flipped, moved_caster)
+    assert on_box.sum() < kept.weighed < 0.5 * len(points)
+    np.testing.assert_array_equal(kept.weights.base, fresh.base)
+    np.testing.assert_array_equal(kept.weights.weights, fresh.weights)
+    nothing = probe_weights.moved_box(moved_caster, moved_caster)
+    again = SurfaceWeights.after_moving(kept, after, normals, flipped, moved_caster, nothing)
+    assert again.weighed == 0

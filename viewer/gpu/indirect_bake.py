@@ -33,7 +33,7 @@ from viewer.gpu.lightmap_update import (Landing, Reached, gather_reflected, gath
 from viewer.gpu.tent import Tent, tent_neighbours
 from viewer.gpu.texel_samples import (dark_fill, gather_records, sample_points, small_tiles, strided_samples, texel_rows,
                                      weight_rows)
-from viewer.probes.weights import SurfaceBake, SurfaceWeights, lobe_normals
+from viewer.probes.weights import SurfaceBake, SurfaceWeights, Weighed, lobe_normals, moved_box
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 
@@ -112,6 +112,7 @@ class BakedIndirectLight:
         self._made: tuple[int, TriangleCaster, tuple | None] | None = None
         """(geometry, caster, gather or None) the last weights were made with: what the next job reuses."""
         self._points: tuple | None = None   # `_sample_points`' lightmap, answer and rounded face normals
+        self._weighed: dict[int, tuple[TriangleCaster, Weighed]] = {}   # per lattice: its last weights' caster
         self._traced: tuple[Scene, BakedDirectLight, GatherRays] | None = None
         """The scene and lightmap the last gather rays were traced for, and the rays (a moved lamp's job
         traces again only the rays the move can change)."""
@@ -200,8 +201,14 @@ class BakedIndirectLight:
         caster, gather = self._geometry_work(geometry, scene, lightmap, rays)
         points, normals, normal_id = self._sample_points(lightmap)
         weighed, rows = weight_rows(self._small, self._records)
-        weights = SurfaceWeights.of(points[weighed], normals[normal_id[weighed]], probes, caster).take(rows)
-        return SurfaceBake.of(weights, *lobe_normals(normals, normal_id, np.tile(self._small, 2))), caster, gather
+        points, at = points[weighed], normals[normal_id[weighed]]
+        before = self._weighed.get(probes.resolution)   # this lattice's weights before a move: kept where they hold
+        box = None if before is None else moved_box(before[0], caster)
+        done = Weighed.of(points, at, probes, caster) if box is None else SurfaceWeights.after_moving(
+            before[1], points, at, probes, caster, box)
+        self._weighed[probes.resolution] = (caster, done)
+        bake = SurfaceBake.of(done.weights.take(rows), *lobe_normals(normals, normal_id, np.tile(self._small, 2)))
+        return bake, caster, gather
 
     def _geometry_work(self, geometry: int, scene: Scene, lightmap: BakedDirectLight,
                        rays: bool) -> tuple[TriangleCaster, tuple | None]:
