@@ -9,6 +9,7 @@ from scenes import box, lit_room
 
 from viewer.rays import dda
 from viewer.rays.cast import TriangleCaster, embree_available
+from viewer.probes import moved_weights
 from viewer.probes import weights as probe_weights
 from viewer.physical.geometry import voxelize_with_faces
 from viewer.probes.weights import CORNERS, SurfaceBake, SurfaceWeights
@@ -187,13 +188,13 @@ def test_weights_after_a_move_are_those_of_weighing_every_point():
     valid[2, 3, 4], valid[9, 1, 5] = ~valid[2, 3, 4], ~valid[9, 1, 5]
     flipped = replace(probes, valid=valid)
     caster, moved_caster = TriangleCaster(scene), TriangleCaster(moved)
-    before = probe_weights.Weighed.of(points, normals, probes, caster)
-    box = probe_weights.moved_box(caster, moved_caster)
-    kept = SurfaceWeights.after_moving(before, after, normals, flipped, moved_caster, box)
+    before = moved_weights.Weighed.of(points, normals, probes, caster)
+    box = moved_weights.moved_box(caster, moved_caster)
+    kept = moved_weights.after_moving(before, after, normals, flipped, moved_caster, box)
     fresh = SurfaceWeights.of(after, normals, flipped, moved_caster)
     assert on_box.sum() < kept.weighed < 0.5 * len(points)
     np.testing.assert_array_equal(kept.weights.base, fresh.base)
     np.testing.assert_array_equal(kept.weights.weights, fresh.weights)
-    nothing = probe_weights.moved_box(moved_caster, moved_caster)
-    again = SurfaceWeights.after_moving(kept, after, normals, flipped, moved_caster, nothing)
+    nothing = moved_weights.moved_box(moved_caster, moved_caster)
+    again = moved_weights.after_moving(kept, after, normals, flipped, moved_caster, nothing)
     assert again.weighed == 0

@@ -33,7 +33,8 @@ from viewer.gpu.lightmap_update import (Landing, Reached, gather_reflected, gath
 from viewer.gpu.tent import Tent, tent_neighbours
 from viewer.gpu.texel_samples import (dark_fill, gather_records, sample_points, small_tiles, strided_samples, texel_rows,
                                      weight_rows)
-from viewer.probes.weights import SurfaceBake, SurfaceWeights, Weighed, lobe_normals, moved_box
+from viewer.probes.moved_weights import Weighed, after_moving, moved_box
+from viewer.probes.weights import SurfaceBake, lobe_normals
 from viewer.probes.grid import ProbeGrid
 from viewer.scene import Scene
 
@@ -104,8 +105,7 @@ class BakedIndirectLight:
         self.installs = 0
         """Counts the weights installed (a new lattice's, or a moved geometry's)."""
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="indirect-weights") if background else None
-        self._job: tuple[tuple, int, Future] | None = None
-        """(lattice key, geometry, future) of the weights under way on the worker."""
+        self._job: tuple[tuple, int, Future] | None = None   # (lattice key, geometry, future) of the worker's weights
         self._prefetching: Future | None = None   # the geometry's work started by `prefetch`, while it runs
         self._geometry = 0
         """Counts `moved` calls: work started for an earlier geometry is dropped."""
@@ -203,9 +203,9 @@ class BakedIndirectLight:
         weighed, rows = weight_rows(self._small, self._records)
         points, at = points[weighed], normals[normal_id[weighed]]
         before = self._weighed.get(probes.resolution)   # this lattice's weights before a move: kept where they hold
-        box = None if before is None else moved_box(before[0], caster)
-        done = Weighed.of(points, at, probes, caster) if box is None else SurfaceWeights.after_moving(
-            before[1], points, at, probes, caster, box)
+        box = moved_box(before[0], caster) if before else None
+        done = after_moving(before[1], points, at, probes, caster, box) if box is not None else Weighed.of(
+            points, at, probes, caster)
         self._weighed[probes.resolution] = (caster, done)
         bake = SurfaceBake.of(done.weights.take(rows), *lobe_normals(normals, normal_id, np.tile(self._small, 2)))
         return bake, caster, gather

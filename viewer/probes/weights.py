@@ -81,38 +81,6 @@ class SurfaceWeights:
             weights[part] = _normalized(w, seen)
         return SurfaceWeights(base, weights, int(probes.resolution))
 
-    @staticmethod
-    def after_moving(before: "Weighed", points: np.ndarray, normals: np.ndarray, probes: ProbeGrid,
-                     caster: TriangleCaster, box: np.ndarray) -> "Weighed":
-        """`of` the same points after some faces moved within `box` ((2, 3): the corners of a box around
-        their old and new places), from `before`, the weights of the points before the move on the same
-        lattice: only the points that moved or turned, those whose segments to their cell's probes can
-        meet the box, and those with a probe whose validity changed are weighed again (a lamp dragged
-        over a 68k-triangle scan: a few thousand of its 0.3 M samples). The same weights as `of`."""
-        p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
-        n = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
-        probe_weight = probes.probe_weights()
-        if (before.points.shape != p.shape or before.probe_weight.shape != probe_weight.shape
-                or not np.array_equal(before.lattice, np.concatenate([probes.lo, probes.hi]))):
-            return Weighed.of(p, n, probes, caster)
-        old = before.weights
-        redo = np.any((before.points != p) | (before.normals != n), axis=1)
-        lo, spacing = np.asarray(probes.lo, np.float64), np.asarray(probes.spacing, np.float64)
-        margin = 1e-3 * float(spacing.min())   # the segments start SURFACE_LIFT spacings off the point
-        low = np.minimum(p, lo + (old.base + 0.5) * spacing) - margin    # the box of the point and its cell's probes
-        high = np.maximum(p, lo + (old.base + 1.5) * spacing) + margin
-        redo |= np.all((low <= box[1]) & (high >= box[0]), axis=1)
-        flipped = (before.probe_weight != probe_weight).ravel()
-        if flipped.any():
-            m = probes.resolution
-            corner = np.minimum(old.base[:, None, :] + CORNERS[None], m - 1)
-            redo |= flipped[(corner[..., 0] * m + corner[..., 1]) * m + corner[..., 2]].any(axis=1)
-        rows, base, weights = np.flatnonzero(redo), old.base.copy(), old.weights.copy()
-        fresh = SurfaceWeights.of(p[rows], n[rows], probes, caster)
-        base[rows], weights[rows] = fresh.base, fresh.weights
-        return Weighed(SurfaceWeights(base, weights, int(probes.resolution)), p, n, probe_weight, before.lattice,
-                       len(rows))
-
     def take(self, rows: np.ndarray) -> "SurfaceWeights":
         """The weights of the points `rows` (indices), in that order."""
         return SurfaceWeights(self.base[rows], self.weights[rows], self.resolution)
@@ -124,40 +92,6 @@ class SurfaceWeights:
         mixed = np.einsum("pk,pkjc->pjc", self.weights, c)
         y = sh.basis(np.asarray(normals, np.float64).reshape(-1, 3)) * sh.COSINE_LOBE
         return np.maximum(np.einsum("pj,pjc->pc", y, mixed), 0.0)
-
-
-@dataclass(frozen=True)
-class Weighed:
-    """Weights and what they were weighed for: the points, normals, the probes' validity weights and the
-    lattice's box (lo, hi), which `SurfaceWeights.after_moving` compares against."""
-
-    weights: SurfaceWeights
-    points: np.ndarray
-    normals: np.ndarray
-    probe_weight: np.ndarray
-    lattice: np.ndarray
-    weighed: int   # how many points were weighed (the others kept from before a move)
-
-    @staticmethod
-    def of(points: np.ndarray, normals: np.ndarray, probes: ProbeGrid, caster: TriangleCaster) -> "Weighed":
-        """`SurfaceWeights.of`, all of the points weighed."""
-        return Weighed(SurfaceWeights.of(points, normals, probes, caster), points, normals, probes.probe_weights(),
-                       np.concatenate([probes.lo, probes.hi]).astype(np.float64), len(points))
-
-
-def moved_box(before: TriangleCaster, after: TriangleCaster) -> np.ndarray | None:
-    """(2, 3) the corners of a box around the old and new places of the faces that moved from `before` to
-    `after`, casters of the same faces (an empty box where none moved); None where the faces differ."""
-    if before.v0.shape != after.v0.shape:
-        return None
-    moved = np.flatnonzero(np.any((before.v0 != after.v0) | (before.e1 != after.e1) | (before.e2 != after.e2), axis=1))
-    if len(moved) == 0:
-        return np.array([[np.inf] * 3, [-np.inf] * 3])
-    corners = np.concatenate([np.concatenate([c.v0[moved], c.v0[moved] + c.e1[moved], c.v0[moved] + c.e2[moved]])
-                              for c in (before, after)])
-    lo, hi = corners.min(axis=0), corners.max(axis=0)
-    margin = 1e-6 * max(float((hi - lo).max()), 1e-9)
-    return np.array([lo - margin, hi + margin])
 
 
 CHUNK = 1 << 16
