@@ -61,16 +61,14 @@ class BakedIndirectLight:
 
     def __init__(self, ctx: moderngl.Context, lightmap: BakedDirectLight, scene: Scene, background: bool = False,
                  gather_rays: int = 0, caster: Future | None = None):
-        self.lightmap = lightmap
-        self.scene = scene
+        self.lightmap, self.scene = lightmap, scene
         height, width = lightmap.covered.shape
         self.texture = ctx.texture((2 * width, height), 3, dtype="f4")
         self.texture.filter, self.texture.repeat_x, self.texture.repeat_y = (moderngl.LINEAR, moderngl.LINEAR), False, False
         self._image, self._written = np.zeros((height * 2 * width, 3), np.float32), False
         rows, columns = np.nonzero(lightmap.covered)           # the order of lightmap.texel_points
         sample, sources, weights = strided_samples(lightmap, rows, columns)
-        self._samples = np.flatnonzero(sample)
-        """The texels (indices into lightmap.texel_points) that the probes' light is evaluated at."""
+        self._samples = np.flatnonzero(sample)   # the texels (of lightmap.texel_points) the probes' light is evaluated at
         self._small = small_tiles(lightmap, self._samples)   # a scan's: records' weights, half rays, rounded lobes
         pixels = rows * 2 * width + columns
         self._pixels = np.concatenate([pixels[sample], pixels[sample] + width])
@@ -109,10 +107,11 @@ class BakedIndirectLight:
         self._prefetching: Future | None = None   # the geometry's work started by `prefetch`, while it runs
         self._geometry = 0
         """Counts `moved` calls: work started for an earlier geometry is dropped."""
-        self._made: tuple[int, TriangleCaster, tuple | None] | None = None
-        """(geometry, caster, gather or None) the last weights were made with: what the next job reuses."""
+        self._made: tuple[int, TriangleCaster, tuple | None] | None = None   # (geometry, caster, gather) of the
+        # last weights: what the next job reuses
         self._points: tuple | None = None   # `_sample_points`' lightmap, answer and rounded face normals
         self._weighed: dict[int, tuple[TriangleCaster, Weighed]] = {}   # per lattice: its last weights' caster
+        self._lobes: tuple = (None, None)   # (normal_id, `lobe_normals`) of the last weights
         self._traced: tuple[Scene, BakedDirectLight, GatherRays] | None = None
         """The scene and lightmap the last gather rays were traced for, and the rays (a moved lamp's job
         traces again only the rays the move can change)."""
@@ -207,8 +206,9 @@ class BakedIndirectLight:
         done = after_moving(before[1], points, at, probes, caster, box) if box is not None else Weighed.of(
             points, at, probes, caster)
         self._weighed[probes.resolution] = (caster, done)
-        bake = SurfaceBake.of(done.weights.take(rows), *lobe_normals(normals, normal_id, np.tile(self._small, 2)))
-        return bake, caster, gather
+        if self._lobes[0] is not normal_id:   # the same normals after a move that turned no face: 15 ms of a scan
+            self._lobes = (normal_id, lobe_normals(normals, normal_id, np.tile(self._small, 2)))
+        return SurfaceBake.of(done.weights.take(rows), *self._lobes[1]), caster, gather
 
     def _geometry_work(self, geometry: int, scene: Scene, lightmap: BakedDirectLight,
                        rays: bool) -> tuple[TriangleCaster, tuple | None]:
