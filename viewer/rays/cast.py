@@ -153,9 +153,8 @@ class TriangleCaster:
         parts = self._parted(triangles, faces, previous) if backend == "embree" else None
         if parts is not None:
             faces = np.concatenate([parts[0], parts[1]])
-        self._embrace(np.ascontiguousarray(triangles[faces], np.float32), faces, triangles[:, 0],
-                      triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0], backend == "embree",
-                      parts)
+        self._embrace(np.ascontiguousarray(triangles[faces], np.float32), faces, *dda.edges(scene),
+                      backend == "embree", parts)
 
     def _parted(self, triangles: np.ndarray, faces: np.ndarray, previous: "TriangleCaster | None"):
         """(faces that stayed, faces that moved, `_Stayed` of the former) where `previous` holds the same
