@@ -45,7 +45,7 @@ def test_colour_channels_are_independent():
     # the probes see of it
     for part in (encoding.BOUNCE, encoding.SEEN):
         more = (b.inputs[1, part][0] - a.inputs[1, part][0])
-        assert more.min() >= -1e-6 and more.max() > 0
+        assert more.min() >= -1e-6 * np.abs(a.inputs[1, part][0]).max() and more.max() > 0   # float32 rounding
         assert more[0].mean() > more[-1].mean()  # red wall at -x
 
 

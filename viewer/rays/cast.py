@@ -122,6 +122,7 @@ class TriangleCaster:
     """`_hull_corners`, once asked."""
     _direct: "embree.Scene | None" = None
     """Embree called from compiled loops (viewer.rays.embree); None where only embreex's binding works."""
+    _quick = False
     _triangles: np.ndarray | None = None
     """(F, 3, 3) the scene's triangles, to tell which faces a later caster's scene moved."""
     _stayed: _Stayed | None = None
@@ -129,12 +130,14 @@ class TriangleCaster:
     next move of the same faces keeps them."""
 
     def __init__(self, scene, cells: dda.Cells | None = None, backend: str | None = None,
-                 previous: "TriangleCaster | None" = None):
+                 previous: "TriangleCaster | None" = None, quick: bool = False):
         """`cells`: the scene's dda.Cells (any grid, Cells.blocking will do) when the caller has them, for
         the DDA backend; `backend`: "embree", "dda", or None for Embree where it is installed ("embreex":
         Embree through embreex's own binding, which holds Python's lock: for comparisons). `previous`:
         the caster of the same faces before some of them moved (a dragged lamp or object), whose
-        hierarchy of the faces that stayed is kept where it has one (`_parted`)."""
+        hierarchy of the faces that stayed is kept where it has one (`_parted`). `quick`: Embree built
+        quickly, its rays a little slower (`embree.Hierarchy`): for a caster of few rays a build."""
+        self._quick = quick
         backend = backend or ("embree" if embree_available() else "dda")
         if backend in ("embree", "embreex") and not embree_available():
             raise ValueError("the embree backend needs the embreex package")
@@ -171,7 +174,8 @@ class TriangleCaster:
         kept = previous._stayed
         if kept is not None and np.array_equal(kept.faces, stayed):
             return stayed, went, kept
-        return stayed, went, _Stayed(stayed, embree.Hierarchy(np.ascontiguousarray(triangles[stayed], np.float32)))
+        return stayed, went, _Stayed(stayed, embree.Hierarchy(np.ascontiguousarray(triangles[stayed], np.float32),
+                                                              self._quick))
 
     def _embrace(self, mesh, faces, v0, e1, e2, direct: bool = True, parts=None) -> None:
         self.mesh = np.ascontiguousarray(mesh, np.float32)
@@ -180,10 +184,10 @@ class TriangleCaster:
         self.v0, self.e1, self.e2 = (np.ascontiguousarray(a, np.float64) for a in (v0, e1, e2))
         if direct and embree.available():   # called from compiled loops: all cores, without Python's lock
             if parts is None:
-                self._direct = embree.Scene(self.mesh)
+                self._direct = embree.Scene(self.mesh, quick=self._quick)
             else:
                 self._stayed = parts[2]
-                self._direct = embree.Scene(parts[2].hierarchy, self.mesh[len(parts[0]):])
+                self._direct = embree.Scene(parts[2].hierarchy, self.mesh[len(parts[0]):], quick=self._quick)
         else:
             self._embree = rtcore_scene.EmbreeScene()
             TriangleMesh(self._embree, self.mesh)

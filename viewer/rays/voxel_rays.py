@@ -35,16 +35,16 @@ class VoxelRays:
     """A scene's triangles and the voxel listing of its grid, ready for rays that land on voxels."""
 
     def __init__(self, scene, cells: dda.Cells, backend: str | None = None, caster: TriangleCaster | None = None,
-                 previous: "VoxelRays | None" = None):
+                 previous: "VoxelRays | None" = None, quick: bool = False):
         """`backend`: "embree", "dda", or None for Embree where it is installed. `caster`: the Embree
         hierarchy of the same triangles, when another listing of them already built one. `previous`: the
         rays of the same faces before some of them moved, whose hierarchy of the others is kept
-        (`TriangleCaster`)."""
+        (`TriangleCaster`); `quick`: Embree built quickly (`TriangleCaster`)."""
         self.cells = cells
         self.backend = backend or ("embree" if embree_available() else "dda")
         if self.backend == "embree":
             self.caster = caster if caster is not None and caster.backend == "embree" else TriangleCaster(
-                scene, cells, self.backend, None if previous is None else previous.caster)
+                scene, cells, self.backend, None if previous is None else previous.caster, quick)
         else:
             self.caster = None
 
