@@ -94,8 +94,7 @@ class BakedIndirectLight:
         self._covered_pixels: tuple[np.ndarray, np.ndarray] | None = None
         self._texture_ratio: tuple[tuple, np.ndarray | None] | None = None   # (textures, texture_ratio)
         self._landing: Landing | None = None   # the pixels the rays land on, once per install
-        self._scratch: np.ndarray | None = None   # albedo x (direct + indirect) there: the rays read it
-        self._values: np.ndarray | None = None    # the samples' light
+        self._scratch = self._values = None   # albedo x (direct + indirect) there (the rays read it); the samples' light
         self._reached: Reached | None = None      # the samples and texels the gather's light reaches
         self._bake: SurfaceBake | None = None
         self.weights_key = None
@@ -287,7 +286,8 @@ class BakedIndirectLight:
 
     def _install(self, key: tuple, bake: SurfaceBake, caster: TriangleCaster | None = None,
                  gather: tuple | None = None) -> None:
-        self._caster = caster if caster is not None else self._caster
+        if caster is not None:   # the caster before the move is no longer needed: its hierarchy is freed
+            self._caster, self._moved_from = caster, None
         self._gather = gather if gather is not None else self._gather
         self.stale = False
         self.installs += 1
