@@ -103,3 +103,18 @@ def test_distinct_rows_group_rows_as_numpys_unique_does():
         np.testing.assert_array_equal(np.sort(first), np.sort(their_first))
         np.testing.assert_array_equal(rows[first][inverse], rows)        # each row's group holds it
         assert len(first) == len(their_first)
+
+
+def test_changed_rows_are_the_rows_numpy_finds_different():
+    """`changed_rows` names the rows where any pair of arrays differs, as numpy's comparison does, and
+    one array passed twice changes nothing."""
+    rng = np.random.default_rng(7)
+    a = rng.random((500, 3, 3))
+    b, c = a.copy(), rng.random((500, 4))
+    b[[3, 77, 499], 2, 1] += 1e-12
+    d = c.copy()
+    d[[10, 77], 0] = -1.0
+    expected = np.any(a != b, axis=(1, 2)) | np.any(c != d, axis=1)
+    np.testing.assert_array_equal(cast.changed_rows((a, b), (c, d)), expected)
+    assert set(np.flatnonzero(expected)) == {3, 10, 77, 499}
+    assert not cast.changed_rows((a, a), (c, c.copy())).any()

@@ -23,7 +23,7 @@ import moderngl
 import numpy as np
 
 from viewer import wake
-from viewer.rays.cast import TriangleCaster
+from viewer.rays.cast import TriangleCaster, changed_rows
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.gather_cast import caster_of
 from viewer.gpu.context import finish
@@ -281,7 +281,7 @@ class BakedIndirectLight:
                 or not np.array_equal(old_scene.face_areas > 0, scene.face_areas > 0)):
             return None
         keep = scene.face_areas > 0
-        moved = np.flatnonzero(np.any(old_scene.triangles[keep] != scene.triangles[keep], axis=(1, 2)))
+        moved = np.flatnonzero(changed_rows((old_scene.triangles, scene.triangles))[keep])
         return moved if len(moved) <= MAX_MOVED * keep.sum() else None
 
     def _install(self, key: tuple, bake: SurfaceBake, caster: TriangleCaster | None = None,

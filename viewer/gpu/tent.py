@@ -44,8 +44,8 @@ class Tent:
 
 def tent_neighbours(lightmap: BakedDirectLight, samples: np.ndarray, records: np.ndarray, own: np.ndarray,
                     rays: GatherRays, before: Tent | None = None) -> Tent:
-    """(2S, K) the records (`gather_records`) each sample of both sides averages, rows of the gather's
-    (2R) samples, 0 with weight 0 past the last, and their tent weights 1 - distance / reach, normalized.
+    """The filter (`Tent`): the records (`gather_records`) each sample of both sides averages, rows of the
+    gather's (2R) samples, 0 with weight 0 past the last, and their tent weights 1 - distance / reach, normalized.
     A sample of a tile with several reads the records within FILTER_RADIUS sample spacings on its plane
     and side (coplanar, the same normal: across the edges of a face's triangles too); one of a tile with
     one reads those within SMALL_RADIUS whose normals are near its own. Records inside a solid (most of

@@ -10,6 +10,7 @@ from scipy import sparse
 
 from viewer.neural import encoding
 from viewer.neural.encoding import CHANNELS
+from viewer.rays.cast import changed_rows
 from viewer.rays.voxel_rays import VoxelRays, meets_box
 from viewer.rays.voxels import VoxelGrid
 
@@ -156,7 +157,7 @@ def moved_box(before: VoxelRays | None, after: VoxelRays | None) -> tuple[np.nda
     old, new = before.cells, after.cells
     if old.v0.shape != new.v0.shape:
         return None
-    moved = np.flatnonzero(np.any((old.v0 != new.v0) | (old.e1 != new.e1) | (old.e2 != new.e2), axis=1))
+    moved = np.flatnonzero(changed_rows((old.v0, new.v0), (old.e1, new.e1), (old.e2, new.e2)))
     if len(moved) == 0 or len(moved) > MOVED_SHARE * len(new.v0):
         return None
     corners = np.concatenate([np.concatenate([c.v0[moved], c.v0[moved] + c.e1[moved], c.v0[moved] + c.e2[moved]])

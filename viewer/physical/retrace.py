@@ -23,6 +23,7 @@ import numpy as np
 from scipy import ndimage
 
 from viewer.rays import dda
+from viewer.rays.cast import changed_rows
 from viewer.probes import sh
 from viewer.physical.geometry import (SURFACE_OFFSET, Geometry, gather_directions, lamp_faces, probe_fields, scene_key,
                              transport_matrix)
@@ -89,7 +90,7 @@ def changed_cells(before: dda.Cells, before_keys: np.ndarray, after: dda.Cells, 
     another set of (triangle, voxel key) entries (a voxel appeared or went, and a grazing triangle's
     entry names a neighbour's)."""
     n3 = after.n ** 3
-    moved = np.any((before.v0 != after.v0) | (before.e1 != after.e1) | (before.e2 != after.e2), axis=1)
+    moved = changed_rows((before.v0, after.v0), (before.e1, after.e1), (before.e2, after.e2))
     changed = np.zeros(n3, bool)
     signatures = []
     for c, keys in ((before, before_keys), (after, after_keys)):

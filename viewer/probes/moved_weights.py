@@ -17,7 +17,7 @@ import numpy as np
 
 from viewer.probes.grid import ProbeGrid
 from viewer.probes.weights import SurfaceWeights
-from viewer.rays.cast import TriangleCaster
+from viewer.rays.cast import TriangleCaster, changed_rows
 
 
 @dataclass(frozen=True)
@@ -44,7 +44,7 @@ def moved_box(before: TriangleCaster, after: TriangleCaster) -> np.ndarray | Non
     `after`, casters of the same faces (an empty box where none moved); None where the faces differ."""
     if before.v0.shape != after.v0.shape:
         return None
-    moved = np.flatnonzero(np.any((before.v0 != after.v0) | (before.e1 != after.e1) | (before.e2 != after.e2), axis=1))
+    moved = np.flatnonzero(changed_rows((before.v0, after.v0), (before.e1, after.e1), (before.e2, after.e2)))
     if len(moved) == 0:
         return np.array([[np.inf] * 3, [-np.inf] * 3])
     corners = np.concatenate([np.concatenate([c.v0[moved], c.v0[moved] + c.e1[moved], c.v0[moved] + c.e2[moved]])

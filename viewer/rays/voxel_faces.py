@@ -20,6 +20,7 @@ import numpy as np
 from scipy import sparse
 
 from viewer.scene import Scene
+from viewer.rays.cast import changed_rows
 from viewer.scene.textures import relative_at
 from viewer.rays.pieces import PIECE_EDGE, face_pairs
 from viewer.rays.voxels import (FACINGS, VoxelGrid, Voxelization, light_samples, subdivide, face_facing,
@@ -70,7 +71,7 @@ class FaceVoxels:
         if size != self.size or not np.array_equal(lo, self.lo):
             return None
         triangles = scene.triangles
-        moved = np.any(triangles != self.triangles, axis=(1, 2))
+        moved = changed_rows((triangles, self.triangles))
         areas = scene.face_areas
         kept = _kept(areas)
         if areas[moved].sum() > MOVED_SHARE * areas.sum() or np.any(kept[~moved] != self.kept[~moved]):
