@@ -22,7 +22,7 @@ import moderngl
 import numba
 import numpy as np
 
-from viewer.gpu.mesh import TriangleBuffer, face_colours, face_uv, vertex_albedo, write_colours
+from viewer.gpu.mesh import TriangleBuffer, face_colours, scene_vertices, write_colours
 from viewer.scene import Scene, SceneError
 
 ATLAS_WIDTH = 2048
@@ -167,14 +167,11 @@ def _fill_tiles(corners, normals, origin, n, inset, position, normal, tile, insi
 def lightmap_vertices(scene: Scene, origin: np.ndarray, n: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """(3F, 16) float32: the SceneMesh vertex layout (position, normal, albedo, emission, texture
     coordinate) plus each corner's front-side lightmap coordinate (the back side's is 0.5 further along u)."""
-    keep = scene.face_areas > 0
-    corners = scene.triangles[keep]
-    per_face = [scene.face_normals[keep], vertex_albedo(scene)[keep], scene.emission[keep]]
+    out = scene_vertices(scene, 16).reshape(-1, 3, 16)
     uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     texel = origin[:, None, :] + 1.0 + n[:, None, None] * uv[None]          # (F, 3, 2) texel units
-    atlas = texel / np.asarray((2 * size[0], size[1]), np.float64)
-    columns = [corners] + [np.repeat(a[:, None, :], 3, axis=1) for a in per_face] + [face_uv(scene)[keep], atlas]
-    return np.concatenate(columns, axis=2).reshape(-1, 16).astype(np.float32)
+    out[..., 14:16] = texel / np.asarray((2 * size[0], size[1]), np.float64)
+    return out.reshape(-1, 16)
 
 
 def same_atlas(a: "BakedDirectLight", b: "BakedDirectLight") -> bool:
