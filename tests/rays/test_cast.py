@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from viewer.rays import cast
+from viewer.rays.moved_faces import changed_rows
 from viewer.scene import load
 from scenes import box
 
@@ -115,6 +116,6 @@ def test_changed_rows_are_the_rows_numpy_finds_different():
     d = c.copy()
     d[[10, 77], 0] = -1.0
     expected = np.any(a != b, axis=(1, 2)) | np.any(c != d, axis=1)
-    np.testing.assert_array_equal(cast.changed_rows((a, b), (c, d)), expected)
+    np.testing.assert_array_equal(changed_rows((a, b), (c, d)), expected)
     assert set(np.flatnonzero(expected)) == {3, 10, 77, 499}
-    assert not cast.changed_rows((a, a), (c, c.copy())).any()
+    assert not changed_rows((a, a), (c, c.copy())).any()

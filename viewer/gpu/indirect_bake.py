@@ -23,7 +23,8 @@ import moderngl
 import numpy as np
 
 from viewer import wake
-from viewer.rays.cast import TriangleCaster, changed_rows
+from viewer.rays.cast import TriangleCaster
+from viewer.rays.moved_faces import changed_rows
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.gather_cast import caster_of
 from viewer.gpu.context import finish
@@ -106,8 +107,7 @@ class BakedIndirectLight:
         self._prefetching: Future | None = None   # the geometry's work started by `prefetch`, while it runs
         self._geometry = 0
         """Counts `moved` calls: work started for an earlier geometry is dropped."""
-        self._made: tuple[int, TriangleCaster, tuple | None] | None = None   # (geometry, caster, gather) of the
-        # last weights: what the next job reuses
+        self._made: tuple[int, TriangleCaster, tuple | None] | None = None   # (geometry, caster, gather): reused
         self._points: tuple | None = None   # `_sample_points`' lightmap, answer and rounded face normals
         self._weighed: dict[int, tuple[TriangleCaster, Weighed]] = {}   # per lattice: its last weights' caster
         self._lobes: tuple = (None, None)   # (normal_id, `lobe_normals`) of the last weights

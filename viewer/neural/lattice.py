@@ -10,7 +10,7 @@ from scipy import sparse
 
 from viewer.neural import encoding
 from viewer.neural.encoding import CHANNELS
-from viewer.rays.cast import changed_rows
+from viewer.rays import moved_faces
 from viewer.rays.voxel_rays import VoxelRays, meets_box
 from viewer.rays.voxels import VoxelGrid
 
@@ -154,17 +154,10 @@ def moved_box(before: VoxelRays | None, after: VoxelRays | None) -> tuple[np.nda
     moved or most did."""
     if before is None or after is None:
         return None
-    old, new = before.cells, after.cells
-    if old.v0.shape != new.v0.shape:
+    found = moved_faces.moved_box(before.cells, after.cells, after.cells.h)
+    if found is None or found[1] is None or len(found[0]) > MOVED_SHARE * len(after.cells.v0):
         return None
-    moved = np.flatnonzero(changed_rows((old.v0, new.v0), (old.e1, new.e1), (old.e2, new.e2)))
-    if len(moved) == 0 or len(moved) > MOVED_SHARE * len(new.v0):
-        return None
-    corners = np.concatenate([np.concatenate([c.v0[moved], c.v0[moved] + c.e1[moved], c.v0[moved] + c.e2[moved]])
-                              for c in (old, new)])
-    lo, hi = corners.min(axis=0), corners.max(axis=0)
-    margin = 1e-6 * max(float((hi - lo).max()), float(new.h))
-    return lo - margin, hi + margin
+    return found[1][0], found[1][1]
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

@@ -23,7 +23,7 @@ import numpy as np
 from scipy import ndimage
 
 from viewer.rays import dda
-from viewer.rays.cast import changed_rows
+from viewer.rays.moved_faces import changed_rows
 from viewer.probes import sh
 from viewer.physical.geometry import (SURFACE_OFFSET, Geometry, gather_directions, lamp_faces, probe_fields, scene_key,
                              transport_matrix)

@@ -17,7 +17,8 @@ import numpy as np
 
 from viewer.probes.grid import ProbeGrid
 from viewer.probes.weights import SurfaceWeights
-from viewer.rays.cast import TriangleCaster, changed_rows
+from viewer.rays import moved_faces
+from viewer.rays.cast import TriangleCaster
 
 
 @dataclass(frozen=True)
@@ -42,16 +43,10 @@ class Weighed:
 def moved_box(before: TriangleCaster, after: TriangleCaster) -> np.ndarray | None:
     """(2, 3) the corners of a box around the old and new places of the faces that moved from `before` to
     `after`, casters of the same faces (an empty box where none moved); None where the faces differ."""
-    if before.v0.shape != after.v0.shape:
+    found = moved_faces.moved_box(before, after)
+    if found is None:
         return None
-    moved = np.flatnonzero(changed_rows((before.v0, after.v0), (before.e1, after.e1), (before.e2, after.e2)))
-    if len(moved) == 0:
-        return np.array([[np.inf] * 3, [-np.inf] * 3])
-    corners = np.concatenate([np.concatenate([c.v0[moved], c.v0[moved] + c.e1[moved], c.v0[moved] + c.e2[moved]])
-                              for c in (before, after)])
-    lo, hi = corners.min(axis=0), corners.max(axis=0)
-    margin = 1e-6 * max(float((hi - lo).max()), 1e-9)
-    return np.array([lo - margin, hi + margin])
+    return np.array([[np.inf] * 3, [-np.inf] * 3]) if found[1] is None else found[1]
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

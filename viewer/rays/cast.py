@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
-from viewer.rays import dda, embree
+from viewer.rays import dda, embree, moved_faces
 
 try:   # optional at run time: the DDA answers the same questions without it, slower on detailed meshes
     from embreex import rtcore_scene
@@ -84,27 +84,6 @@ def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 return first, which.ravel()
     _, first, which = np.unique(rows, axis=0, return_index=True, return_inverse=True)
     return first, which.ravel()
-
-
-def changed_rows(*pairs) -> np.ndarray:
-    """(F,) bool: the rows where the two arrays of any pair (a, b), each (F, ...), differ: the faces that
-    moved between two scenes, in one compiled pass (on a 272k-triangle scan 0.9 ms, where numpy's
-    comparison and reduction took 5.3; a moved object's update asks four times)."""
-    out = np.zeros(len(pairs[0][0]), np.bool_)
-    for a, b in pairs:
-        if a is not b:
-            _changed(np.ascontiguousarray(a).reshape(len(a), -1), np.ascontiguousarray(b).reshape(len(b), -1), out)
-    return out
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _changed(a, b, out):
-    for r in numba.prange(a.shape[0]):
-        if not out[r]:
-            for k in range(a.shape[1]):
-                if a[r, k] != b[r, k]:
-                    out[r] = True
-                    break
 
 
 def _hull_of(corners: np.ndarray) -> np.ndarray:
@@ -177,7 +156,7 @@ class TriangleCaster:
         parts = self._parted(triangles, faces, previous) if backend == "embree" else None
         if parts is not None:
             faces = np.concatenate([parts[0], parts[1]])
-        self._embrace(np.ascontiguousarray(triangles[faces], np.float32), faces, *dda.edges(scene),
+        self._embrace(np.ascontiguousarray(triangles[faces], np.float32), faces, *scene.edges,
                       backend == "embree", parts)
 
     def _parted(self, triangles: np.ndarray, faces: np.ndarray, previous: "TriangleCaster | None"):
@@ -187,7 +166,7 @@ class TriangleCaster:
         if (previous is None or previous._direct is None or not embree.available()
                 or previous._triangles.shape != triangles.shape):
             return None
-        moved = changed_rows((previous._triangles, triangles))[faces]
+        moved = moved_faces.changed_rows((previous._triangles, triangles))[faces]
         count = int(moved.sum())
         if count == 0 or count > MOVED_SHARE * len(faces) or len(faces) - count < PARTED_FACES:
             return None

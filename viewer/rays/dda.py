@@ -109,20 +109,11 @@ class Cells:
     def _make(scene, lo, h, n, cell, triangle, voxel) -> "Cells":
         first = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=n ** 3))]).astype(np.int64)
         return Cells(np.asarray(lo, np.float64), float(h), int(n), first, triangle.astype(np.int64),
-                     voxel.astype(np.int64), *edges(scene))
+                     voxel.astype(np.int64), *scene.edges)
 
     def args(self) -> tuple:
         """The record as the compiled code takes it."""
         return self.lo, self.h, self.n, self.first, self.triangle, self.voxel, self.v0, self.e1, self.e2
-
-
-def edges(scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(v0, e1, e2) of every face: the scene's own where it keeps them (`Scene.edges`)."""
-    if hasattr(scene, "edges"):
-        return scene.edges
-    tri = scene.triangles
-    return (np.ascontiguousarray(tri[:, 0]), np.ascontiguousarray(tri[:, 1] - tri[:, 0]),
-            np.ascontiguousarray(tri[:, 2] - tri[:, 0]))
 
 
 # ---- the march (compiled) --------------------------------------------------------------------------------

@@ -20,7 +20,7 @@ import numpy as np
 from scipy import sparse
 
 from viewer.scene import Scene
-from viewer.rays.cast import changed_rows
+from viewer.rays.moved_faces import changed_rows
 from viewer.scene.textures import relative_at
 from viewer.rays.pieces import PIECE_EDGE, face_pairs
 from viewer.rays.voxels import (FACINGS, VoxelGrid, Voxelization, light_samples, subdivide, face_facing,

@@ -1,0 +1,48 @@
+"""Which faces moved between two versions of a scene (a dragged lamp or object: the same faces, some
+elsewhere), and the box around their old and new places: what every stage that keeps its work across
+a move asks first (the ray casters, the voxels, the occluders' rays, the solver's retrace, the renderer's
+gather rays and probe weights).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+def changed_rows(*pairs) -> np.ndarray:
+    """(F,) bool: the rows where the two arrays of any pair (a, b), each (F, ...), differ: the faces that
+    moved between two scenes, in one compiled pass (on a 272k-triangle scan 0.9 ms, where numpy's
+    comparison and reduction took 5.3; a moved object's update asks four times)."""
+    out = np.zeros(len(pairs[0][0]), np.bool_)
+    for a, b in pairs:
+        if a is not b:
+            _changed(np.ascontiguousarray(a).reshape(len(a), -1), np.ascontiguousarray(b).reshape(len(b), -1), out)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _changed(a, b, out):
+    for r in numba.prange(a.shape[0]):
+        if not out[r]:
+            for k in range(a.shape[1]):
+                if a[r, k] != b[r, k]:
+                    out[r] = True
+                    break
+
+
+def moved_box(before, after, least: float = 1e-9) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """(moved, box) between `before` and `after`, each with the faces' (v0, e1, e2) (ray casters or cell
+    listings of the same faces): the faces that moved, and (2, 3) the corners of a box around their old
+    and new places, wider by a millionth of the larger of its extent and `least` (None where none moved).
+    None where the faces differ."""
+    if before.v0.shape != after.v0.shape:
+        return None
+    moved = np.flatnonzero(changed_rows((before.v0, after.v0), (before.e1, after.e1), (before.e2, after.e2)))
+    if len(moved) == 0:
+        return moved, None
+    corners = np.concatenate([np.concatenate([c.v0[moved], c.v0[moved] + c.e1[moved], c.v0[moved] + c.e2[moved]])
+                              for c in (before, after)])
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    margin = 1e-6 * max(float((hi - lo).max()), least)
+    return moved, np.array([lo - margin, hi + margin])
