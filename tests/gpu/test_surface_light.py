@@ -8,47 +8,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from surfaces import background_renderer, render, wait_for_weights
 
-from viewer.bench.blotches import _srgb, face_blocks, silhouette_steps, view_depth
-from viewer.physical.gi import GISettings
-from viewer.gpu.compute_relight import solve_probes
+from viewer.bench.blotches import face_blocks, silhouette_steps
 from viewer.gpu.offscreen import OffscreenRenderer
 from viewer.gpu.renderer import RenderSettings
 from viewer.probes.weights import SurfaceWeights
 from viewer.probes.grid import ProbeGrid
-from viewer.scene import load
-
-
-@pytest.fixture(scope="module")
-def cornell():
-    return load("cornell")
-
-
-@pytest.fixture(scope="module")
-def cornell_probes(gl_context, cornell):
-    return solve_probes(gl_context, cornell, GISettings(), include_emitted=False)
-
-
-def render(ctx, scene, probes, size, views=("final",), settings=None):
-    offscreen = OffscreenRenderer(size, settings or RenderSettings(), samples=0, ctx=ctx)
-    try:
-        offscreen.renderer.set_scene(scene)
-        offscreen.renderer.set_probes(probes)
-        images = {view: offscreen.render_hdr(view=view) for view in views}
-        images["depth"] = view_depth(offscreen, scene.camera, scene.bounds)
-    finally:
-        offscreen.release()
-    images["normals"] = 2.0 * _srgb(images["normals"]) - 1.0 if "normals" in images else None
-    return images
-
-
-def wait_for_weights(renderer) -> None:
-    """Until the renderer's background worker has installed the lightmap's weights (polled as a frame does)."""
-    import time
-
-    while renderer.baking:
-        time.sleep(0.02)
-        renderer.bake_version()
 
 
 def test_the_baked_indirect_light_is_the_weighted_probes_at_each_pixel(gl_context, cornell):
@@ -117,12 +83,9 @@ def test_a_new_lattice_is_read_per_fragment_until_its_weights_are_ready(gl_conte
     frames meanwhile read the probes per fragment (lit, not black), `bake_version` changes when the
     weights are in, and the image is then the one a synchronous renderer draws."""
     expected = render(gl_context, cornell, cornell_probes, (96, 96), ("indirect",))["indirect"]
-    offscreen = OffscreenRenderer((96, 96), samples=0, ctx=gl_context)
+    offscreen = background_renderer(gl_context, cornell, cornell_probes, (96, 96))
     try:
         renderer = offscreen.renderer
-        renderer.background_bake = True
-        renderer.set_scene(cornell)
-        renderer.set_probes(cornell_probes)
         early = offscreen.render_hdr(view="indirect")
         version = renderer.bake_version()
         assert version[1], "the weights are computed in the background"
@@ -170,163 +133,6 @@ def test_a_scene_too_detailed_to_bake_keeps_the_probes_per_fragment(gl_context, 
     np.testing.assert_allclose(baked, exact, rtol=1e-5, atol=1e-6)
 
 
-def test_a_colour_edit_keeps_the_geometry_work_and_draws_what_a_fresh_renderer_draws(gl_context, cornell,
-                                                                                   cornell_probes, monkeypatch):
-    """An edit of colours (a wall's albedo, the lamp's colour and intensity) keeps the triangles: the
-    renderer keeps the texel weights and final-gather rays and the shadow maps (seconds of work on a new
-    geometry) and draws what a renderer given the edited scene from the start draws: exactly after an
-    albedo edit, and within the half floats' rounding (a part in 2000) after the lamp's, whose light the
-    renderer scales instead of baking it again (the lamps light the Cornell box alone). A lamp moved is
-    new geometry: everything is made again."""
-    from viewer.gpu import indirect_bake, renderer as renderer_module
-
-    groups = {name: cornell.group_index(name) for name in cornell.groups}
-    emitter = next(name for name, k in groups.items() if cornell.emission[cornell.face_group == k].max() > 0)
-    wall = max((n for n in groups if n != emitter), key=lambda n: cornell.face_areas[cornell.face_group == groups[n]].sum())
-    lamp = cornell.face_group == groups[emitter]
-    edits = [cornell.with_albedo(wall, (0.9, 0.3, 0.2))]
-    emission = cornell.emission.copy()
-    emission[lamp] *= np.array([0.4, 0.8, 1.6])
-    edits.append(replace(cornell, emission=emission))
-
-    fresh = [render(gl_context, edited, cornell_probes, (64, 64))["final"] for edited in edits]
-    made, shadows = [], []
-    original = indirect_bake.BakedIndirectLight.weights_of
-    monkeypatch.setattr(indirect_bake.BakedIndirectLight, "weights_of",
-                        lambda self, probes: made.append(probes.resolution) or original(self, probes))
-    bakes = []
-    original_bake = renderer_module.BakedDirectLight.bake
-    monkeypatch.setattr(renderer_module.BakedDirectLight, "bake",
-                        lambda self, *args: bakes.append(1) or original_bake(self, *args))
-    original_shadows = renderer_module.EmitterShadows.render
-    monkeypatch.setattr(renderer_module.EmitterShadows, "render",
-                        lambda self, *args: shadows.append(1) or original_shadows(self, *args))
-    offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
-    try:
-        renderer = offscreen.renderer
-        renderer.set_scene(cornell)
-        renderer.set_probes(cornell_probes)
-        first = offscreen.render_hdr(view="final")
-        for edited, expected, rtol in zip(edits, fresh, (1e-4, 1e-3)):
-            bakes.clear()
-            renderer.set_scene(edited)
-            renderer.set_probes(cornell_probes)
-            image = offscreen.render_hdr(view="final")
-            assert not np.allclose(image, first, rtol=1e-2)
-            assert (made, shadows) == ([24], [1]), "the geometry's work was kept"
-            assert not bakes, "no bake: the lightmap holds irradiance, and the lamp's is scaled"
-            np.testing.assert_allclose(image, expected, rtol=rtol, atol=1e-6)
-            first = image
-        moved = lamp_moved(cornell)
-        renderer.set_scene(moved)
-        renderer.set_probes(cornell_probes)
-        image = offscreen.render_hdr(view="final")
-        assert (made, shadows) == ([24, 24], [1, 1])
-        monkeypatch.undo()
-        np.testing.assert_allclose(image, render(gl_context, moved, cornell_probes, (64, 64))["final"],
-                                   rtol=1e-4, atol=1e-6)
-    finally:
-        offscreen.release()
-
-
-def lamp_moved(scene, by=-0.05):
-    """The scene with its emitting faces moved along z."""
-    lamp = np.unique(scene.faces[scene.emission.max(axis=1) > 0])
-    vertices = scene.vertices.copy()
-    vertices[lamp, 2] += by
-    return replace(scene, vertices=vertices)
-
-
-def test_a_moved_lamp_retraces_only_what_changed_and_shows_the_probes_meanwhile(gl_context, cornell, cornell_probes,
-                                                                                 monkeypatch):
-    """The viewer drags a lamp: the same faces elsewhere, the same lightmap layout. While the worker
-    traces again the gather rays the move can change, the frames read the probes per fragment (the old
-    geometry's rays would leave the ceiling the lamp covered dark), and once the new weights land the
-    image is the one a renderer given the moved scene draws, from the same rays a full trace gives."""
-    moved = lamp_moved(cornell)
-    expected = render(gl_context, moved, cornell_probes, (64, 64), ("indirect",))["indirect"]
-    offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
-    try:
-        renderer = offscreen.renderer
-        renderer.background_bake = True
-        renderer.set_scene(cornell)
-        renderer.set_probes(cornell_probes)
-        offscreen.render_hdr(view="indirect")
-        wait_for_weights(renderer)
-        from viewer.gpu.final_gather import GatherRays
-
-        full, incremental = [], []
-        of, after_moving = GatherRays.of, GatherRays.after_moving
-        monkeypatch.setattr(GatherRays, "of", staticmethod(lambda *a, **k: full.append(1) or of(*a, **k)))
-        monkeypatch.setattr(GatherRays, "after_moving",
-                            lambda self, *a, **k: incremental.append(1) or after_moving(self, *a, **k))
-        renderer.set_scene(moved)
-        renderer.set_probes(cornell_probes)
-        meanwhile = offscreen.render_hdr(view="indirect")
-        assert renderer.baking and renderer._indirect.stale
-        exact = render(gl_context, moved, cornell_probes, (64, 64), ("indirect",),
-                       RenderSettings(baked=False))["indirect"]
-        np.testing.assert_allclose(meanwhile, exact, rtol=1e-4, atol=1e-6)   # the probes per fragment
-        wait_for_weights(renderer)
-        np.testing.assert_allclose(offscreen.render_hdr(view="indirect"), expected, rtol=1e-3, atol=1e-5)
-        assert (full, incremental) == ([], [1])
-        monkeypatch.undo()
-        fresh = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
-        try:   # only the rays the move can change were traced again, and they are all a new trace gives
-            fresh.renderer.set_scene(moved)
-            fresh.renderer.set_probes(cornell_probes)
-            fresh.render_hdr(view="indirect")
-            ours, theirs = renderer._indirect._gather, fresh.renderer._indirect._gather
-            np.testing.assert_array_equal(ours[0].hits, theirs[0].hits)
-            # and only the samples near the lamp were filtered again, to the rows filtering all of them gives
-            assert 0 < ours[1].filtered < 0.5 * theirs[1].filtered
-            np.testing.assert_array_equal(ours[1].near, theirs[1].near)
-            np.testing.assert_array_equal(ours[1].tent, theirs[1].tent)
-            # the probe weights too: weighed again near the lamp alone, the same as weighing every sample
-            kept = next(iter(renderer._indirect._weighed.values()))[1]
-            assert 0 < kept.weighed < 0.5 * len(kept.points)
-            np.testing.assert_array_equal(renderer._indirect._bake.weights, fresh.renderer._indirect._bake.weights)
-        finally:
-            fresh.release()
-    finally:
-        offscreen.release()
-
-
-def count_full_traces(monkeypatch) -> list:
-    """A list that gets an entry each time a geometry's final-gather rays are all traced (GatherRays.of)."""
-    from viewer.gpu.final_gather import GatherRays
-
-    traced = []
-    original = GatherRays.of
-    monkeypatch.setattr(GatherRays, "of", staticmethod(lambda *a, **k: traced.append(1) or original(*a, **k)))
-    return traced
-
-
-def test_a_new_scenes_rays_are_traced_before_its_first_probes(gl_context, cornell, cornell_probes, monkeypatch):
-    """In the viewer the final gather's rays of a new scene are traced on the worker from its first frame,
-    while the GI source computes the probes (they need none), and once: the weights that follow the
-    probes reuse them."""
-    import time
-
-    traced = count_full_traces(monkeypatch)
-    offscreen = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
-    try:
-        renderer = offscreen.renderer
-        renderer.background_bake = True
-        renderer.set_scene(cornell)
-        offscreen.render_hdr(view="final")          # no probes yet: direct light only
-        deadline = time.monotonic() + 600
-        while not traced or renderer._indirect._made is None:
-            assert time.monotonic() < deadline
-            time.sleep(0.02)
-        renderer.set_probes(cornell_probes)
-        offscreen.render_hdr(view="indirect")
-        wait_for_weights(renderer)
-        assert traced == [1]
-    finally:
-        offscreen.release()
-
-
 def test_a_finely_cut_box_is_gathered_from_records_that_follow_its_area(gl_context, cornell, cornell_probes):
     """Cut into 50,000 triangles, half of them narrower than two texels (a scanned mesh's), the large box
     has 2.3 times the lightmap samples it had as 12 triangles: one a tile for the narrow ones. The final
@@ -369,41 +175,3 @@ def test_a_finely_cut_box_is_gathered_from_records_that_follow_its_area(gl_conte
     np.testing.assert_allclose(ratio, 1.0, atol=0.03)
 
 
-def test_after_a_colour_edit_the_indirect_light_waits_for_the_probes_the_gi_source_is_computing(
-        gl_context, cornell, cornell_probes, monkeypatch):
-    """A colour edit re-gathers the indirect lightmap once, with the probes computed for it, not first with
-    the old ones as well (`probes_pending`, set by the viewer while its GI source works); without pending
-    probes, or past AWAIT_PROBES, it is gathered at once."""
-
-    from viewer.gpu import lightmaps
-    from viewer.gpu.indirect_bake import BakedIndirectLight
-
-    updates = []
-    original = BakedIndirectLight.update
-    monkeypatch.setattr(BakedIndirectLight, "update", lambda self, probes: updates.append(probes) or original(self, probes))
-    offscreen = OffscreenRenderer((32, 32), samples=0, ctx=gl_context)
-    try:
-        renderer = offscreen.renderer
-        renderer.set_scene(cornell)
-        renderer.set_probes(cornell_probes)
-        offscreen.render_hdr(view="final")
-        assert len(updates) == 1
-        greener = replace(cornell, albedo=cornell.albedo * np.array([0.8, 1.0, 0.8]))
-        renderer.probes_pending = True
-        renderer.set_scene(greener)
-        offscreen.render_hdr(view="final")
-        assert len(updates) == 1                      # the last gather shows until the new probes come
-        renderer.set_probes(cornell_probes)
-        offscreen.render_hdr(view="final")
-        assert len(updates) == 2
-        renderer.set_scene(cornell)
-        monkeypatch.setattr(lightmaps, "AWAIT_PROBES", 0.0)
-        renderer._stale_indirect(awaiting=True)
-        offscreen.render_hdr(view="final")
-        assert len(updates) == 3                      # waited long enough
-        renderer.probes_pending = False
-        renderer.set_scene(greener)
-        offscreen.render_hdr(view="final")
-        assert len(updates) == 4                      # no probes coming: gathered at once
-    finally:
-        offscreen.release()

@@ -62,7 +62,7 @@ def tent_neighbours(lightmap: BakedDirectLight, samples: np.ndarray, records: np
 
     `before`: the filter of the same samples and records before some faces moved, on the same grid: its
     rows stay for every sample with no moved or re-sided record (before or after) in the cells it reads,
-    and the others are filtered again; the same rows as filtering them all (tests/gpu/test_surface_light.py)."""
+    and the others are filtered again; the same rows as filtering them all (tests/gpu/test_surface_edits.py)."""
     points = np.ascontiguousarray(lightmap.texel_points[samples], np.float64)   # the front sides'; the back
     normals = np.ascontiguousarray(lightmap.texel_normals[samples], np.float64)  # sides' are the same again
     small = small_tiles(lightmap, samples)
