@@ -42,7 +42,7 @@ def test_scene_vertices_hold_each_faces_corners_and_its_attributes_three_times()
     """`scene_vertices`: the faces with an area, three vertices each: the corner, then the face's normal,
     vertex albedo and emission repeated, then the corner's texture coordinate; float32 of the float64
     values; the lightmap's layout adds its atlas coordinates after them."""
-    from viewer.gpu.mesh import face_uv, scene_vertices, vertex_albedo
+    from viewer.gpu.mesh import scene_vertices, vertex_albedo
 
     scene = load("cornell")
     keep = scene.face_areas > 0
@@ -52,5 +52,51 @@ def test_scene_vertices_hold_each_faces_corners_and_its_attributes_three_times()
     for start, per_face in ((3, scene.face_normals), (6, vertex_albedo(scene)), (9, scene.emission)):
         np.testing.assert_array_equal(vertices[..., start:start + 3],
                                       np.repeat(per_face[keep][:, None].astype(np.float32), 3, axis=1))
-    np.testing.assert_array_equal(vertices[..., 12:14], face_uv(scene)[keep].astype(np.float32))
+    np.testing.assert_array_equal(vertices[..., 12:14], 0.0)   # no texture coordinates
     np.testing.assert_array_equal(scene_vertices(scene), scene_vertices(scene, 16)[:, :14])
+    some = np.flatnonzero(keep)[5:17]   # some faces alone: their rows of the whole
+    np.testing.assert_array_equal(scene_vertices(scene, faces=some).reshape(-1, 3, 14),
+                                  scene_vertices(scene).reshape(-1, 3, 14)[5:17])
+
+
+def test_drags_leave_the_vertex_buffers_and_the_draw_order_as_a_fresh_upload_of_the_scene(gl_context, cornell):
+    """A drag writes only the faces that moved (`SceneMesh.write_moved`), on a copy of the scene in draw
+    order that keeps its order and makes its geometry from the last one's (`in_draw_order`): after the
+    lamp dragged and shrunk with a new colour, the small box dragged and a wall recoloured, the vertex
+    buffers and the scene in draw order are what a renderer given the last scene afresh holds."""
+    from dataclasses import replace
+
+    from viewer.gpu.mesh import in_draw_order
+
+    def moved(x, scale=1.0):
+        matrix = np.eye(4)
+        matrix[:3, :3] *= scale
+        matrix[0, 3] = x
+        return matrix
+
+    edited, fresh = Renderer(gl_context), Renderer(gl_context)
+    try:
+        scene = cornell
+        edited.set_scene(scene)
+        for change in (lambda s: s.transformed_group("light", moved(0.2)),
+                       lambda s: s.transformed_group("light", moved(-0.1, 0.7)).with_emission("light", (3, 2, 1)),
+                       lambda s: s.transformed_group("small-box", moved(0.15)),
+                       lambda s: s.with_albedo("green-wall", (0.2, 0.5, 0.7))):
+            kept = edited.mesh
+            scene = change(scene)
+            edited.set_scene(scene)
+            edited._ensure_shadows()
+            edited._ensure_baked()
+            assert edited.mesh is kept
+        fresh.set_scene(replace(scene, vertices=np.array(scene.vertices)))
+        fresh._ensure_shadows()
+        fresh._ensure_baked()
+        for pick in (lambda r: r.mesh, lambda r: r._baked):
+            assert pick(edited).buffer.read() == pick(fresh).buffer.read()
+        ours, theirs = edited._draw_order, in_draw_order(scene)
+        np.testing.assert_array_equal(ours[2], theirs[2])
+        for name in ("faces", "albedo", "emission", "face_group", "triangles", "face_normals", "face_areas"):
+            np.testing.assert_array_equal(getattr(ours[1], name), getattr(theirs[1], name), err_msg=name)
+    finally:
+        edited.release()
+        fresh.release()

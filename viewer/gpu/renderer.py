@@ -30,7 +30,7 @@ from viewer.gpu.camera import gl_bytes, jittered, view_projection
 from viewer.gpu.debug_views import DebugViews
 from viewer.gpu.lightmaps import (ATLAS_UNIT, BAKED_UNIT, HDR_UNIT, INDIRECT_UNIT, INTERLEAVE_UNIT, PROBE_UNIT,
                                   SUN_UNIT, LightmapUpkeep, max_texture_side)
-from viewer.gpu.mesh import SceneMesh, in_draw_order, same_triangles
+from viewer.gpu.mesh import SceneMesh, in_draw_order, same_faces, same_triangles
 from viewer.gpu.probe_textures import ProbeTextures, empty_grid
 from viewer.gpu.programs import SHADERS, ProgramLibrary, set_uniforms
 from viewer.gpu.render_settings import TONEMAPS, VIEWS, VOXEL_COLORS, RenderSettings  # noqa: F401 (re-exported)
@@ -126,7 +126,7 @@ class Renderer(LightmapUpkeep):
         same = self.scene is not None and same_triangles(draw_scene, self._draw_scene)
         if not same:
             self._geometry += 1
-            if self.scene is None or not np.array_equal(draw_scene.faces, self._draw_scene.faces):
+            if self.scene is None or not same_faces(draw_scene, self._draw_scene):
                 self._release_baked()
                 self._faces = int(np.count_nonzero(scene.face_areas > 0))   # said once, not per edit
                 self._fits = lightmap_holds(scene, max_texture_side(self.ctx))

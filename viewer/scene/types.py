@@ -14,12 +14,12 @@ viewer.scene picks the format of a file and loads built-in scenes by name; this 
 from __future__ import annotations
 
 import copy
-import hashlib
 import sys
-from dataclasses import dataclass, field, replace
-from functools import cached_property
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from viewer.scene.geometry import TriangleGeometry
 
 
 MAX_COORDINATE = 1e15
@@ -29,13 +29,15 @@ MAX_RADIANCE = 1e30
 """Largest emitted radiance (and sun irradiance): the bounces, the probes' SH and the renderer work in
 float32 (up to 3.4e38) and multiply it by areas, solid angles and the bounce series' sum; a value finite
 in float64 but past this would come out as NaN or infinity in the probes and the picture."""
-FLAT = 1e-6
-"""A bounding box thinner than this fraction of its largest extent along an axis is flat along it."""
 
 
-def _read_only(array: np.ndarray) -> np.ndarray:
-    array.setflags(write=False)
-    return array
+def _own_colours(values, face_count: int) -> np.ndarray:
+    """(F, 3) float64 colours a scene can keep: a read-only array of that shape as it is (another scene's,
+    or one an edit made for it), else a copy (a million-triangle scan's two copies took 0.15 s a drag)."""
+    array = np.asarray(values, np.float64)
+    if array.shape == (face_count, 3) and not array.flags.writeable:
+        return array
+    return np.broadcast_to(array, (face_count, 3)).copy()
 
 
 class SceneError(ValueError):
@@ -86,7 +88,7 @@ class Camera:
 
 
 @dataclass(frozen=True)
-class Scene:
+class Scene(TriangleGeometry):
     """A triangle soup with per-face Lambertian material and emission."""
 
     name: str
@@ -121,11 +123,7 @@ class Scene:
             raise SceneError(f"{self.name}: vertices and faces must be (n, 3) arrays")
         if len(f) == 0 or len(v) == 0:
             raise SceneError(f"{self.name}: the scene has no triangles")
-        if not np.all(np.isfinite(v)):
-            raise SceneError(f"{self.name}: vertex positions contain NaN or infinity")
-        if np.abs(v).max() > MAX_COORDINATE:
-            raise SceneError(f"{self.name}: vertex coordinates beyond +-{MAX_COORDINATE:.0e} (the GPU computes "
-                             f"areas in float32)")
+        self._check_positions(v)
         if f.min() < 0 or f.max() >= len(v):
             raise SceneError(f"{self.name}: face indices out of range (0..{len(v) - 1})")
         # Voxelizing weighs every triangle by its area: some must be non-zero.
@@ -139,9 +137,18 @@ class Scene:
         object.__setattr__(self, "groups", tuple(self.groups) or ("default",))
         self._check_colours(len(f))
 
+    def _check_positions(self, v: np.ndarray) -> None:
+        if not np.all(np.isfinite(v)):
+            raise SceneError(f"{self.name}: vertex positions contain NaN or infinity")
+        if len(v) and np.abs(v).max() > MAX_COORDINATE:
+            raise SceneError(f"{self.name}: vertex coordinates beyond +-{MAX_COORDINATE:.0e} (the GPU computes "
+                             f"areas in float32)")
+
+    def _error(self, message: str) -> SceneError:
+        return SceneError(f"{self.name}: {message}")
+
     def _check_colours(self, face_count: int) -> None:
-        albedo = np.broadcast_to(np.asarray(self.albedo, np.float64), (face_count, 3)).copy()
-        emission = np.broadcast_to(np.asarray(self.emission, np.float64), (face_count, 3)).copy()
+        albedo, emission = _own_colours(self.albedo, face_count), _own_colours(self.emission, face_count)
         if not (np.all(np.isfinite(albedo)) and np.all(np.isfinite(emission))):
             raise SceneError(f"{self.name}: material colours contain NaN or infinity")
         if np.any(emission < 0):
@@ -149,7 +156,8 @@ class Scene:
         if np.any(emission > MAX_RADIANCE):
             raise SceneError(f"{self.name}: emitted radiance beyond {MAX_RADIANCE:.0e} (the GI works in float32)")
         # Albedo 1 never converges (eq. 30 is a geometric series in albedo): keep it just below.
-        albedo = np.clip(albedo, 0.0, 0.999)
+        if albedo.min() < 0.0 or albedo.max() > 0.999:
+            albedo = np.clip(albedo, 0.0, 0.999)
         for name, value in (("albedo", albedo), ("emission", emission)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -186,63 +194,6 @@ class Scene:
         object.__setattr__(self, "uv", uv)
         object.__setattr__(self, "textures", textures)
 
-    # ---- derived geometry -------------------------------------------------------------------------
-    @cached_property
-    def triangles(self) -> np.ndarray:
-        """(F, 3, 3) corner positions, made once (read-only): each stage of a new scene asks for them, and
-        on a 272k-triangle scan each gather of the corners took 14 ms (100 ms of voxelizing it)."""
-        return _read_only(self.vertices[self.faces])
-
-    @cached_property
-    def geometry_digest(self) -> bytes:
-        """A hash of the triangles' corners (what traced geometry depends on; not colours or lights)."""
-        return hashlib.blake2b(np.ascontiguousarray(self.triangles).tobytes(), digest_size=16).digest()
-
-    # The scene is immutable (its arrays are read-only), so what is derived from its triangles is computed
-    # once and kept, read-only too: a stage asks for the faces' areas or the bounds many times, and on a
-    # 68k-triangle scan each cross product took 15 ms (0.25 s of opening it).
-    @cached_property
-    def edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(v0, e1, e2), each (F, 3) contiguous and read-only: each face's first corner and its edges to the
-        other two, as every ray caster reads them, made once (three stages of a moved lamp's scene made
-        them each, 2-3 ms a time on a 68k-triangle scan)."""
-        t = self.triangles
-        return tuple(_read_only(np.ascontiguousarray(a)) for a in (t[:, 0], t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
-
-    @cached_property
-    def face_cross(self) -> np.ndarray:
-        t = self.triangles
-        return _read_only(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
-
-    @cached_property
-    def face_areas(self) -> np.ndarray:
-        return _read_only(0.5 * np.linalg.norm(self.face_cross, axis=1))
-
-    @cached_property
-    def face_normals(self) -> np.ndarray:
-        """Unit front-face normals (zero for degenerate faces)."""
-        c = self.face_cross
-        n = np.linalg.norm(c, axis=1, keepdims=True)
-        return _read_only(np.divide(c, n, out=np.zeros_like(c), where=n > 0))
-
-    @cached_property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lo, hi): the box around the vertices the faces use, and the box every stage fills (probes,
-        the camera's framing). A flat scene (a floor alone, one lamp) has no depth along one axis: that
-        axis is widened, centred on the plane, to the box's largest extent, so that the probe grid over
-        it has a spacing on every axis and probes on both sides of the plane."""
-        mask = np.zeros(len(self.vertices), bool)
-        mask[self.faces.ravel()] = True   # a mask, not np.unique's sort: 0.3 ms against 9 on a 68k scan
-        used = self.vertices[mask]
-        lo, hi = used.min(axis=0), used.max(axis=0)
-        extent = hi - lo
-        flat = extent <= FLAT * extent.max()
-        if np.any(flat):
-            half = 0.5 * (extent.max() if extent.max() > 0 else 1.0)
-            centre = 0.5 * (lo + hi)
-            lo, hi = np.where(flat, centre - half, lo), np.where(flat, centre + half, hi)
-        return _read_only(lo), _read_only(hi)
-
     @property
     def has_emitters(self) -> bool:
         return bool(np.any(self.emission > 0)) or (self.sun is not None and np.any(self.sun.irradiance > 0))
@@ -269,9 +220,12 @@ class Scene:
         channel the new colour has: then the texture is dropped and the group shows the plain colour."""
         index = self.group_index(group)
         mask = self.face_group == index
+        texture = self.texture_of(index)
+        if texture is None and np.all(self.albedo[mask] == np.clip(np.asarray(rgb, np.float64), 0.0, 0.999)):
+            return self   # the viewer applies every group's colour again after each edit
         albedo = self.albedo.copy()
         albedo[mask] = np.asarray(rgb, np.float64)
-        texture = self.texture_of(index)
+        albedo.setflags(write=False)   # the new scene's own: not copied again
         if texture is not None and np.any((texture.mean <= 0) & (albedo[mask] > 0)):
             textures = list(self.textures)
             textures[index] = None
@@ -280,8 +234,11 @@ class Scene:
 
     def with_emission(self, group: str, rgb) -> "Scene":
         mask = self.face_group == self.group_index(group)
+        if np.all(self.emission[mask] == np.asarray(rgb, np.float64)):
+            return self   # the viewer applies the lamp's colour again after each drag
         emission = self.emission.copy()
         emission[mask] = np.asarray(rgb, np.float64)
+        emission.setflags(write=False)   # the new scene's own: not copied again
         return self._recoloured(emission=emission)
 
     def with_sun(self, sun: DirectionalLight | None) -> "Scene":
@@ -295,7 +252,7 @@ class Scene:
         v = self.vertices.copy()
         m = np.asarray(matrix, np.float64)
         v[idx] = v[idx] @ m[:3, :3].T + m[:3, 3]
-        return replace(self, vertices=v)
+        return self._moved(v, idx)
 
     def largest_group(self) -> str:
         """The group whose faces have the largest total area (a room's biggest wall or floor)."""
