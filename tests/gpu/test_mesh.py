@@ -100,3 +100,39 @@ def test_drags_leave_the_vertex_buffers_and_the_draw_order_as_a_fresh_upload_of_
     finally:
         edited.release()
         fresh.release()
+
+
+@pytest.mark.parametrize("writes", [64, 3])
+def test_scattered_colour_changes_are_written_run_by_run_or_first_to_last(gl_context, cornell, writes, monkeypatch):
+    """Faces recoloured here and there (runs of consecutive faces, each written apart, or more runs than
+    `COLOUR_WRITES`: one write from the first to the last) leave the vertex buffers as a fresh upload
+    holds them."""
+    from dataclasses import replace
+
+    from viewer.gpu import mesh
+    from viewer.gpu.mesh import in_draw_order, recoloured_rows
+
+    monkeypatch.setattr(mesh, "COLOUR_WRITES", writes)
+
+    rng = np.random.default_rng(7)
+    albedo = np.array(cornell.albedo)
+    chosen = rng.random(len(albedo)) < 0.5
+    albedo[chosen] = rng.random((int(chosen.sum()), 3))
+    edited_scene = replace(cornell, albedo=albedo)
+    rows = recoloured_rows(in_draw_order(edited_scene)[1], in_draw_order(cornell)[1])
+    assert len(rows) == chosen.sum() and 3 < 1 + np.count_nonzero(np.diff(rows) != 1) < 64
+    edited, fresh = Renderer(gl_context), Renderer(gl_context)
+    try:
+        edited.set_scene(cornell)
+        edited._ensure_shadows()
+        edited._ensure_baked()
+        edited.set_scene(edited_scene)
+        fresh.set_scene(edited_scene)
+        for renderer in (edited, fresh):
+            renderer._ensure_shadows()
+            renderer._ensure_baked()
+        for pick in (lambda r: r.mesh, lambda r: r._baked):
+            assert pick(edited).buffer.read() == pick(fresh).buffer.read()
+    finally:
+        edited.release()
+        fresh.release()

@@ -22,7 +22,7 @@ import moderngl
 import numba
 import numpy as np
 
-from viewer.gpu.mesh import TriangleBuffer, face_colours, scene_vertices, write_colours
+from viewer.gpu.mesh import TriangleBuffer, scene_vertices, write_colours
 from viewer.scene import Scene, SceneError
 
 ATLAS_WIDTH = 2048
@@ -195,7 +195,7 @@ class BakedDirectLight(TriangleBuffer):
         self.tile_origin, self.tile_n = origin, n
         """Each face's tile: its lower-left atlas texel (F, 2) and its triangle's texels per side (F,)."""
         vertices = lightmap_vertices(scene, origin, n, self.size)
-        self._uv, self._colours = scene.uv, None   # the texture coordinates the buffer holds, and the colours
+        self._uv = scene.uv   # the texture coordinates the buffer holds
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(np.ascontiguousarray(vertices))   # read in place, not copied
         position, normal, tile, inside = lightmap_texels(scene, origin, n, self.size)
@@ -219,17 +219,15 @@ class BakedDirectLight(TriangleBuffer):
         """What the baked irradiance is multiplied by where it is read: a lamp's new colour or intensity in a
         scene lit by its lamps alone scales it (`LightmapUpkeep._ensure_shadows`) instead of a bake."""
 
-    def recolour(self, scene: Scene, colours: np.ndarray | None = None) -> None:
+    def recolour(self, scene: Scene, rows: np.ndarray | None = None) -> None:
         """Take the colours (albedo, emission) of `scene`, whose triangles are those this was made for;
         the lightmap must be baked again. Only the colours are written (0.1 s less on a 68k-triangle scan):
-        `colours` (`face_colours` of `scene`, as the scene's mesh just took them) or made here; where the
-        texture coordinates differ too (a texture dropped), every attribute."""
+        of the faces at `rows` (`recoloured_rows`: what the scene's mesh just wrote), or all of them (None);
+        where the texture coordinates differ too (a texture dropped), every attribute."""
         if scene.uv is self._uv:   # the same array: `in_draw_order` keeps it across colour edits
-            colours = face_colours(scene) if colours is None else colours
-            self._colours = write_colours(self.buffer, colours, self._colours, 64)
+            write_colours(self.buffer, scene, rows, 64)
         else:
             self.buffer.write(np.ascontiguousarray(lightmap_vertices(scene, self.tile_origin, self.tile_n, self.size)))
-            self._colours = None
         self._uv = scene.uv
 
     def bake(self, program: moderngl.Program, first_unit: int) -> None:

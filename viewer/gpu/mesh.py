@@ -71,9 +71,9 @@ def in_draw_order(scene: Scene, last: tuple[Scene, Scene, np.ndarray] | None = N
             reordered = reordered._moved(scene.vertices, moved)
         if scene.vertices is reordered.vertices:
             uv = reordered.uv if scene.uv is before.uv else scene.uv[order] if scene.uv is not None else None
-            reordered = reordered._recoloured(albedo=_in_order(scene.albedo, before.albedo, reordered.albedo, order),
-                                              emission=_in_order(scene.emission, before.emission, reordered.emission,
-                                                                 order),
+            colours = {name: _in_order(getattr(scene, name), getattr(before, name), getattr(reordered, name), order)
+                       for name in ("albedo", "emission")}
+            reordered = reordered._recoloured(**{n: c for n, c in colours.items() if c is not getattr(reordered, n)},
                                               uv=uv, textures=scene.textures, sun=scene.sun)
             return scene, reordered, order
     area = np.bincount(scene.face_group, weights=scene.face_areas, minlength=len(scene.groups))
@@ -154,28 +154,51 @@ def same_faces(a: Scene, b: Scene) -> bool:
     return a.faces is b.faces or (a.faces.shape == b.faces.shape and np.array_equal(a.faces, b.faces))
 
 
-def face_colours(scene: Scene) -> np.ndarray:
-    """(F, 6) float32: each drawn face's albedo (`vertex_albedo`) and emission, the attributes after position
-    and normal in both vertex layouts (SceneMesh's and the lightmap's), which a colour edit writes alone
-    (`write_colours`)."""
-    keep = scene.face_areas > 0
-    return np.concatenate([vertex_albedo(scene)[keep], scene.emission[keep]], axis=1).astype(np.float32)
+def same_textures(a: Scene, b: Scene) -> bool:
+    """Whether two scenes show the same texture objects group by group."""
+    return len(a.textures) == len(b.textures) and all(x is y for x, y in zip(a.textures, b.textures))
 
 
-def write_colours(buffer: moderngl.Buffer, colours: np.ndarray, held: np.ndarray | None, stride: int) -> np.ndarray:
-    """Write the faces' `colours` (`face_colours`) into a vertex buffer of `stride` bytes a vertex (position
-    and normal first), three vertices a face, where they differ from `held`, the colours it holds (None:
-    unknown): the faces from the first that changed to the last, in one write (a lamp's colour or a wall's
-    is a few faces, where all of a 68k-triangle scan's took 6 ms a buffer). Returns `colours`, held now."""
-    if held is None or held.shape != colours.shape:
-        changed = np.arange(len(colours))
-    else:
-        changed = np.flatnonzero((colours != held).any(axis=1))
-    if len(changed):
-        first, last = int(changed[0]), int(changed[-1]) + 1
-        vertices = np.repeat(colours[first:last], 3, axis=0)
-        buffer.write_chunks(vertices.tobytes(), 24 + 3 * first * stride, stride, len(vertices))
-    return colours
+def face_colours(scene: Scene, faces: np.ndarray) -> np.ndarray:
+    """(K, 6) float32: the albedo (`vertex_albedo`) and emission of the `faces` (indices), the attributes
+    after position and normal in both vertex layouts (SceneMesh's and the lightmap's), which a colour edit
+    writes alone (`write_colours`)."""
+    return np.concatenate([vertex_albedo(scene, faces), scene.emission[faces]], axis=1).astype(np.float32)
+
+
+def recoloured_rows(scene: Scene, previous: Scene) -> np.ndarray:
+    """The drawn faces (by their place among the faces with an area, as the vertex buffers hold them) whose
+    colours differ from `previous`'s, a scene of the same triangles: found in one compiled comparison of
+    the two scenes' colours (comparing every face's colours as written took a million-triangle scan 62 ms
+    a lamp's colour edit); all of them where the textures differ (their means divide the albedo)."""
+    drawn = scene.face_areas > 0
+    if not same_textures(scene, previous):
+        return np.arange(int(np.count_nonzero(drawn)))
+    changed = np.flatnonzero(changed_rows((scene.albedo, previous.albedo), (scene.emission, previous.emission))
+                             & drawn)
+    return changed if drawn.all() else np.cumsum(drawn)[changed] - 1
+
+
+COLOUR_WRITES = 64
+"""Past this many runs of consecutive faces to recolour, one write covers them all, first to last."""
+
+
+def write_colours(buffer: moderngl.Buffer, scene: Scene, rows: np.ndarray | None, stride: int) -> None:
+    """Write the colours (`face_colours`) of `scene`'s drawn faces at `rows` (`recoloured_rows`; None: all)
+    into a vertex buffer of `stride` bytes a vertex (position and normal first), three vertices a face:
+    each run of consecutive faces in one write (a lamp's colour or a wall's is one run of a few faces,
+    where all of a 68k-triangle scan's took 6 ms a buffer)."""
+    drawn = np.flatnonzero(scene.face_areas > 0)
+    rows = np.arange(len(drawn)) if rows is None else np.asarray(rows, np.int64)
+    if len(rows) == 0:
+        return
+    breaks = np.flatnonzero(np.diff(rows) != 1) + 1
+    if len(breaks) >= COLOUR_WRITES:
+        rows, breaks = np.arange(rows[0], rows[-1] + 1), np.zeros(0, np.int64)
+    colours = face_colours(scene, drawn[rows])
+    for run in np.split(np.arange(len(rows)), breaks):
+        vertices = np.repeat(colours[run], 3, axis=0)
+        buffer.write_chunks(vertices.tobytes(), 24 + 3 * int(rows[run[0]]) * stride, stride, len(vertices))
 
 
 class SceneMesh(TriangleBuffer):
@@ -188,7 +211,9 @@ class SceneMesh(TriangleBuffer):
         vertices = self._vertices(scene)
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(np.ascontiguousarray(vertices))   # read in place, not copied
-        self.colours: np.ndarray | None = None   # `face_colours` the buffer holds, once a colour edit wrote them
+        self.recoloured: np.ndarray | None = None
+        """The rows the last colour edit wrote (`recoloured_rows`), for the lightmap's buffer to write too;
+        None where all the vertices were written."""
 
     @staticmethod
     def _vertices(scene: Scene) -> np.ndarray:
@@ -202,10 +227,11 @@ class SceneMesh(TriangleBuffer):
         are the same (a drag: `write_moved`), else a new one (`old` released)."""
         if old is not None and previous is not None and same_triangles(scene, previous):
             if scene.uv is previous.uv:   # the same array: `in_draw_order` keeps it across colour edits
-                old.colours = write_colours(old.buffer, face_colours(scene), old.colours, 56)
+                old.recoloured = recoloured_rows(scene, previous)
+                write_colours(old.buffer, scene, old.recoloured, 56)
             else:
                 old.buffer.write(np.ascontiguousarray(SceneMesh._vertices(scene)))
-                old.colours = None
+                old.recoloured = None
             return old
         if old is not None and previous is not None and old.write_moved(scene, previous):
             return old
@@ -218,9 +244,7 @@ class SceneMesh(TriangleBuffer):
         the buffer holds) to `scene`, the faces from the first that changed to the last in one write (a
         dragged lamp in a million-triangle scan: 0.9 s for all of its vertices). False, nothing written,
         where the faces, their texture coordinates or textures differ, or a face gained or lost its area."""
-        same_textures = len(scene.textures) == len(previous.textures) and all(
-            a is b for a, b in zip(scene.textures, previous.textures))
-        if not (scene.faces is previous.faces and scene.uv is previous.uv and same_textures):
+        if not (scene.faces is previous.faces and scene.uv is previous.uv and same_textures(scene, previous)):
             return False
         drawn = scene.face_areas > 0
         if not np.array_equal(drawn, previous.face_areas > 0):
@@ -232,9 +256,7 @@ class SceneMesh(TriangleBuffer):
             first, last = int(rows[0]), int(rows[-1]) + 1
             vertices = scene_vertices(scene, faces=np.flatnonzero(drawn)[first:last])
             self.buffer.write(np.ascontiguousarray(vertices), offset=3 * first * vertices.shape[1] * 4)
-            if self.colours is not None:
-                self.colours = self.colours.copy()
-                self.colours[first:last] = vertices[::3, 6:12]
+        self.recoloured = None
         return True
 
 

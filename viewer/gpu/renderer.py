@@ -141,7 +141,7 @@ class Renderer(LightmapUpkeep):
         previous, self._draw_scene = self._draw_scene, draw_scene
         self.mesh = SceneMesh.remade(self.mesh, self.ctx, draw_scene, previous)   # a colour edit keeps its arrays
         if same and self._baked is not None:   # the lightmap's vertices take the colours the mesh's just took
-            self._baked.recolour(draw_scene, self.mesh.colours)
+            self._baked.recolour(draw_scene, self.mesh.recoloured)
             if self._indirect is not None:
                 self._indirect.recolour(draw_scene)
                 self._stale_indirect(awaiting=True)

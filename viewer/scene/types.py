@@ -147,16 +147,18 @@ class Scene(TriangleGeometry):
     def _error(self, message: str) -> SceneError:
         return SceneError(f"{self.name}: {message}")
 
-    def _check_colours(self, face_count: int) -> None:
-        albedo, emission = _own_colours(self.albedo, face_count), _own_colours(self.emission, face_count)
-        if not (np.all(np.isfinite(albedo)) and np.all(np.isfinite(emission))):
+    def _check_colours(self, face_count: int, checked: tuple[str, ...] = ()) -> None:
+        """Check and keep the albedo and emission, but those `checked` already (another scene's arrays)."""
+        albedo = self.albedo if "albedo" in checked else _own_colours(self.albedo, face_count)
+        emission = self.emission if "emission" in checked else _own_colours(self.emission, face_count)
+        if not all(np.all(np.isfinite(a)) for n, a in (("albedo", albedo), ("emission", emission)) if n not in checked):
             raise SceneError(f"{self.name}: material colours contain NaN or infinity")
-        if np.any(emission < 0):
+        if "emission" not in checked and np.any(emission < 0):
             raise SceneError(f"{self.name}: negative emission")
-        if np.any(emission > MAX_RADIANCE):
+        if "emission" not in checked and np.any(emission > MAX_RADIANCE):
             raise SceneError(f"{self.name}: emitted radiance beyond {MAX_RADIANCE:.0e} (the GI works in float32)")
         # Albedo 1 never converges (eq. 30 is a geometric series in albedo): keep it just below.
-        if albedo.min() < 0.0 or albedo.max() > 0.999:
+        if "albedo" not in checked and (albedo.min() < 0.0 or albedo.max() > 0.999):
             albedo = np.clip(albedo, 0.0, 0.999)
         for name, value in (("albedo", albedo), ("emission", emission)):
             value.setflags(write=False)
@@ -171,7 +173,7 @@ class Scene(TriangleGeometry):
         scene = copy.copy(self)
         for name, value in changes.items():
             object.__setattr__(scene, name, value)
-        scene._check_colours(len(scene.faces))
+        scene._check_colours(len(scene.faces), tuple(n for n in ("albedo", "emission") if n not in changes))
         return scene
 
     def _check_textures(self, face_count: int) -> None:
