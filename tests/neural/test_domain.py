@@ -145,3 +145,21 @@ def test_a_closed_room_is_outside_rooms_open_at_the_front():
     for closed in (furnace(0.8), Scene.concatenate("lit", [box(inward=True, albedo=0.5, name="room"), ceiling_lamp()])):
         assert measure(closed).open_sides == 0
         assert "the scene is open on 0 sides of its box; every training room was open on 1" in outside(closed, V2)
+
+
+def test_colour_edits_sum_again_only_the_groups_they_recolour():
+    """`measure` keeps its albedo sums between calls on the same triangles: after colour edits (two
+    groups recoloured, then the lamp's colour) it gives what it gives afresh, to the last bit."""
+    from viewer.neural import domain
+
+    scene = load("cornell")
+    shape = domain.Shape.of(scene)
+    measure(scene, shape)
+    for edited in (scene.with_albedo("red-wall", (0.3, 0.2, 0.1)).with_albedo("small-box", (0.9, 0.9, 0.1)),
+                   scene.with_emission("light", (5.0, 4.0, 3.0))):
+        kept = measure(edited, shape)
+        domain._albedo_kept[0] = None
+        fresh = measure(edited, shape)
+        assert kept.albedo.keys() == fresh.albedo.keys()
+        for name in fresh.albedo:
+            np.testing.assert_array_equal(kept.albedo[name], fresh.albedo[name])

@@ -94,3 +94,11 @@ def test_unchanged_colours_give_back_the_same_scene_and_new_ones_are_not_copied_
     brighter = cornell.with_emission("light", 2 * lamp)
     assert brighter.albedo is cornell.albedo and brighter.vertices is cornell.vertices
     assert not brighter.emission.flags.writeable
+
+
+def test_a_drag_gets_a_digest_of_its_own_made_from_its_source(cornell):
+    cornell.geometry_digest
+    moved = cornell.transformed_group("light", shift(0.1))
+    other = cornell.transformed_group("light", shift(0.2))
+    assert len({cornell.geometry_digest, moved.geometry_digest, other.geometry_digest}) == 3
+    assert cornell.transformed_group("light", shift(0.1)).geometry_digest == moved.geometry_digest

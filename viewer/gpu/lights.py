@@ -78,7 +78,7 @@ def _frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def emitter_samples(scene: Scene, count: int = 32) -> LightSamples:
     """`count` power-stratified samples on the scene's emitting triangles (an empty set if none emit)."""
     area = scene.face_areas
-    emitting = np.flatnonzero(np.any(scene.emission > 0, axis=1) & (area > 0))
+    emitting = np.flatnonzero(scene.emitting & (area > 0))
     if len(emitting) == 0 or count <= 0:
         empty = np.zeros((0, 3))
         return LightSamples(empty, empty, empty, empty, empty, np.zeros(0))

@@ -55,7 +55,7 @@ class GeometrySettings:
 
 def lamp_faces(scene: Scene) -> np.ndarray:
     """(F,) bool: the faces whose light comes through light samples (see LAMP_SHARE)."""
-    emitting = np.any(scene.emission > 0, axis=1)
+    emitting = scene.emitting
     areas = scene.face_areas
     if areas[emitting].sum() > LAMP_SHARE * areas.sum():
         return np.zeros(len(emitting), bool)

