@@ -106,6 +106,11 @@ class _Stayed:
     hull: np.ndarray | None = None
 
 
+def corners(scene, faces: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) float32 corners of the `faces`, as Embree takes them."""
+    return np.ascontiguousarray(scene.vertices[scene.faces[faces]], np.float32)
+
+
 def usable_faces(scene) -> np.ndarray:
     """The faces rays can meet: those of area above 1e-12 of the largest (as the DDA lists them)."""
     areas = scene.face_areas
@@ -123,8 +128,6 @@ class TriangleCaster:
     _direct: "embree.Scene | None" = None
     """Embree called from compiled loops (viewer.rays.embree); None where only embreex's binding works."""
     _quick = False
-    _triangles: np.ndarray | None = None
-    """(F, 3, 3) the scene's triangles, to tell which faces a later caster's scene moved."""
     _stayed: _Stayed | None = None
     """The faces that stayed, where this caster was made from a previous one with some faces moved: the
     next move of the same faces keeps them."""
@@ -150,23 +153,24 @@ class TriangleCaster:
                 cells = dda.Cells.blocking(scene, *grid_frame(scene, 32), 32)
             self._march(cells)
             return
-        triangles = np.asarray(scene.triangles, np.float64)
         faces = usable_faces(scene)
-        self._triangles = triangles
-        parts = self._parted(triangles, faces, previous) if backend == "embree" else None
+        parts = self._parted(scene, faces, previous) if backend == "embree" else None
         if parts is not None:
             faces = np.concatenate([parts[0], parts[1]])
-        self._embrace(np.ascontiguousarray(triangles[faces], np.float32), faces, *scene.edges,
-                      backend == "embree", parts)
+            mesh = corners(scene, parts[1])   # the moved faces alone: the stayed ones' hierarchy is kept
+        else:
+            mesh = np.asarray(scene.triangles)[faces]
+        self._embrace(mesh, faces, *scene.edges, backend == "embree", parts)
 
-    def _parted(self, triangles: np.ndarray, faces: np.ndarray, previous: "TriangleCaster | None"):
+    def _parted(self, scene, faces: np.ndarray, previous: "TriangleCaster | None"):
         """(faces that stayed, faces that moved, `_Stayed` of the former) where `previous` holds the same
         faces with at most MOVED_SHARE of them elsewhere now; the previous one's `_Stayed` where it held
         the same faces apart, else made here. None: one hierarchy of all."""
+        v0, e1, e2 = scene.edges
         if (previous is None or previous._direct is None or not embree.available()
-                or previous._triangles.shape != triangles.shape):
+                or previous.v0.shape != v0.shape):
             return None
-        moved = moved_faces.changed_rows((previous._triangles, triangles))[faces]
+        moved = moved_faces.changed_rows((previous.v0, v0), (previous.e1, e1), (previous.e2, e2))[faces]
         count = int(moved.sum())
         if count == 0 or count > MOVED_SHARE * len(faces) or len(faces) - count < PARTED_FACES:
             return None
@@ -174,12 +178,12 @@ class TriangleCaster:
         kept = previous._stayed
         if kept is not None and np.array_equal(kept.faces, stayed):
             return stayed, went, kept
-        return stayed, went, _Stayed(stayed, embree.Hierarchy(np.ascontiguousarray(triangles[stayed], np.float32),
-                                                              self._quick))
+        return stayed, went, _Stayed(stayed, embree.Hierarchy(corners(scene, stayed), self._quick))
 
     def _embrace(self, mesh, faces, v0, e1, e2, direct: bool = True, parts=None) -> None:
         self.mesh = np.ascontiguousarray(mesh, np.float32)
-        """(usable faces, 3, 3) float32: the corners Embree holds."""
+        """(faces, 3, 3) float32: the corners Embree holds in a hierarchy of this caster's own (the usable
+        faces, or those that moved where the faces that stayed keep theirs)."""
         self._faces = np.ascontiguousarray(faces, np.int64)
         self.v0, self.e1, self.e2 = (np.ascontiguousarray(a, np.float64) for a in (v0, e1, e2))
         if direct and embree.available():   # called from compiled loops: all cores, without Python's lock
@@ -187,7 +191,7 @@ class TriangleCaster:
                 self._direct = embree.Scene(self.mesh, quick=self._quick)
             else:
                 self._stayed = parts[2]
-                self._direct = embree.Scene(parts[2].hierarchy, self.mesh[len(parts[0]):], quick=self._quick)
+                self._direct = embree.Scene(parts[2].hierarchy, self.mesh, quick=self._quick)
         else:
             self._embree = rtcore_scene.EmbreeScene()
             TriangleMesh(self._embree, self.mesh)
