@@ -192,7 +192,7 @@ class ViewerApp(mglw.WindowConfig):
         self.shader_error: str | None = None
         self._screenshot_requested: str | None = None   # "view" (S) or "window" (shift+S)
         self.frames = 0
-        self._frame_started = time.perf_counter()
+        self._frame_started, self._frame_seconds, self._drew = time.perf_counter(), 0.0, False
         self.rests = Rests(self.pacing, glfw.wait_events_timeout, glfw.post_empty_event)
         self.unattended = UnattendedRun(options, self.ctx, self.session, self.viewport, self.times, self.view, log)
         self._drop_callback = glfw.set_drop_callback(self.wnd._window, self._glfw_drop)
@@ -200,11 +200,13 @@ class ViewerApp(mglw.WindowConfig):
 
     # ---- the frame ------------------------------------------------------------------------------------
     def on_render(self, time_now: float, frame_time: float) -> None:
-        self.rests.take()
+        rested, last_started = self.rests.take(), self._frame_started
         self._frame_started = time.perf_counter()
+        if self._drew:   # the last frame, start to start, less its rest: what a frame of the scene costs
+            self._frame_seconds = self._frame_started - last_started - rested - self.session.waited
         self.times.begin()
         session = self.session
-        session.update(self.view.view, self._view_rect())
+        session.update(self.view.view, self._view_rect(), self._frame_seconds)
         self.controls.fly(frame_time)
         screen = self.wnd.fbo
         with self.times.gpu():
@@ -237,6 +239,7 @@ class ViewerApp(mglw.WindowConfig):
                 f"scene {session.name!r}")
         if self.unattended.after_frame(self.frames, settled_shot):
             self.wnd.close()
+        self._drew = drew
         self._plan_rest(drew)
 
     def _view_rect(self) -> tuple[int, int, int, int]:

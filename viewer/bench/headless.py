@@ -38,18 +38,23 @@ class HeadlessViewer:
         self.viewport = Viewport(self.ctx, self.renderer)
         self.screen = self.ctx.framebuffer(color_attachments=[self.ctx.texture(size, 4)])
         self.frames = 0
+        self.frame_seconds = 0.0
+        """What the last drawn frame took (`Session.update` waits for the GI that long after an edit)."""
         self.rests = Rests(Pacing())
         self.edited_at = time.perf_counter()
 
     def frame(self) -> bool:
         """One frame as the window runs it; True if the scene was drawn."""
         session = self.session
-        session.update("final")
+        session.update("final", frame_seconds=self.frame_seconds)
         preview = self.gi.previewing
         self.frames += 1
+        started = time.perf_counter()
         drawn = self.viewport.frame(session.camera.camera(), "final", session.content_key(), self.screen,
                                     preview=preview)
         finish(self.ctx)   # the window's buffer swap waits for the picture (letting go of Python's lock)
+        if drawn:
+            self.frame_seconds = time.perf_counter() - started
         return drawn
 
     def step(self) -> bool:

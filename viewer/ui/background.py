@@ -51,6 +51,10 @@ class BackgroundTask:
     def done(self) -> bool:
         return self.finished is not None
 
+    def wait(self, seconds: float) -> None:
+        """Until the work is done or `seconds` have passed (Python's lock let go meanwhile)."""
+        self._thread.join(max(seconds, 0.0))
+
     @property
     def elapsed(self) -> float:
         return (self.finished or time.perf_counter()) - self.started

@@ -166,6 +166,14 @@ class GIController:
         if live is not None and not self.unlit:
             live.step()
 
+    def wait(self, seconds: float) -> None:
+        """Give the shown source's work in flight up to `seconds` to finish, so that the next `update`
+        shows its result (see Session.update)."""
+        live = self._live.get(self.source)
+        task = None if live is None or self.unlit else live.pending
+        if task is not None and not task.done:
+            task.wait(seconds)
+
     def update(self) -> tuple[bool, ProbeGrid | None]:
         """(changed, grid): whether the shown probes should change, and to what (None: no indirect)."""
         for name, live in list(self._live.items()):

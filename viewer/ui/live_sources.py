@@ -43,6 +43,13 @@ class LiveSource:
         return False
 
     @property
+    def pending(self) -> BackgroundTask | None:
+        """The work on a worker thread whose result the next `step` shows as probes, if any (the
+        network's voxels are not: its prediction follows them on the render thread, and a frame that
+        waited for them held the renderer's own part of a drag back: 30 ms later settled on a box)."""
+        return None
+
+    @property
     def domain_warning(self) -> str | None:
         return None
 
@@ -160,6 +167,10 @@ class ComputeLive(LiveSource):
     def busy(self) -> bool:
         return self.source is not None and self.source.busy
 
+    @property
+    def pending(self) -> BackgroundTask | None:
+        return getattr(self.source, "work", None)
+
     def status(self):
         if self.source is None:
             return "Compute solver: idle.", None, self.controller.fallback
@@ -244,6 +255,10 @@ class BatchLive(LiveSource):
     @property
     def busy(self) -> bool:
         return self.task is not None
+
+    @property
+    def pending(self) -> BackgroundTask | None:
+        return self.task
 
     def status(self):
         if self.error:

@@ -77,8 +77,9 @@ class Rests:
         """No rest before the next frame."""
         self._until = None
 
-    def take(self) -> None:
-        """Before a frame: the rest planned, or less."""
+    def take(self) -> float:
+        """Before a frame: the rest planned, or less. Returns the seconds it rested."""
+        started = time.perf_counter()
         if self._until is not None:
             until, idle = self._until
             left = until - time.perf_counter()
@@ -88,6 +89,7 @@ class Rests:
                 self._woken.wait(left)
         self._until = None
         self._woken.clear()
+        return time.perf_counter() - started
 
     def _wake(self) -> None:   # from a worker thread
         self._woken.set()
