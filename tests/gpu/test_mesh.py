@@ -1,6 +1,8 @@
 """The scene's vertex buffers (viewer/gpu/mesh.py, and the lightmap's in viewer/gpu/direct_bake.py): a
 colour edit writes into them only what changed, and leaves what a fresh upload would hold."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -13,29 +15,41 @@ def cornell():
     return load("cornell")
 
 
-def test_colour_edits_leave_both_vertex_buffers_as_a_fresh_upload_of_the_scene(gl_context, cornell):
-    """A colour edit writes only the faces whose colours changed (`write_colours`): after a wall's albedo,
-    the lamp's colour and a box's albedo, the scene's and the lightmap's vertex buffers hold byte for byte
-    what a renderer given the last scene afresh holds."""
+def assert_as_a_fresh_upload(gl_context, scenes, after_each=None) -> tuple:
+    """Give one renderer `scenes` in turn (each drawn: shadow maps and lightmap) and another the last one
+    afresh (its vertices a copy: no geometry to keep); the scene's and the lightmap's vertex buffers must
+    then hold the same bytes. `after_each(renderer, mesh before)` after each scene but the first. Returns
+    the first renderer's `in_draw_order` answer."""
     edited, fresh = Renderer(gl_context), Renderer(gl_context)
     try:
-        scene = cornell
-        edited.set_scene(scene)
-        for change in (lambda s: s.with_albedo("green-wall", (0.2, 0.5, 0.7)),
-                       lambda s: s.with_emission("light", (3.0, 2.0, 1.0)),
-                       lambda s: s.with_albedo("small-box", (0.9, 0.1, 0.1))):
-            scene = change(scene)
+        for index, scene in enumerate(scenes):
+            kept = edited.mesh
             edited.set_scene(scene)
             edited._ensure_shadows()
             edited._ensure_baked()
-        fresh.set_scene(scene)
+            if index and after_each is not None:
+                after_each(edited, kept)
+        fresh.set_scene(replace(scenes[-1], vertices=np.array(scenes[-1].vertices)))
         fresh._ensure_shadows()
         fresh._ensure_baked()
         for pick in (lambda r: r.mesh, lambda r: r._baked):
             assert pick(edited).buffer.read() == pick(fresh).buffer.read()
+        return edited._draw_order
     finally:
         edited.release()
         fresh.release()
+
+
+def test_colour_edits_leave_both_vertex_buffers_as_a_fresh_upload_of_the_scene(gl_context, cornell):
+    """A colour edit writes only the faces whose colours changed (`write_colours`): after a wall's albedo,
+    the lamp's colour and a box's albedo, the scene's and the lightmap's vertex buffers hold byte for byte
+    what a renderer given the last scene afresh holds."""
+    scenes = [cornell]
+    for change in (lambda s: s.with_albedo("green-wall", (0.2, 0.5, 0.7)),
+                   lambda s: s.with_emission("light", (3.0, 2.0, 1.0)),
+                   lambda s: s.with_albedo("small-box", (0.9, 0.1, 0.1))):
+        scenes.append(change(scenes[-1]))
+    assert_as_a_fresh_upload(gl_context, scenes)
 
 
 def test_scene_vertices_hold_each_faces_corners_and_its_attributes_three_times():
@@ -64,8 +78,6 @@ def test_drags_leave_the_vertex_buffers_and_the_draw_order_as_a_fresh_upload_of_
     order that keeps its order and makes its geometry from the last one's (`in_draw_order`): after the
     lamp dragged and shrunk with a new colour, the small box dragged and a wall recoloured, the vertex
     buffers and the scene in draw order are what a renderer given the last scene afresh holds."""
-    from dataclasses import replace
-
     from viewer.gpu.mesh import in_draw_order
 
     def moved(x, scale=1.0):
@@ -74,32 +86,21 @@ def test_drags_leave_the_vertex_buffers_and_the_draw_order_as_a_fresh_upload_of_
         matrix[0, 3] = x
         return matrix
 
-    edited, fresh = Renderer(gl_context), Renderer(gl_context)
-    try:
-        scene = cornell
-        edited.set_scene(scene)
-        for change in (lambda s: s.transformed_group("light", moved(0.2)),
-                       lambda s: s.transformed_group("light", moved(-0.1, 0.7)).with_emission("light", (3, 2, 1)),
-                       lambda s: s.transformed_group("small-box", moved(0.15)),
-                       lambda s: s.with_albedo("green-wall", (0.2, 0.5, 0.7))):
-            kept = edited.mesh
-            scene = change(scene)
-            edited.set_scene(scene)
-            edited._ensure_shadows()
-            edited._ensure_baked()
-            assert edited.mesh is kept
-        fresh.set_scene(replace(scene, vertices=np.array(scene.vertices)))
-        fresh._ensure_shadows()
-        fresh._ensure_baked()
-        for pick in (lambda r: r.mesh, lambda r: r._baked):
-            assert pick(edited).buffer.read() == pick(fresh).buffer.read()
-        ours, theirs = edited._draw_order, in_draw_order(scene)
-        np.testing.assert_array_equal(ours[2], theirs[2])
-        for name in ("faces", "albedo", "emission", "face_group", "triangles", "face_normals", "face_areas"):
-            np.testing.assert_array_equal(getattr(ours[1], name), getattr(theirs[1], name), err_msg=name)
-    finally:
-        edited.release()
-        fresh.release()
+    scenes = [cornell]
+    for change in (lambda s: s.transformed_group("light", moved(0.2)),
+                   lambda s: s.transformed_group("light", moved(-0.1, 0.7)).with_emission("light", (3, 2, 1)),
+                   lambda s: s.transformed_group("small-box", moved(0.15)),
+                   lambda s: s.with_albedo("green-wall", (0.2, 0.5, 0.7))):
+        scenes.append(change(scenes[-1]))
+
+    def kept_its_mesh(renderer, mesh):
+        assert renderer.mesh is mesh
+
+    ours = assert_as_a_fresh_upload(gl_context, scenes, kept_its_mesh)
+    theirs = in_draw_order(scenes[-1])
+    np.testing.assert_array_equal(ours[2], theirs[2])
+    for name in ("faces", "albedo", "emission", "face_group", "triangles", "face_normals", "face_areas"):
+        np.testing.assert_array_equal(getattr(ours[1], name), getattr(theirs[1], name), err_msg=name)
 
 
 @pytest.mark.parametrize("writes", [64, 3])
@@ -107,8 +108,6 @@ def test_scattered_colour_changes_are_written_run_by_run_or_first_to_last(gl_con
     """Faces recoloured here and there (runs of consecutive faces, each written apart, or more runs than
     `COLOUR_WRITES`: one write from the first to the last) leave the vertex buffers as a fresh upload
     holds them."""
-    from dataclasses import replace
-
     from viewer.gpu import mesh
     from viewer.gpu.mesh import in_draw_order, recoloured_rows
 
@@ -121,18 +120,4 @@ def test_scattered_colour_changes_are_written_run_by_run_or_first_to_last(gl_con
     edited_scene = replace(cornell, albedo=albedo)
     rows = recoloured_rows(in_draw_order(edited_scene)[1], in_draw_order(cornell)[1])
     assert len(rows) == chosen.sum() and 3 < 1 + np.count_nonzero(np.diff(rows) != 1) < 64
-    edited, fresh = Renderer(gl_context), Renderer(gl_context)
-    try:
-        edited.set_scene(cornell)
-        edited._ensure_shadows()
-        edited._ensure_baked()
-        edited.set_scene(edited_scene)
-        fresh.set_scene(edited_scene)
-        for renderer in (edited, fresh):
-            renderer._ensure_shadows()
-            renderer._ensure_baked()
-        for pick in (lambda r: r.mesh, lambda r: r._baked):
-            assert pick(edited).buffer.read() == pick(fresh).buffer.read()
-    finally:
-        edited.release()
-        fresh.release()
+    assert_as_a_fresh_upload(gl_context, [cornell, edited_scene])
