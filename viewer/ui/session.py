@@ -117,16 +117,18 @@ class Session:
     def update(self, view: str, view_rect: tuple[int, int, int, int] | None = None, frame_seconds: float = 0.0) -> None:
         """One frame's work: a finished load opened, edits applied, new probes installed. `view_rect`
         (x, y, width, height) is where the 3D view is drawn: a scene opened later is framed for it.
-        `frame_seconds`, what the last drawn frame took: after an edit, the GI source's work in flight
-        gets up to that long (at most EDIT_WAIT) to finish, so that the frame shows it rather than the
-        old light: on llvmpipe a million-triangle room's frame takes 0.2-0.4 s of the same cores a relight
-        needs, and a frame drawn with the old light delayed the new one by a whole frame."""
+        `frame_seconds`, what the last drawn frame took: after an edit of colours or lights (the same
+        triangles), the GI source's work in flight gets up to that long (at most EDIT_WAIT) to finish, so
+        that the frame shows it rather than the old light: on llvmpipe a million-triangle room's frame
+        takes 0.2-0.4 s of the same cores a relight needs, and a frame drawn with the old light delayed
+        the new one by a whole frame. A drag is not waited for: its traces can take longer than a frame,
+        and a dragged lamp's frames would then come half as often."""
         if view_rect is not None and view_rect[3] > 0:
             self.view_aspect = view_rect[2] / view_rect[3]
         self._finish_loading()
-        clock = time.perf_counter()
-        if self._apply_edits() and frame_seconds > 0:
-            self.gi.wait(min(frame_seconds, EDIT_WAIT))
+        clock, before = time.perf_counter(), self.scene
+        if self._apply_edits() and frame_seconds > 0 and self.scene.vertices is before.vertices:
+            self.gi.wait(min(frame_seconds, EDIT_WAIT))   # a colour edit's relight; not a drag's traces
         self.waited = time.perf_counter() - clock   # the edits and the wait: not the frame's own cost
         changed, grid = self.gi.update()
         if changed:
