@@ -57,3 +57,15 @@ def test_without_a_measured_frame_the_frame_after_an_edit_shows_the_old_light(vi
     held.set()
     viewer.settle()
     assert viewer.session.probes_version != before
+
+
+def test_a_drag_is_not_waited_for(viewer, held, monkeypatch):
+    """A dragged lamp's traces can take longer than a frame: the frame after it is drawn at once."""
+    viewer.frame_seconds = 600.0
+    waits = []
+    monkeypatch.setattr(viewer.gi, "wait", waits.append)
+    viewer.session.edits.set_light(offset=(0.05, 0.0, 0.0))
+    viewer.frame()
+    assert waits == []
+    held.set()
+    viewer.settle()
