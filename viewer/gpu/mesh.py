@@ -66,7 +66,8 @@ def in_draw_order(scene: Scene, last: tuple[Scene, Scene, np.ndarray] | None = N
     million-triangle scan)."""
     if last is not None and scene.faces is last[0].faces and scene.face_group is last[0].face_group:
         before, reordered, order = last
-        if scene.vertices is not before.vertices and np.array_equal(_group_rank(scene), _group_rank(before)):
+        if (scene.vertices is not before.vertices and scene.vertices.shape == before.vertices.shape
+                and np.array_equal(_group_rank(scene), _group_rank(before))):
             moved = np.flatnonzero(changed_rows((scene.vertices, before.vertices)))
             reordered = reordered._moved(scene.vertices, moved)
         if scene.vertices is reordered.vertices:
@@ -244,7 +245,8 @@ class SceneMesh(TriangleBuffer):
         the buffer holds) to `scene`, the faces from the first that changed to the last in one write (a
         dragged lamp in a million-triangle scan: 0.9 s for all of its vertices). False, nothing written,
         where the faces, their texture coordinates or textures differ, or a face gained or lost its area."""
-        if not (scene.faces is previous.faces and scene.uv is previous.uv and same_textures(scene, previous)):
+        if not (scene.faces is previous.faces and scene.vertices.shape == previous.vertices.shape
+                and scene.uv is previous.uv and same_textures(scene, previous)):
             return False
         drawn = scene.face_areas > 0
         if not np.array_equal(drawn, previous.face_areas > 0):

@@ -16,6 +16,8 @@ def changed_rows(*pairs) -> np.ndarray:
     comparison and reduction took 5.3; a moved object's update asks four times)."""
     out = np.zeros(len(pairs[0][0]), np.bool_)
     for a, b in pairs:
+        if np.shape(a) != np.shape(b) or len(a) != len(out):
+            raise ValueError(f"rows of shapes {np.shape(a)} and {np.shape(b)} cannot be compared row by row")
         if a is not b:
             _changed(np.ascontiguousarray(a).reshape(len(a), -1), np.ascontiguousarray(b).reshape(len(b), -1), out)
     return out
