@@ -144,10 +144,8 @@ def scene_vertices(scene: Scene, columns: int = 14, faces: np.ndarray | None = N
 
 def same_triangles(a: Scene, b: Scene) -> bool:
     """Whether two scenes have the same triangles in the same order (their colours may differ)."""
-    if a.faces.shape != b.faces.shape or a.vertices.shape != b.vertices.shape:
-        return False
-    return ((a.faces is b.faces or np.array_equal(a.faces, b.faces))
-            and (a.vertices is b.vertices or np.array_equal(a.vertices, b.vertices)))
+    return same_faces(a, b) and (a.vertices is b.vertices or (a.vertices.shape == b.vertices.shape
+                                                               and np.array_equal(a.vertices, b.vertices)))
 
 
 def same_faces(a: Scene, b: Scene) -> bool:

@@ -18,7 +18,7 @@ the surface they cover, how their powers compare, and whether there is a sun.
 from __future__ import annotations
 
 import sys
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 
 import numba
 import numpy as np
@@ -154,6 +154,9 @@ class Shape:
     """(F, 3) unit normals (zero for degenerate faces)."""
     aspect: float
     open_sides: int
+    sums: list = field(default_factory=lambda: [None], compare=False, repr=False)
+    """`_group_albedo`'s last sums on these triangles: [((emitting, face_group), albedo, surface, group
+    area, weighted)]."""
 
     @staticmethod
     def of(scene: Scene) -> "Shape":
@@ -174,17 +177,12 @@ def measure(scene: Scene, shape: Shape | None = None) -> Quantities:
                       open_sides=shape.open_sides)
 
 
-_albedo_kept: list = [None]
-"""The last `_group_albedo`'s sums: ((shape, emitting, face_group), albedo, surface, group area, weighted)."""
-
-
 def _group_albedo(scene: Scene, shape: Shape, emitting: np.ndarray) -> dict[str, np.ndarray]:
     """Group -> area-weighted albedo of the groups that are not lights (`Quantities.albedo`). The sums of
-    the last call are kept: on the same triangles, lamps and groups, only the groups whose albedo changed
+    the last call are kept with the triangles' `Shape`: on the same lamps and groups, only the groups whose albedo changed
     are summed again (on a million-triangle scan the sums took 24-30 ms of each colour edit)."""
-    kept, count = _albedo_kept[0], len(scene.groups)
-    if (kept is not None and kept[0][0] is shape and kept[0][2] is scene.face_group
-            and np.array_equal(kept[0][1], emitting)):
+    kept, count = shape.sums[0], len(scene.groups)
+    if kept is not None and kept[0][1] is scene.face_group and np.array_equal(kept[0][0], emitting):
         _, before, surface, group_area, weighted = kept
         if before is not scene.albedo:
             weighted = weighted.copy()
@@ -198,7 +196,7 @@ def _group_albedo(scene: Scene, shape: Shape, emitting: np.ndarray) -> dict[str,
         group_area = np.bincount(scene.face_group, surface, minlength=count)
         weighted = np.stack([np.bincount(scene.face_group, surface * scene.albedo[:, c], minlength=count)
                              for c in range(3)], axis=1)
-    _albedo_kept[0] = ((shape, emitting, scene.face_group), scene.albedo, surface, group_area, weighted)
+    shape.sums[0] = ((emitting, scene.face_group), scene.albedo, surface, group_area, weighted)
     return {name: weighted[g] / group_area[g] for g, name in enumerate(scene.groups)
             if group_area[g] > MIN_SURFACE_SHARE * group_area.sum()}
 

@@ -41,8 +41,12 @@ def corner_rows(name: str, corners: np.ndarray):
     if name == "edges":
         return t[:, 0], t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
     cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    if name == "face_cross":
-        return cross
+    return cross if name == "face_cross" else cross_rows(name, cross)
+
+
+def cross_rows(name: str, cross: np.ndarray) -> np.ndarray:
+    """The faces' areas or unit normals (`name`: face_areas, face_normals; zero normals for degenerate
+    faces) from their corners' cross products (K, 3)."""
     length = np.linalg.norm(cross, axis=1, keepdims=True)
     if name == "face_areas":
         return 0.5 * length[:, 0]
@@ -98,17 +102,13 @@ class TriangleGeometry:
     @cached_property
     def face_areas(self) -> np.ndarray:
         kept = self._from_moved("face_areas")
-        return kept if kept is not None else read_only(0.5 * np.linalg.norm(self.face_cross, axis=1))
+        return kept if kept is not None else read_only(cross_rows("face_areas", self.face_cross))
 
     @cached_property
     def face_normals(self) -> np.ndarray:
         """Unit front-face normals (zero for degenerate faces)."""
         kept = self._from_moved("face_normals")
-        if kept is not None:
-            return kept
-        c = self.face_cross
-        n = np.linalg.norm(c, axis=1, keepdims=True)
-        return read_only(np.divide(c, n, out=np.zeros_like(c), where=n > 0))
+        return kept if kept is not None else read_only(cross_rows("face_normals", self.face_cross))
 
     @cached_property
     def _unused(self) -> np.ndarray | None:

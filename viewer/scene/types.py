@@ -150,18 +150,20 @@ class Scene(TriangleGeometry):
 
     def _check_colours(self, face_count: int, checked: tuple[str, ...] = ()) -> None:
         """Check and keep the albedo and emission, but those `checked` already (another scene's arrays)."""
-        albedo = self.albedo if "albedo" in checked else _own_colours(self.albedo, face_count)
-        emission = self.emission if "emission" in checked else _own_colours(self.emission, face_count)
-        if not all(np.all(np.isfinite(a)) for n, a in (("albedo", albedo), ("emission", emission)) if n not in checked):
+        fresh = {name: _own_colours(getattr(self, name), face_count)
+                 for name in ("albedo", "emission") if name not in checked}
+        if not all(np.all(np.isfinite(values)) for values in fresh.values()):
             raise SceneError(f"{self.name}: material colours contain NaN or infinity")
-        if "emission" not in checked and np.any(emission < 0):
+        emission = fresh.get("emission")
+        if emission is not None and np.any(emission < 0):
             raise SceneError(f"{self.name}: negative emission")
-        if "emission" not in checked and np.any(emission > MAX_RADIANCE):
+        if emission is not None and np.any(emission > MAX_RADIANCE):
             raise SceneError(f"{self.name}: emitted radiance beyond {MAX_RADIANCE:.0e} (the GI works in float32)")
         # Albedo 1 never converges (eq. 30 is a geometric series in albedo): keep it just below.
-        if "albedo" not in checked and (albedo.min() < 0.0 or albedo.max() > 0.999):
-            albedo = np.clip(albedo, 0.0, 0.999)
-        for name, value in (("albedo", albedo), ("emission", emission)):
+        albedo = fresh.get("albedo")
+        if albedo is not None and (albedo.min() < 0.0 or albedo.max() > 0.999):
+            fresh["albedo"] = np.clip(albedo, 0.0, 0.999)
+        for name, value in fresh.items():
             value.setflags(write=False)
             object.__setattr__(self, name, value)
         self._check_textures(face_count)
