@@ -1,10 +1,12 @@
 """The ray-casting layer (viewer/rays/cast.py): Embree and the DDA meet the same faces at the same
 points from the same sides, and the DDA answers where embreex is missing."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
-from viewer.rays import cast
+from viewer.rays import cast, moved_faces
 from viewer.rays.moved_faces import changed_rows
 from viewer.scene import load
 from scenes import box
@@ -119,3 +121,22 @@ def test_changed_rows_are_the_rows_numpy_finds_different():
     np.testing.assert_array_equal(changed_rows((a, b), (c, d)), expected)
     assert set(np.flatnonzero(expected)) == {3, 10, 77, 499}
     assert not changed_rows((a, a), (c, c.copy())).any()
+
+
+def test_the_moved_box_holds_every_corner_of_the_moved_faces_before_and_after():
+    """`moved_box` is the box of the moved faces' corners, where they were and where they are, a
+    millionth wider: no other face's corner widens it."""
+    rng = np.random.default_rng(11)
+    v0, e1, e2 = (rng.normal(size=(300, 3)) for _ in range(3))
+    before = SimpleNamespace(v0=v0, e1=e1, e2=e2)
+    after = SimpleNamespace(v0=v0.copy(), e1=e1, e2=e2.copy())
+    after.v0[[5, 200]] += [40.0, -3.0, 0.5]
+    after.e2[7] *= 30.0
+    moved, box = moved_faces.moved_box(before, after)
+    assert moved.tolist() == [5, 7, 200]
+    corners = np.concatenate([np.concatenate([c.v0[moved], c.v0[moved] + c.e1[moved], c.v0[moved] + c.e2[moved]])
+                              for c in (before, after)])
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    margin = 1e-6 * (hi - lo).max()
+    np.testing.assert_allclose(box, [lo - margin, hi + margin], rtol=0, atol=1e-12)
+    assert moved_faces.moved_box(before, before)[1] is None
