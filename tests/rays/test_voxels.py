@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from viewer import scene as scenes
-from viewer.rays.voxels import voxelize
+from viewer.rays.voxels import FACINGS, face_facing, voxelize
 from scenes import box
 
 
@@ -70,3 +70,13 @@ def test_voxelizing_a_scene_is_deterministic_and_rejects_bad_settings():
         voxelize(scene, 1)
     with pytest.raises(ValueError):
         voxelize(scene, 16, normal_mode="nope")
+
+
+def test_a_face_joins_the_facing_of_its_largest_dot_product_the_first_of_equals():
+    """`face_facing` is the argmax of the normal's dot products with the six signed axes, ties (diagonals,
+    a zero normal, negative zeros) going to the first, as the voxels' keys were made before."""
+    rng = np.random.default_rng(5)
+    ties = np.array([[1, 1, 0], [-1, -1, 0], [0, -1, -1], [-1, 1, 1], [1, -1, -1], [0, 0, 0], [-0.0, -0.0, -1],
+                     [-0.0, 0, 0], [0, 2, -2], [-3, 0, 3]], np.float64)
+    normals = np.concatenate([rng.normal(size=(2000, 3)), ties])
+    np.testing.assert_array_equal(face_facing(normals), np.argmax(normals @ FACINGS.T, axis=1))

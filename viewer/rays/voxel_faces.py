@@ -24,7 +24,7 @@ from viewer.rays.moved_faces import changed_rows
 from viewer.scene.textures import relative_at
 from viewer.rays.pieces import PIECE_EDGE, face_pairs
 from viewer.rays.voxels import (FACINGS, VoxelGrid, Voxelization, light_samples, subdivide, face_facing,
-                           grid_frame, voxel_albedo)
+                           grid_frame, voxel_albedo, sorted_unique)
 
 MOVED_SHARE = 0.5
 """Past this share of the surface moved (its pieces are the work), voxelizing afresh is as quick."""
@@ -86,9 +86,10 @@ class FaceVoxels:
 
     def voxelization(self, scene: Scene) -> Voxelization:
         """`voxelize_with_faces(scene, resolution)` (area normals) from the pairs."""
-        keys, inverse = np.unique(self.key, return_inverse=True)
+        n = self.resolution
+        keys, inverse = sorted_unique(self.key, n ** 3 * 6)
         inverse = inverse.ravel()
-        count, n = len(keys), self.resolution
+        count = len(keys)
         area = np.bincount(inverse, self.area, minlength=count)
         safe = np.maximum(area, 1e-30)[:, None]
 
