@@ -154,8 +154,8 @@ def moved_box(before: VoxelRays | None, after: VoxelRays | None) -> tuple[np.nda
     moved or most did."""
     if before is None or after is None:
         return None
-    found = moved_faces.moved_box(before.cells, after.cells, after.cells.h)
-    if found is None or found[1] is None or len(found[0]) > MOVED_SHARE * len(after.cells.v0):
+    found = moved_faces.moved_box(before.cells, after.cells, after.cells.h, MOVED_SHARE)
+    if found is None or found[1] is None:
         return None
     return found[1][0], found[1][1]
 

@@ -33,14 +33,17 @@ def _changed(a, b, out):
                     break
 
 
-def moved_box(before, after, least: float = 1e-9) -> tuple[np.ndarray, np.ndarray | None] | None:
+def moved_box(before, after, least: float = 1e-9, most: float = 1.0) -> tuple[np.ndarray, np.ndarray | None] | None:
     """(moved, box) between `before` and `after`, each with the faces' (v0, e1, e2) (ray casters or cell
     listings of the same faces): the faces that moved, and (2, 3) the corners of a box around their old
     and new places, wider by a millionth of the larger of its extent and `least` (None where none moved).
-    None where the faces differ."""
+    None where the faces differ, or where more than the share `most` of them moved (a caller that then
+    starts afresh needs no box)."""
     if before.v0.shape != after.v0.shape:
         return None
     moved = np.flatnonzero(changed_rows((before.v0, after.v0), (before.e1, after.e1), (before.e2, after.e2)))
+    if len(moved) > most * len(after.v0):
+        return None
     if len(moved) == 0:
         return moved, None
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
