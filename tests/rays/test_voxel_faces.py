@@ -7,7 +7,7 @@ import pytest
 from viewer.scene import load
 from viewer.evaluation.procedural import PRESETS, random_scene
 from viewer.rays.voxel_faces import FaceVoxels
-from viewer.rays.voxels import voxelize_with_faces
+from viewer.rays.voxels import face_facing, voxelize_with_faces
 
 
 def assert_same_voxelization(ours, theirs):
@@ -56,3 +56,31 @@ def test_what_cannot_be_kept_is_voxelized_afresh():
     for group in scene.groups:
         everything = moved(everything, group, (0.01, 0.0, 0.0), 0.99)
     assert pairs.moved(everything) is None                                  # every face moved
+
+
+@pytest.mark.parametrize("group", ["light", "large-box"])
+def test_the_cells_of_a_moved_scene_list_what_listing_it_afresh_lists(group, monkeypatch):
+    """`dda.Cells.of` from the cells before some faces moved keeps the others' entries and lists the moved
+    ones alone; every entry, its order and its voxel (the grazing ones' neighbours and BACKFACE
+    included) are those of listing the moved scene afresh, three moves in a row."""
+    from viewer.rays import dda
+
+    scene = load("cornell")
+    pairs = FaceVoxels.of(scene, 16)
+    cells = dda.Cells.of(pairs.voxelization(scene), scene)
+    for step in range(3):
+        edited = moved(scene, group, (0.07 * (step + 1), 0.0, -0.05 * step))
+        pairs = pairs.moved(edited)
+        voxelization = pairs.voxelization(edited)
+        fresh = dda.Cells.of(voxelization, edited)
+        with monkeypatch.context() as patch:   # the full listing is not made
+            patch.setattr(dda, "_listing", None)
+            cells = dda.Cells.of(voxelization, edited, cells)
+        cell = np.repeat(np.arange(16 ** 3), np.diff(fresh.first))
+        own = cell * 6 + face_facing(edited.face_normals)[fresh.triangle]
+        assert (voxelization.keys[fresh.voxel] != own).any()   # grazing entries take a neighbour's voxel
+        for name in ("first", "triangle", "voxel"):
+            assert np.array_equal(getattr(cells, name), getattr(fresh, name)), name
+    # a largest face of another size decides otherwise which faces are too small to list: all afresh
+    assert dda._moved(cells, edited, cells.lo, cells.h, cells.n, 2 * cells.largest) is None
+    assert dda._moved(cells, edited, cells.lo, cells.h, cells.n, cells.largest) is not None

@@ -40,7 +40,7 @@ The direct light's parts are viewer/neural/direct.py, the one bounce viewer/neur
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numba
@@ -177,7 +177,8 @@ class Occluders(VoxelRays):
         grid = (scene, voxels.lo, voxels.voxel_size / k, voxels.resolution * k)
         super().__init__(scene, dda.Cells.unlisted(*grid) if backend == "embree" else dda.Cells.blocking(*grid), backend,
                          previous=previous, quick=True)   # a few hundred thousand rays a build
-        self.landing = VoxelRays(scene, landing_cells(scene, voxels), self.backend, self.caster)
+        self.landing = VoxelRays(scene, landing_cells(scene, voxels, None if previous is None else previous.landing.cells),
+                                 self.backend, self.caster)
 
 
 def occluders(scene, voxels: VoxelGrid, previous: Occluders | None = None) -> Occluders:
@@ -186,15 +187,13 @@ def occluders(scene, voxels: VoxelGrid, previous: Occluders | None = None) -> Oc
     return Occluders(scene, voxels, previous=previous if isinstance(previous, Occluders) else None)
 
 
-def landing_cells(scene, voxels: VoxelGrid) -> dda.Cells:
+def landing_cells(scene, voxels: VoxelGrid, previous: dda.Cells | None = None) -> dda.Cells:
     """`dda.Cells.of` for a voxel grid without its voxelization: each voxel's key (flat cell x 6 +
     facing) is remade from its cell and its normal, whose signed dominant axis is its pieces' (their
-    area-weighted mean keeps it), and the listing's voxels are put back in the grid's order."""
+    area-weighted mean keeps it). `previous`: the landing cells of the same faces before some moved."""
     n, c = voxels.resolution, voxels.coords
     keys = (c[:, 0] + n * (c[:, 1] + n * c[:, 2])) * 6 + face_facing(voxels.normal)
-    order = np.argsort(keys, kind="stable")
-    cells = dda.Cells.of(SimpleNamespace(grid=voxels, keys=keys[order]), scene)
-    return replace(cells, voxel=np.where(cells.voxel >= 0, order[np.maximum(cells.voxel, 0)], cells.voxel))
+    return dda.Cells.of(SimpleNamespace(grid=voxels, keys=keys), scene, previous)
 
 
 def seen_rays(blockers: VoxelRays | None, voxels: VoxelGrid, points: np.ndarray, previous: SeenRays | None = None,

@@ -45,7 +45,7 @@ def after_moving(before: Geometry, scene: Scene, voxelization: Voxelization,
     if (grid.resolution != old.resolution or grid.voxel_size != old.voxel_size
             or not np.array_equal(grid.lo, old.lo) or len(scene.faces) != before.faces.shape[1]):
         return None
-    cells = dda.Cells.of(voxelization, scene)
+    cells = dda.Cells.of(voxelization, scene, before.cells)
     rays = VoxelRays(scene, cells, before.rays.backend, previous=before.rays)
     keys = np.asarray(voxelization.keys, np.int64)
     changed = changed_cells(before.cells, before.voxel_keys, cells, keys)

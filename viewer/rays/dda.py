@@ -19,7 +19,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from viewer.rays.listing import listing as _listing
+from viewer.rays.listing import listing as _listing, moved_listing
+from viewer.rays.moved_faces import changed_rows
 
 MISS = -1
 """The ray left the grid (or reached the end of its segment) without crossing a surface."""
@@ -31,12 +32,51 @@ one of them (watertight in practice)."""
 
 
 _NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
+_NEIGHBOUR_ORDER = np.ascontiguousarray(_NEIGHBOURS[np.argsort(np.abs(_NEIGHBOURS).sum(axis=1))], np.int64)
+"""The cell and its 26 neighbours, nearest first: where a grazing entry looks for its voxel."""
+MOVED_SHARE = 0.5
+"""Past this share of the faces moved, `Cells.of` lists them all afresh."""
 
 
 def voxel_of(keys: np.ndarray, key: np.ndarray) -> np.ndarray:
     """Index of each key in the sorted voxel keys, -1 where absent."""
     where = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
     return np.where(keys[where] == key, where, -1)
+
+
+def _firsts(cell: np.ndarray, n: int) -> np.ndarray:
+    """(n^3 + 1,) where each cell's entries start, for entries sorted by flat `cell`."""
+    return np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=n ** 3))]).astype(np.int64)
+
+
+def _moved(previous: "Cells | None", scene, lo: np.ndarray, h: float, n: int, largest: float) -> np.ndarray | None:
+    """(F,) bool the faces that moved since `previous` listed the same faces on the same grid, where
+    at most MOVED_SHARE of them did; else None (list them all)."""
+    if (previous is None or previous.n != n or previous.h != h or previous.largest != largest
+            or not np.array_equal(previous.lo, lo) or previous.v0.shape != (len(scene.faces), 3)):
+        return None
+    v0, e1, e2 = scene.edges
+    moved = changed_rows((previous.v0, v0), (previous.e1, e1), (previous.e2, e2))
+    return moved if moved.sum() <= MOVED_SHARE * len(moved) else None
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _entry_voxels(first, triangle, facing, table, order, n, out):
+    """Each entry's voxel: the key table's (flat cell x 6 + the triangle's facing -> voxel, -1 for none)
+    in the entry's cell, else in the first neighbour in `order` that has one, else BACKFACE."""
+    for c in numba.prange(n * n * n):
+        x, y, z = c % n, (c // n) % n, c // (n * n)
+        for e in range(first[c], first[c + 1]):
+            f = facing[triangle[e]]
+            v = table[c * 6 + f]
+            if v < 0:
+                for o in range(order.shape[0]):
+                    a, b, d = x + order[o, 0], y + order[o, 1], z + order[o, 2]
+                    if 0 <= a < n and 0 <= b < n and 0 <= d < n:
+                        v = table[(a + n * (b + n * d)) * 6 + f]
+                        if v >= 0:
+                            break
+            out[e] = v if v >= 0 else BACKFACE
 
 
 @dataclass(frozen=True)
@@ -61,33 +101,40 @@ class Cells:
     """(T, 3) float64 edge v1 - v0."""
     e2: np.ndarray
     """(T, 3) float64 edge v2 - v0 (front side: counter-clockwise, normal e1 x e2)."""
+    largest: float = 0.0
+    """The largest face's area when the cells were listed (which faces are too small to list depends on
+    it): `of`'s cells of a moved scene keep the others' entries only while it is the same."""
 
     @staticmethod
-    def of(voxelization, scene) -> "Cells":
-        """From a viewer.rays.voxels.Voxelization of `scene`: each triangle is listed in every cell of its
-        bounding box that its plane passes through (a superset of the cells it passes through: an extra
-        entry costs a test and never a hit, since a hit must lie in the cell)."""
+    def of(voxelization, scene, previous: "Cells | None" = None) -> "Cells":
+        """From a viewer.rays.voxels.Voxelization of `scene` (or any record of its `grid` and each grid
+        voxel's key, cell x 6 + facing, as `keys`): each triangle is listed in every cell of its bounding
+        box that its plane passes through (a superset of the cells it passes through: an extra entry
+        costs a test and never a hit, since a hit must lie in the cell), with the voxel of its facing
+        there; a triangle that only grazes a cell where none of its pieces landed belongs to the
+        same-facing voxel of the nearest neighbouring cell that has one, else it is BACKFACE (opaque and
+        dark). `previous`: the cells of the same faces before some of them moved, on the same grid: the
+        faces that stayed keep their entries (`listing.moved_listing`), and every entry's voxel is looked
+        up again (a key table, one compiled pass: a lamp moved in a million-triangle scan lists its cells
+        in a fifth of the time)."""
         from viewer.rays.voxels import face_facing
 
         grid = voxelization.grid
-        n, h, lo = grid.resolution, grid.voxel_size, grid.lo
-        xyz, triangle = _listing(scene, lo, h, n)
-        cell = xyz[:, 0] + n * (xyz[:, 1] + n * xyz[:, 2])
-        # each entry's voxel: (cell, the triangle's facing); a triangle that only grazes a cell where
-        # none of its pieces landed belongs to the same-facing voxel of a neighbouring cell
-        facing = face_facing(scene.face_normals)[triangle]
-        voxel = voxel_of(voxelization.keys, cell * 6 + facing)
-        for offset in np.argsort(np.abs(_NEIGHBOURS).sum(axis=1)):
-            stray = np.nonzero(voxel < 0)[0]
-            if not len(stray):
-                break
-            c = xyz[stray] + _NEIGHBOURS[offset]
-            inside = np.all((c >= 0) & (c < n), axis=1)
-            found = np.where(inside, voxel_of(voxelization.keys, (c[:, 0] + n * (c[:, 1] + n * c[:, 2])) * 6
-                                               + facing[stray]), -1)
-            voxel[stray] = found
-        voxel[voxel < 0] = BACKFACE   # no voxel of that facing nearby: the surface is opaque and dark
-        return Cells._make(scene, lo, h, n, cell, triangle, voxel)
+        n, h, lo = int(grid.resolution), float(grid.voxel_size), np.asarray(grid.lo, np.float64)
+        largest = float(scene.face_areas.max()) if len(scene.faces) else 0.0
+        moved = _moved(previous, scene, lo, h, n, largest)
+        if moved is None:
+            xyz, triangle = _listing(scene, lo, h, n)
+            first = _firsts(xyz[:, 0] + n * (xyz[:, 1] + n * xyz[:, 2]), n)
+        else:
+            first, triangle = moved_listing(previous.first, previous.triangle, moved, scene, lo, h, n)
+        keys = np.asarray(voxelization.keys, np.int64)
+        table = np.full(n ** 3 * 6, -1, np.int64)
+        table[keys[::-1]] = np.arange(len(keys) - 1, -1, -1)   # the first voxel of a key, should two share it
+        voxel = np.empty(len(triangle), np.int64)
+        _entry_voxels(first, np.asarray(triangle, np.int64), face_facing(scene.face_normals), table,
+                      _NEIGHBOUR_ORDER, n, voxel)
+        return Cells(lo, h, n, first, np.asarray(triangle, np.int64), voxel, *scene.edges, largest)
 
     @staticmethod
     def blocking(scene, lo, h: float, n: int) -> "Cells":
@@ -107,7 +154,7 @@ class Cells:
 
     @staticmethod
     def _make(scene, lo, h, n, cell, triangle, voxel) -> "Cells":
-        first = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=n ** 3))]).astype(np.int64)
+        first = _firsts(cell, n)
         return Cells(np.asarray(lo, np.float64), float(h), int(n), first, triangle.astype(np.int64),
                      voxel.astype(np.int64), *scene.edges)
 
