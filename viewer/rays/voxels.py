@@ -306,7 +306,7 @@ def _voxelize(scene: Scene, resolution: int, normal_mode: str):
 
 
 def light_samples(scene: Scene, face_ids, lo, h, resolution, keys) -> LightSamples:
-    emitting = face_ids[np.any(scene.emission[face_ids] > 0, axis=1)]
+    emitting = face_ids[scene.emitting[face_ids]]
     if not len(emitting):
         empty = np.zeros((0, 3))
         return LightSamples(empty, empty, np.zeros(0), empty, np.zeros(0, np.int64), np.zeros(0, np.int64))
