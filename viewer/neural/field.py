@@ -272,9 +272,8 @@ class SceneVoxels:
         self.pairs = self.pairs or FaceVoxels.of(scene, resolution)
         self.voxelization = self.pairs.voxelization(scene)
         self.shape = Shape.of(scene)
-        self._colours = None
-        self._grid = self.voxelization.grid
-        self.voxels_of(scene)   # colours by the faces' shares from the start: every edit's come the same way
+        self._grid = self.voxelization.grid   # its colours are the faces' shares', as every edit's come
+        self._colours = (scene.albedo, scene.emission)
         self.blockers = encoding.occluders(scene, self._grid, None if previous is None else previous.blockers)
         """The occluders of these triangles, one object for every colour edit (the encoder keeps its
         shadows while it is given the same)."""
