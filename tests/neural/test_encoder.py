@@ -272,3 +272,4 @@ def test_after_a_move_the_seen_rays_land_where_rays_cast_afresh_do(name, group, 
     assert same.mean() > 0.999
     assert np.array_equal(after.voxel[same], fresh.voxel[same])
     assert not np.array_equal(before.voxel, fresh.voxel)
+    assert np.array_equal(after.links, fresh.links)   # the filter's links tested again only near the move

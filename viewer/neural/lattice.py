@@ -107,18 +107,22 @@ class LatticeShadows:
             return np.ones((len(target), len(self.points)), np.float32)
         target = np.asarray(target, np.float64).reshape(-1, 3)
         out = np.empty((len(target), len(self.points)), np.float32)
-        fresh = []
+        fresh, kept = [], []
         self.retraced = 0
         for c, end in enumerate(target):
-            kept = None if self._before is None else self._before[2].get(end.tobytes())
-            if kept is None:
+            row = None if self._before is None else self._before[2].get(end.tobytes())
+            if row is None:
                 fresh.append(c)
-                continue
-            out[c] = kept
-            near = np.flatnonzero(_meets_box(self.points, end, False, self._before[0], self._before[1]))
-            if len(near):
-                out[c, near] = self.blockers.segments_clear(self.points[near], np.broadcast_to(end, (len(near), 3)))
-                self.retraced += len(near)
+            else:
+                out[c] = row
+                kept.append(c)
+        if kept:   # the kept rows' rays through the moved box, traced again in one call
+            near = _segments_meet_box(self.points, target[kept], self._before[0], self._before[1])
+            row, probe = np.nonzero(near)
+            if len(row):
+                ends = target[kept][row]
+                out[np.asarray(kept)[row], probe] = self.blockers.segments_clear(self.points[probe], ends)
+                self.retraced += len(row)
         if fresh:
             out[fresh] = self.blockers.pairs_clear(self.points, target[fresh]).T
             self.retraced += len(fresh) * len(self.points)
@@ -171,4 +175,15 @@ def _meets_box(points, end, is_direction, lo, hi):
             out[p] = meets_box(x, y, z, end[0], end[1], end[2], np.inf, lo, hi)
         else:
             out[p] = meets_box(x, y, z, end[0] - x, end[1] - y, end[2] - z, 1.0, lo, hi)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _segments_meet_box(points, ends, lo, hi):
+    """(C, P) bool: the segment from each point to each of `ends` passes through the box [lo, hi]."""
+    out = np.empty((ends.shape[0], points.shape[0]), np.bool_)
+    for p in numba.prange(points.shape[0]):
+        x, y, z = points[p, 0], points[p, 1], points[p, 2]
+        for c in range(ends.shape[0]):
+            out[c, p] = meets_box(x, y, z, ends[c, 0] - x, ends[c, 1] - y, ends[c, 2] - z, 1.0, lo, hi)
     return out

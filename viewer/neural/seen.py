@@ -86,7 +86,7 @@ class SeenRays:
         hits = hits.reshape(-1)
         self.voxel = np.where(hits < 0, count, hits).astype(np.int32)
         """(P x R,) the voxel each ray lands on; `count` where it brings no light."""
-        self.links = lattice_links(landing, points)
+        self.links = lattice_links(landing, points, None if before is None else (previous.links, box))
         """(3, m, m, m) bool on a cubic lattice (else None): whether the segment from each probe to its
         next one along x, y, z crosses no surface (`filtered` does not average across a wall)."""
 
@@ -239,21 +239,32 @@ def _gathered(voxel, sets, basis, radiance):
     return out
 
 
-def lattice_links(landing: VoxelRays, points: np.ndarray) -> np.ndarray | None:
+def lattice_links(landing: VoxelRays, points: np.ndarray, kept=None) -> np.ndarray | None:
     """(3, m, m, m) bool: whether the segment from each probe of a cubic lattice (flat order, x slowest)
     to the next along each axis crosses no surface (the last layer's links are True: `_three_taps`
-    repeats the faces); None where `points` are not a cubic lattice."""
+    repeats the faces); None where `points` are not a cubic lattice. `kept`: (the same lattice's links
+    before some triangles moved, (lo, hi) a box around their old and new places): only the segments
+    that reach into the box are tested again."""
     side = round(len(points) ** (1.0 / 3.0))
     if side ** 3 != len(points) or side < 2:
         return None
     grid = np.asarray(points, np.float64).reshape(side, side, side, 3)
     links = np.ones((3, side, side, side), bool)
+    before, box = (None, None) if kept is None else kept
     for axis in range(3):
         here = [slice(None)] * 3
         there = [slice(None)] * 3
         here[axis], there[axis] = slice(0, side - 1), slice(1, side)
         a, b = grid[tuple(here)], grid[tuple(there)]
-        links[(axis, *here)] = landing.segments_clear(a.reshape(-1, 3), b.reshape(-1, 3)).reshape(a.shape[:3])
+        test = np.ones(a.shape[:3], bool)
+        if before is not None and before.shape == links.shape:
+            links[(axis, *here)] = before[(axis, *here)]
+            low, high = np.minimum(a, b), np.maximum(a, b)
+            test = ((low[..., 0] <= box[1][0]) & (high[..., 0] >= box[0][0]) & (low[..., 1] <= box[1][1])
+                    & (high[..., 1] >= box[0][1]) & (low[..., 2] <= box[1][2]) & (high[..., 2] >= box[0][2]))
+        if test.any():
+            view = links[(axis, *here)]
+            view[test] = landing.segments_clear(a[test], b[test])
     return links
 
 
