@@ -51,9 +51,6 @@ SEEN_BOUNCES = 3
 TAIL_RATIO_MAX = 0.95
 """The most of its light a room's surfaces are taken to reflect from one bounce to the next (the
 geometric tail's ratio): past it the tail's 1 / (1 - r) would grow without bound."""
-MOVED_MARGIN = 3
-"""Cells around the moved triangles' box within which a kept ray is traced again: the voxels of those
-cells, and the listing's lookups a cell or two around them, may have changed."""
 SEED = 0x5EE
 """The directions' rotation: the same in training and in the viewer."""
 
@@ -67,15 +64,17 @@ class SeenRays:
                  seed: int = SEED, previous: "SeenRays | None" = None, box=None):
         """`previous`, `box`: the same probes' rays in the scene before some triangles moved, and the
         box around those triangles' old and new places (`lattice.moved_box`): the rays that do not pass
-        through it (widened by MOVED_MARGIN cells) keep the face they met, and are only landed again."""
+        through it meet the same face at the same distance, and are only landed again on the new
+        voxels' listing (a ray that passes beside the box lands on the voxels there as they are now):
+        a small box moved in the Cornell box traces 26k of its 221k rays again (64k with the box widened
+        by three cells, which the rays beside it do not need)."""
         self.count, self.rays, self.probes, self.points, self.seed = int(count), int(rays), len(points), points, seed
         directions, self._basis, self._sets = lattice_rays(len(points), self.rays, seed)
         before = None
         if (box is not None and previous is not None and previous._faces is not None
                 and (previous.rays, previous.seed) == (self.rays, seed)
                 and (previous.points is points or np.array_equal(previous.points, points))):
-            margin = MOVED_MARGIN * landing.cells.h
-            before, box = previous._faces, (box[0] - margin, box[1] + margin)
+            before = previous._faces
         hits, face, t, self.traced = landing.kept_bundle(points, directions, before, box)
         """`traced`: how many of the rays were traced (the others landed again)."""
         self._faces = None if face is None else (face, t)
