@@ -47,7 +47,7 @@ from scipy import ndimage
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
-from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, OPEN, SEEN, Encoding
+from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, FEATURES, OPEN, SEEN, Encoding
 from viewer.neural.lattice import LatticeGeometry, LatticeShadows, moved_box
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
@@ -56,6 +56,9 @@ SAME_COLOUR = 1e-9
 """Two patches belong to one emitter when their radiances point the same way in RGB to this
 tolerance; an emitter keeps its basis while its patches' radiances stay proportional to it."""
 _serials = itertools.count()
+GEOMETRY = slice(0, FEATURES.index("albedo"))
+PLACE = slice(FEATURES.index("coord_x"), FEATURES.index("bounce_0"))
+"""The features of `LatticeGeometry.features` that an encoding takes as they are (the others are its own)."""
 
 
 @dataclass
@@ -204,7 +207,8 @@ class Encoder:
             if unchanged[c] and previous is not None:
                 inputs[c] = previous[c]
                 continue
-            inputs[c] = g.features
+            inputs[c, GEOMETRY] = g.features[GEOMETRY]   # density and normal
+            inputs[c, PLACE] = g.features[PLACE]         # coordinates and extent
             inputs[c, 4] = self._albedo_feature[c]
             inputs[c, 5] = emitted[c] * inv[c]
             np.multiply(direct[c], np.float32(inv[c]), out=inputs[c, DIRECT])

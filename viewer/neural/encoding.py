@@ -113,34 +113,42 @@ def compressed(inputs: np.ndarray) -> np.ndarray:
     """(passes, CHANNELS, M, M, M) float32: the encoded `inputs` as the network's convolutions read them,
     the light (`COMPRESSED`) through asinh. A network exported with two inputs takes it beside the
     inputs: the eight ONNX operators that spell asinh cost 4 ms of the network's 19 on a 24^3 lattice's
-    three passes. Compiled and shared among the cores (`_asinh`): numpy's asinh took 1.3 ms on an Intel
-    Xeon machine, whose vector library it has a kernel for, but takes 27 ms of one core on an AMD EPYC
-    one, where the compiled loop takes 9 (the Cornell box's inputs, `time.thread_time`)."""
-    out = np.array(inputs, np.float32, copy=True)
-    shape = out.shape
-    flat = out.reshape(shape[0], shape[1], -1)
+    three passes. Compiled, in one pass that copies the other channels, shared among the cores
+    (`_asinh`): numpy's asinh took 1.3 ms on an Intel Xeon machine, whose vector library it has a
+    kernel for, but takes 27 ms of one core on an AMD EPYC one, where the compiled loop takes 9 (the
+    Cornell box's inputs, `time.thread_time`)."""
+    source = np.ascontiguousarray(inputs, np.float32)
+    shape = source.shape
+    flat = source.reshape(shape[0], shape[1], -1)
+    light = np.zeros(shape[1], np.bool_)
     for part in COMPRESSED:
-        _asinh(flat, part.start, part.stop)
-    return out
+        light[part] = True
+    out = np.empty_like(flat)
+    _asinh(flat, light, out)
+    return out.reshape(shape)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True, fastmath=True, error_model="numpy")
-def _asinh(a, start, stop):
-    """asinh in place over a[:, start:stop, :] (passes, channels, cells) float32: log(|x| + sqrt(x^2 + 1))
-    with the sign of x, x itself below 5e-3 (where the sum rounds; within 3e-5 of asinh there, an ulp
-    elsewhere), and 2|x| for the root past 1e8 (where the square would overflow). Selects, no
-    branches, so that the loop vectorizes: log1p in their place runs a call a value, as slow as numpy."""
-    rows = a.shape[0] * (stop - start)
+def _asinh(a, light, out):
+    """out = a (passes, channels, cells) float32, through asinh in the `light` channels: log(|x| +
+    sqrt(x^2 + 1)) with the sign of x, x itself below 5e-3 (where the sum rounds; within 3e-5 of asinh
+    there, an ulp elsewhere), and 2|x| for the root past 1e8 (where the square would overflow). Selects,
+    no branches, so that the loop vectorizes: log1p in their place runs a call a value, as slow as
+    numpy."""
+    channels = a.shape[1]
     one, small, big = np.float32(1.0), np.float32(5e-3), np.float32(1e8)
-    for row in numba.prange(rows):
-        p, c = row // (stop - start), start + row % (stop - start)
-        line = a[p, c]
+    for row in numba.prange(a.shape[0] * channels):
+        p, c = row // channels, row % channels
+        line, target = a[p, c], out[p, c]
+        if not light[c]:
+            target[:] = line
+            continue
         for i in range(line.shape[0]):
             x = line[i]
             ax = abs(x)
             root = np.sqrt(ax * ax + one) if ax < big else ax
             y = np.log(ax + root) if ax >= small else ax
-            line[i] = math.copysign(y, x)
+            target[i] = math.copysign(y, x)
 
 
 @dataclass(frozen=True)
