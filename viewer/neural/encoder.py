@@ -41,6 +41,7 @@ import time
 from dataclasses import dataclass
 from types import SimpleNamespace
 
+import numba
 import numpy as np
 from scipy import ndimage
 
@@ -212,8 +213,8 @@ class Encoder:
             inputs[c, 4] = self._albedo_feature[c]
             inputs[c, 5] = emitted[c] * inv[c]
             np.multiply(direct[c], np.float32(inv[c]), out=inputs[c, DIRECT])
-            inputs[c, BOUNCE] = bounce[:, :, c].T * inv[c]
-            inputs[c, SEEN] = seen[:, :, c].T * inv[c]
+            _transposed(bounce, c, inv[c], inputs[c, BOUNCE])   # bounce[:, :, c].T x inv[c], in one pass
+            _transposed(seen, c, inv[c], inputs[c, SEEN])
             inputs[c, OPEN] = opened
         inputs = inputs.reshape(3, CHANNELS, m, m, m)
         inputs.flags.writeable = False  # shared with the next encoding when it is the same
@@ -330,6 +331,14 @@ class Encoder:
             part = labels[tuple(local.T)]
             out += [patches[mine[part == label]] for label in np.unique(part)]
         return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _transposed(source, column, scale, out):
+    """out (9, P) = source[:, :, column].T x scale, for source (P, 9, C)."""
+    for p in range(source.shape[0]):
+        for b in range(source.shape[1]):
+            out[b, p] = source[p, b, column] * scale
 
 
 def _patch_keys(position, normal, area, target) -> list[bytes]:
