@@ -24,6 +24,7 @@ import numpy as np
 
 from viewer import wake
 from viewer.rays.cast import TriangleCaster
+from viewer.gpu.half_floats import widened
 from viewer.rays.moved_faces import changed_rows
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.gather_cast import caster_of
@@ -350,10 +351,9 @@ class BakedIndirectLight:
     def _read_direct(self) -> None:
         if self._direct is None:
             lightmap = self.lightmap
-            height, width = lightmap.covered.shape
             finish(lightmap.ctx)   # the bake drawn without Python's lock (a scan's: 0.15 s the worker waited)
-            texels = np.frombuffer(lightmap.texture.read(), np.float16).reshape(height * 2 * width, 4)
-            self._direct = (texels[:, :3].astype(np.float32), np.array(lightmap.scale, np.float32))   # and its scale
+            texels = np.frombuffer(lightmap.texture.read(), np.float16).reshape(-1, 4)   # (front | back) rows
+            self._direct = (widened(texels, 3), np.array(lightmap.scale, np.float32))   # and its scale
             self._reflectance = None
 
     @property
