@@ -121,6 +121,12 @@ def test_changed_rows_are_the_rows_numpy_finds_different():
     np.testing.assert_array_equal(changed_rows((a, b), (c, d)), expected)
     assert set(np.flatnonzero(expected)) == {3, 10, 77, 499}
     assert not changed_rows((a, a), (c, c.copy())).any()
+    for array in (a, b, c, d):
+        array.setflags(write=False)
+    first = changed_rows((a, b), (c, d))
+    assert changed_rows((a, b), (c, d)) is first and not first.flags.writeable   # kept for the same arrays
+    assert changed_rows((b, a), (c, d)) is not first                            # asked of others: made again
+    np.testing.assert_array_equal(changed_rows((a, b), (c, d.copy())), expected)
 
 
 def test_the_moved_box_holds_every_corner_of_the_moved_faces_before_and_after():
