@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from viewer import scene as scenes
-from viewer.rays.voxels import FACINGS, face_facing, face_sums, voxelize
+from viewer.rays.voxels import FACINGS, face_facing, voxelize
 from scenes import box
 
 
@@ -80,18 +80,3 @@ def test_a_face_joins_the_facing_of_its_largest_dot_product_the_first_of_equals(
                      [-0.0, 0, 0], [0, 2, -2], [-3, 0, 3]], np.float64)
     normals = np.concatenate([rng.normal(size=(2000, 3)), ties])
     np.testing.assert_array_equal(face_facing(normals), np.argmax(normals @ FACINGS.T, axis=1))
-
-
-def test_face_sums_are_scipys_product_to_the_last_bit():
-    """`face_sums` adds each voxel's faces in scipy's order: the voxels' colours are what the sparse
-    product gave (empty rows zero, other dtypes left to scipy)."""
-    from scipy import sparse
-
-    rng = np.random.default_rng(8)
-    shares = sparse.random(300, 2000, density=0.01, random_state=5, format="csr")
-    shares = sparse.vstack([shares, sparse.csr_matrix((2, 2000))]).tocsr()
-    values = rng.random((2000, 3))
-    ours = face_sums(shares, values)
-    assert ours.shape == (302, 3) and not ours[-2:].any()
-    assert np.array_equal(ours.view(np.uint64), (shares @ values).view(np.uint64))
-    assert np.array_equal(face_sums(shares, values.astype(np.float32)), shares @ values.astype(np.float32))

@@ -27,7 +27,7 @@ from viewer.probes.grid import ProbeGrid
 from viewer.resources import DEFAULT_MODEL
 from viewer.scene import Scene
 from viewer.rays.voxel_faces import FaceVoxels
-from viewer.rays.voxels import VoxelGrid, face_sums, voxel_albedo, voxelize
+from viewer.rays.voxels import VoxelGrid, voxel_albedo, voxelize
 
 OUTPUTS = 19
 """Per probe and colour pass: 9 SH of all the light, 9 of the reflected light, 1 validity logit."""
@@ -298,7 +298,7 @@ class SceneVoxels:
             if lights.face is not None and lights.count:
                 lights = replace(lights, radiance=scene.emission[lights.face])
             albedo = voxel_albedo(faces, self.voxelization.tint, scene)
-            self._grid = replace(grid, albedo=albedo, emission=face_sums(faces, scene.emission), lights=lights)
+            self._grid = replace(grid, albedo=albedo, emission=faces @ scene.emission, lights=lights)
             self._colours = (scene.albedo, scene.emission)
         return self._grid
 

@@ -29,7 +29,7 @@ from viewer.probes import sh
 from viewer.physical.geometry import Geometry, SunPaths
 from viewer.physical.lightpaths import LightPaths
 from viewer.probes.grid import ProbeGrid
-from viewer.rays.voxels import face_sums, voxel_albedo
+from viewer.rays.voxels import voxel_albedo
 from viewer.scene import Scene
 
 
@@ -54,7 +54,7 @@ def materials(scene: Scene, geometry: Geometry, lights: LightPaths) -> Materials
             else np.zeros((0, 3)))
     sun = scene.sun.irradiance if scene.sun is not None else np.zeros(3)
     return Materials(np.asarray(voxel_albedo(geometry.faces, geometry.tint, scene), np.float32),
-                     np.asarray(face_sums(geometry.faces, gathered), np.float32), np.asarray(lamp, np.float32),
+                     np.asarray(geometry.faces @ gathered, np.float32), np.asarray(lamp, np.float32),
                      np.asarray(sun, np.float64))
 
 

@@ -25,7 +25,7 @@ from viewer.rays.moved_faces import changed_rows
 from viewer.scene.textures import relative_at
 from viewer.rays.pieces import PIECE_EDGE, face_pairs
 from viewer.rays.voxels import (FACINGS, VoxelGrid, Voxelization, light_samples, subdivide, face_facing,
-                           face_sums, grid_frame, voxel_albedo)
+                           grid_frame, voxel_albedo)
 
 MOVED_SHARE = 0.5
 """Past this share of the surface moved (its pieces are the work), voxelizing afresh is as quick."""
@@ -107,7 +107,7 @@ class FaceVoxels:
         coords = np.stack([cell % n, (cell // n) % n, cell // n ** 2], axis=1)
         grid = VoxelGrid(lo=self.lo, voxel_size=self.size, resolution=n, coords=coords, position=position,
                          normal=normal, area=area, albedo=voxel_albedo(faces, tint, scene),
-                         emission=face_sums(faces, scene.emission),
+                         emission=faces @ scene.emission,
                          lights=light_samples(scene, np.flatnonzero(self.kept), self.lo, self.size, n, keys))
         return Voxelization(grid, faces, keys, tint)
 

@@ -198,34 +198,11 @@ class Voxelization:
     texture over its mean there, less 1 (see `voxel_albedo`); None for a scene without textures."""
 
 
-def face_sums(faces: "sparse.csr_matrix", values: np.ndarray) -> np.ndarray:
-    """(K, C) `faces @ values` for the (K, F) voxels' face shares and (F, C) per-face values, in one
-    compiled pass that reads a face's C values together (scipy's product: 9 ms for a million-triangle
-    scan's colours, asked four times by a move of the solver), the same sums in the same order."""
-    values = np.ascontiguousarray(values)
-    if values.dtype != np.float64 or faces.dtype != np.float64 or values.ndim != 2:
-        return faces @ values
-    out = np.empty((faces.shape[0], values.shape[1]))
-    _face_sums(faces.indptr, faces.indices, faces.data, values, out)
-    return out
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _face_sums(indptr, indices, data, values, out):
-    for row in numba.prange(out.shape[0]):
-        for c in range(out.shape[1]):
-            out[row, c] = 0.0
-        for k in range(indptr[row], indptr[row + 1]):
-            share, face = data[k], indices[k]
-            for c in range(out.shape[1]):
-                out[row, c] += share * values[face, c]
-
-
 def voxel_albedo(faces: "sparse.csr_matrix", tint: tuple | None, scene: Scene) -> np.ndarray:
     """(K, 3) voxel albedo from per-face albedo: the faces' area shares, plus on textured faces what their
     texture adds where each voxel lies (a recoloured group scales its texture with its colour, so the
     shares stay true; a group whose texture was dropped counts as plain)."""
-    albedo = face_sums(faces, scene.albedo)
+    albedo = faces @ scene.albedo
     if tint is not None and scene.textured:
         textured = scene.albedo * textured_faces(scene)[:, None]
         albedo = np.minimum(albedo + np.stack([tint[c] @ textured[:, c] for c in range(3)], axis=1), 0.999)
