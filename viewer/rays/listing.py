@@ -20,15 +20,14 @@ def listing(scene, lo: np.ndarray, h: float, n: int, only: np.ndarray | None = N
     areas = scene.face_areas
     usable = areas > 1e-12 * max(float(areas.max()), 1e-30)
     usable = np.flatnonzero(usable if only is None else usable & only)
-    triangles = scene.triangles
-    corners = triangles if len(usable) == len(areas) else triangles[usable]
-    corners = np.ascontiguousarray(corners, np.float64)
-    normals = np.ascontiguousarray(scene.face_normals[usable], np.float64)
+    corners = np.ascontiguousarray(scene.triangles, np.float64)   # read in place at the usable rows
+    normals = np.ascontiguousarray(scene.face_normals, np.float64)
     lo = np.asarray(lo, np.float64)
     low = np.empty((len(usable), 3), np.int64)
     extent = np.empty((len(usable), 3), np.int64)
-    first = np.empty(len(usable) + 1, np.int64)
-    _boxes(corners, lo, float(h), n, low, extent, first)
+    first = np.zeros(len(usable) + 1, np.int64)
+    _boxes(corners, usable, lo, float(h), n, low, extent, first)
+    np.cumsum(first, out=first)
     xyz = np.empty((first[-1], 3), np.int64)
     triangle = np.empty(first[-1], np.int64)
     near = np.empty(first[-1], np.bool_)
@@ -36,21 +35,21 @@ def listing(scene, lo: np.ndarray, h: float, n: int, only: np.ndarray | None = N
     return _by_cell(xyz, triangle, near, n)
 
 
-@numba.njit(cache=True, nogil=True)
-def _boxes(corners, lo, h, n, low, extent, first):
-    """Each triangle's box of cells (its lowest cell and its extent in cells, clipped to the grid), and
-    where its candidates start (`first`, a running sum of the boxes' cells)."""
-    first[0] = 0
-    for t in range(corners.shape[0]):
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _boxes(corners, usable, lo, h, n, low, extent, count):
+    """Each usable triangle's box of cells (its lowest cell and its extent in cells, clipped to the grid),
+    and its number of cells at `count[t + 1]` (their running sum is where its candidates start)."""
+    for t in numba.prange(len(usable)):
+        f = usable[t]
         cells = 1
         for axis in range(3):
-            a, b, c = corners[t, 0, axis], corners[t, 1, axis], corners[t, 2, axis]
+            a, b, c = corners[f, 0, axis], corners[f, 1, axis], corners[f, 2, axis]
             start = min(max(int(np.floor((min(a, b, c) - lo[axis]) / h)), 0), n - 1)
             end = min(max(int(np.floor((max(a, b, c) - lo[axis]) / h)), 0), n - 1)
             low[t, axis] = start
             extent[t, axis] = end - start + 1
             cells *= end - start + 1
-        first[t + 1] = first[t] + cells
+        count[t + 1] = cells
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -58,17 +57,18 @@ def _candidates(corners, normals, usable, lo, h, low, extent, first, xyz, triang
     """Each triangle's bounding-box cells (x fastest) from `first[t]` on, and whether its plane passes
     within the cell: the distance from the cell's centre to the plane at most half the cell's extent
     along the normal (with a hair of tolerance)."""
-    for t in numba.prange(corners.shape[0]):
-        nx, ny, nz = normals[t, 0], normals[t, 1], normals[t, 2]
+    for t in numba.prange(len(usable)):
+        f = usable[t]
+        nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
         reach = 0.5 * h * ((abs(nx) + abs(ny)) + abs(nz)) * (1 + 1e-9) + 1e-12 * h
         e0, e1 = extent[t, 0], extent[t, 1]
         for local in range(first[t + 1] - first[t]):
             i = first[t] + local
             x, y, z = low[t, 0] + local % e0, low[t, 1] + local // e0 % e1, low[t, 2] + local // (e0 * e1)
             xyz[i, 0], xyz[i, 1], xyz[i, 2] = x, y, z
-            triangle[i] = usable[t]
-            dx, dy = lo[0] + (x + 0.5) * h - corners[t, 0, 0], lo[1] + (y + 0.5) * h - corners[t, 0, 1]
-            near[i] = abs((dx * nx + dy * ny) + (lo[2] + (z + 0.5) * h - corners[t, 0, 2]) * nz) <= reach
+            triangle[i] = f
+            dx, dy = lo[0] + (x + 0.5) * h - corners[f, 0, 0], lo[1] + (y + 0.5) * h - corners[f, 0, 1]
+            near[i] = abs((dx * nx + dy * ny) + (lo[2] + (z + 0.5) * h - corners[f, 0, 2]) * nz) <= reach
 
 
 @numba.njit(cache=True, nogil=True)

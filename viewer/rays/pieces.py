@@ -43,38 +43,42 @@ def piece_centroids(level: int) -> np.ndarray:
 
 
 def face_pairs(triangles: np.ndarray, areas: np.ndarray, facing: np.ndarray, lo: np.ndarray, size: float,
-               resolution: int):
+               resolution: int, rows: np.ndarray | None = None):
     """(key, face, area, moment) per (voxel, face) pair of the triangles' pieces: key = flat cell x 6 +
-    the face's `facing`, face an index into `triangles`, area the pieces' summed area there, moment their
-    area-weighted centroids summed. Pairs come face by face, each face's in the order its pieces first
-    reach a voxel."""
+    the face's `facing`, face an index into `triangles` (into `rows`, where given: the triangles and
+    areas of those rows alone are cut, read in place instead of copied: a million-triangle scan's
+    corners are 72 MB), area the pieces' summed area there, moment their area-weighted centroids summed.
+    Pairs come face by face, each face's in the order its pieces first reach a voxel. `facing` has one
+    entry a face cut."""
     triangles = np.ascontiguousarray(triangles, np.float64)
+    rows = np.arange(len(triangles)) if rows is None else np.asarray(rows, np.int64)
     lo = np.asarray(lo, np.float64)
-    level = np.empty(len(triangles), np.int64)
-    bound = _plan(triangles, PIECE_EDGE * size, lo, float(size), resolution, level)
+    level = np.empty(len(rows), np.int64)
+    bound = _plan(triangles, rows, PIECE_EDGE * size, lo, float(size), resolution, level)
     slot = np.full(resolution ** 3, -1, np.int32)
     key = np.empty(bound, np.int64)
     face = np.empty(bound, np.int64)
     area = np.empty(bound)
     moment = np.empty((bound, 3))
-    count = _bin(triangles, np.asarray(areas, np.float64), level, np.asarray(facing, np.int64), lo, float(size),
+    count = _bin(triangles, rows, np.asarray(areas, np.float64), level, np.asarray(facing, np.int64), lo, float(size),
                  resolution, slot, key, face, area, moment)
     return key[:count], face[:count], area[:count], moment[:count]
 
 
 @numba.njit(cache=True, nogil=True)
-def _plan(triangles, max_edge, lo, size, n, level):
+def _plan(triangles, rows, max_edge, lo, size, n, level):
     """Each face's `piece_levels` into `level`; returns how many pairs the faces can make at most (a pair
     a piece, or a pair a cell of the face's bounding box, whichever is fewer)."""
     bound = 0
-    for f in range(len(triangles)):
+    for f in range(len(rows)):
+        t = rows[f]
         longest = 0.0
         cells = 1
         for e in range(3):
-            p, q = triangles[f, e], triangles[f, (e + 1) % 3]
+            p, q = triangles[t, e], triangles[t, (e + 1) % 3]
             longest = max(longest, np.sqrt((q[0] - p[0]) ** 2 + (q[1] - p[1]) ** 2 + (q[2] - p[2]) ** 2))
-            low = min(triangles[f, 0, e], triangles[f, 1, e], triangles[f, 2, e])
-            high = max(triangles[f, 0, e], triangles[f, 1, e], triangles[f, 2, e])
+            low = min(triangles[t, 0, e], triangles[t, 1, e], triangles[t, 2, e])
+            high = max(triangles[t, 0, e], triangles[t, 1, e], triangles[t, 2, e])
             cells *= _cell(high, lo[e], size, n) - _cell(low, lo[e], size, n) + 1
         level[f] = int(np.ceil(np.log2(max(longest / max_edge, 1.0))))
         bound += min(cells, 1 << (2 * level[f]))
@@ -82,12 +86,12 @@ def _plan(triangles, max_edge, lo, size, n, level):
 
 
 @numba.njit(cache=True, nogil=True)
-def _bin(triangles, areas, level, facing, lo, size, n, slot, key, face, area, moment):
+def _bin(triangles, rows, areas, level, facing, lo, size, n, slot, key, face, area, moment):
     count = 0
-    for f in range(len(triangles)):
+    for f in range(len(rows)):
         side = 1 << level[f]
-        piece = areas[f] / (side * side)
-        a, b, c = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+        piece = areas[rows[f]] / (side * side)
+        a, b, c = triangles[rows[f], 0], triangles[rows[f], 1], triangles[rows[f], 2]
         first = count
         for flip in range(2):
             offset = (1.0 + flip) / 3.0

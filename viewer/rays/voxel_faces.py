@@ -221,10 +221,9 @@ def _pairs(scene: Scene, triangles: np.ndarray, faces: np.ndarray, lo: np.ndarra
     if len(faces) == 0:
         return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)),
                 np.zeros((0, 3)) if scene.textured else None)
-    facing = face_facing(normals[faces])
+    facing = face_facing(normals, faces)
     if not scene.textured:
-        key, source, area, moment = face_pairs(triangles[faces], scene.face_areas[faces], facing, lo, size,
-                                               resolution)
+        key, source, area, moment = face_pairs(triangles, scene.face_areas, facing, lo, size, resolution, faces)
         return key, faces[source], area, moment, None
     centroid, piece_area, source = subdivide(triangles[faces], PIECE_EDGE * size)
     piece_face = faces[source]

@@ -222,28 +222,31 @@ def voxelize_with_faces(scene: Scene, resolution: int = 32, normal_mode: str = "
     return Voxelization(grid, faces, keys, tint)
 
 
-def face_facing(normals: np.ndarray) -> np.ndarray:
+def face_facing(normals: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
     """(F,) index into FACINGS of the signed axis closest to each normal (the voxel a face's pieces join):
     the largest of its dot products with FACINGS, the first of equals, found from |n| in one compiled
     pass (numpy's argmax along rows of three took 6.7 ms on a 272k-face scan, and a moved scan asks
-    several times; a matrix product waits for BLAS's threads after the compiled loops' parallel work)."""
+    several times; a matrix product waits for BLAS's threads after the compiled loops' parallel work).
+    `rows`: of those normals alone, read in place."""
     normals = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
-    out = np.empty(len(normals), np.int64)
-    _facing(normals, out)
+    rows = np.arange(len(normals)) if rows is None else np.asarray(rows, np.int64)
+    out = np.empty(len(rows), np.int64)
+    _facing(normals, rows, out)
     return out
 
 
 @numba.njit(cache=True, nogil=True)
-def _facing(normals, out):
-    for f in range(normals.shape[0]):
+def _facing(normals, rows, out):
+    for i in range(len(rows)):
+        f = rows[i]
         x, y, z = normals[f, 0], normals[f, 1], normals[f, 2]
         ax, ay, az = abs(x), abs(y), abs(z)
         if ax >= ay and ax >= az:
-            out[f] = 1 if x < 0 else 0
+            out[i] = 1 if x < 0 else 0
         elif ay >= az:
-            out[f] = 3 if y < 0 else 2
+            out[i] = 3 if y < 0 else 2
         else:
-            out[f] = 5 if z < 0 else 4
+            out[i] = 5 if z < 0 else 4
 
 
 def _voxelize(scene: Scene, resolution: int, normal_mode: str):
@@ -256,7 +259,7 @@ def _voxelize(scene: Scene, resolution: int, normal_mode: str):
     keep = areas > 1e-12 * max(float(areas.max()), 1e-30)
     face_ids = np.nonzero(keep)[0]
     face_normal = scene.face_normals
-    facing = face_facing(face_normal[face_ids])
+    facing = face_facing(face_normal, face_ids)
     # Items binned per voxel: a plain scene's (voxel, face) pairs, summed as its pieces are made
     # (viewer.rays.pieces); a textured one's pieces themselves, each taking its texture where it lies.
     piece_tint = None
@@ -268,8 +271,7 @@ def _voxelize(scene: Scene, resolution: int, normal_mode: str):
         moment = centroid * piece_area[:, None]
         piece_tint = relative_at(scene, face_ids[source], centroid)
     else:
-        item_key, source, piece_area, moment = face_pairs(scene.triangles[keep], areas[keep], facing, lo, h,
-                                                          resolution)
+        item_key, source, piece_area, moment = face_pairs(scene.triangles, areas, facing, lo, h, resolution, face_ids)
     piece_face = face_ids[source]
     keys, inverse = sorted_unique(item_key, resolution ** 3 * 6)
 
