@@ -190,23 +190,24 @@ def _staying(moved, face, stay):
 @numba.njit(cache=True, nogil=True)
 def _restack(stay, key, face, area, moment, tint, new_key, new_face, new_area, new_moment, new_tint,
              out_key, out_face, out_area, out_moment, out_tint):
-    tinted = out_tint.shape[0] > 0
+    out = (out_key, out_face, out_area, out_moment, out_tint)
     w = 0
     for q in range(len(stay)):
         if stay[q]:
-            out_key[w], out_face[w], out_area[w] = key[q], face[q], area[q]
-            for c in range(3):
-                out_moment[w, c] = moment[q, c]
-                if tinted:
-                    out_tint[w, c] = tint[q, c]
+            _put(q, (key, face, area, moment, tint), w, out)
             w += 1
     for q in range(len(new_key)):
-        out_key[w], out_face[w], out_area[w] = new_key[q], new_face[q], new_area[q]
-        for c in range(3):
-            out_moment[w, c] = new_moment[q, c]
-            if tinted:
-                out_tint[w, c] = new_tint[q, c]
-        w += 1
+        _put(q, (new_key, new_face, new_area, new_moment, new_tint), w + q, out)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _put(q, source, w, out):
+    """Row q of the pairs `source` (key, face, area, moment, tint: empty without textures) to row w of `out`."""
+    out[0][w], out[1][w], out[2][w] = source[0][q], source[1][q], source[2][q]
+    for c in range(3):
+        out[3][w, c] = source[3][q, c]
+        if out[4].shape[0] > 0:
+            out[4][w, c] = source[4][q, c]
 
 
 def _kept(areas: np.ndarray) -> np.ndarray:
