@@ -84,3 +84,29 @@ def test_the_cells_of_a_moved_scene_list_what_listing_it_afresh_lists(group, mon
     # a largest face of another size decides otherwise which faces are too small to list: all afresh
     assert dda._moved(cells, edited, cells.lo, cells.h, cells.n, 2 * cells.largest) is None
     assert dda._moved(cells, edited, cells.lo, cells.h, cells.n, cells.largest) is not None
+
+
+@pytest.mark.parametrize("group", ["back", "small-box"])
+def test_a_textured_scene_moved_in_part_keeps_its_textures_in_the_voxels(group):
+    """With a textured back wall (blue on its left half, yellow on its right), the pairs kept across a
+    move carry their share of the texture with them, and so do the moved faces' new pairs: the voxels
+    are the moved scene's own, their albedo included."""
+    from dataclasses import replace
+
+    from viewer.scene.textures import Texture
+
+    box = load("cornell")
+    image = np.zeros((2, 64, 3), np.float32)
+    image[:, :32], image[:, 32:] = (0.1, 0.2, 0.8), (0.8, 0.7, 0.1)
+    texture = Texture(image, srgb=False, wrap=("clamp", "clamp"), name="two-tone")
+    corners = box.triangles
+    uv = np.stack([(corners[..., 0] + 1) / 2, (1 - corners[..., 1]) / 2], axis=-1)
+    back = box.group_index("back")
+    textures = tuple(texture if g == back else None for g in range(len(box.groups)))
+    scene = replace(box, uv=uv, textures=textures)
+    pairs = FaceVoxels.of(scene, 16)
+    assert pairs.tint is not None
+    edited = moved(scene, group, (0.0, 0.0, 0.04) if group == "back" else (0.1, 0.0, 0.1))
+    kept = pairs.moved(edited)
+    assert kept is not None and kept.tint is not None
+    assert_same_voxelization(kept.voxelization(edited), voxelize_with_faces(edited, 16))
