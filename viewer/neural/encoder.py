@@ -41,15 +41,14 @@ import time
 from dataclasses import dataclass
 from types import SimpleNamespace
 
-import numba
 import numpy as np
 from scipy import ndimage
 
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
-from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, FEATURES, OPEN, SEEN, Encoding
-from viewer.neural.lattice import LatticeGeometry, LatticeShadows, moved_box
+from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, OPEN, SEEN, Encoding
+from viewer.neural.lattice import GEOMETRY, PLACE, LatticeGeometry, LatticeShadows, moved_box, transposed
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
 
@@ -57,9 +56,6 @@ SAME_COLOUR = 1e-9
 """Two patches belong to one emitter when their radiances point the same way in RGB to this
 tolerance; an emitter keeps its basis while its patches' radiances stay proportional to it."""
 _serials = itertools.count()
-GEOMETRY = slice(0, FEATURES.index("albedo"))
-PLACE = slice(FEATURES.index("coord_x"), FEATURES.index("bounce_0"))
-"""The features of `LatticeGeometry.features` that an encoding takes as they are (the others are its own)."""
 
 
 @dataclass
@@ -213,8 +209,8 @@ class Encoder:
             inputs[c, 4] = self._albedo_feature[c]
             inputs[c, 5] = emitted[c] * inv[c]
             np.multiply(direct[c], np.float32(inv[c]), out=inputs[c, DIRECT])
-            _transposed(bounce, c, inv[c], inputs[c, BOUNCE])   # bounce[:, :, c].T x inv[c], in one pass
-            _transposed(seen, c, inv[c], inputs[c, SEEN])
+            transposed(bounce, c, inv[c], inputs[c, BOUNCE])   # bounce[:, :, c].T x inv[c], in one pass
+            transposed(seen, c, inv[c], inputs[c, SEEN])
             inputs[c, OPEN] = opened
         inputs = inputs.reshape(3, CHANNELS, m, m, m)
         inputs.flags.writeable = False  # shared with the next encoding when it is the same
@@ -331,14 +327,6 @@ class Encoder:
             part = labels[tuple(local.T)]
             out += [patches[mine[part == label]] for label in np.unique(part)]
         return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _transposed(source, column, scale, out):
-    """out (9, P) = source[:, :, column].T x scale, for source (P, 9, C)."""
-    for p in range(source.shape[0]):
-        for b in range(source.shape[1]):
-            out[b, p] = source[p, b, column] * scale
 
 
 def _patch_keys(position, normal, area, target) -> list[bytes]:

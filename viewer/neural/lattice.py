@@ -15,6 +15,11 @@ from viewer.rays.voxel_rays import VoxelRays, meets_box
 from viewer.rays.voxels import VoxelGrid
 
 
+GEOMETRY = slice(0, encoding.FEATURES.index("albedo"))
+PLACE = slice(encoding.FEATURES.index("coord_x"), encoding.FEATURES.index("bounce_0"))
+"""The features of `LatticeGeometry.features` that an encoding takes as they are (the others are its own)."""
+
+
 class LatticeGeometry:
     """What the encoding takes from the voxels' geometry alone (positions, normals, areas) on one lattice."""
 
@@ -187,3 +192,11 @@ def _segments_meet_box(points, ends, lo, hi):
         for c in range(ends.shape[0]):
             out[c, p] = meets_box(x, y, z, ends[c, 0] - x, ends[c, 1] - y, ends[c, 2] - z, 1.0, lo, hi)
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def transposed(source, column, scale, out):
+    """out (9, P) = source[:, :, column].T x scale, for source (P, 9, C)."""
+    for p in range(source.shape[0]):
+        for b in range(source.shape[1]):
+            out[b, p] = source[p, b, column] * scale

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from viewer.rays.listing import listing as _listing, moved_listing
+from viewer.rays.listing import entry_voxels, listing as _listing, moved_listing
 from viewer.rays.moved_faces import changed_rows
 
 MISS = -1
@@ -31,9 +31,6 @@ EDGE_TOLERANCE = 1e-7
 one of them (watertight in practice)."""
 
 
-_NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
-_NEIGHBOUR_ORDER = np.ascontiguousarray(_NEIGHBOURS[np.argsort(np.abs(_NEIGHBOURS).sum(axis=1))], np.int64)
-"""The cell and its 26 neighbours, nearest first: where a grazing entry looks for its voxel."""
 MOVED_SHARE = 0.5
 """Past this share of the faces moved, `Cells.of` lists them all afresh."""
 
@@ -58,25 +55,6 @@ def _moved(previous: "Cells | None", scene, lo: np.ndarray, h: float, n: int, la
     v0, e1, e2 = scene.edges
     moved = changed_rows((previous.v0, v0), (previous.e1, e1), (previous.e2, e2))
     return moved if moved.sum() <= MOVED_SHARE * len(moved) else None
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _entry_voxels(first, triangle, facing, table, order, n, out):
-    """Each entry's voxel: the key table's (flat cell x 6 + the triangle's facing -> voxel, -1 for none)
-    in the entry's cell, else in the first neighbour in `order` that has one, else BACKFACE."""
-    for c in numba.prange(n * n * n):
-        x, y, z = c % n, (c // n) % n, c // (n * n)
-        for e in range(first[c], first[c + 1]):
-            f = facing[triangle[e]]
-            v = table[c * 6 + f]
-            if v < 0:
-                for o in range(order.shape[0]):
-                    a, b, d = x + order[o, 0], y + order[o, 1], z + order[o, 2]
-                    if 0 <= a < n and 0 <= b < n and 0 <= d < n:
-                        v = table[(a + n * (b + n * d)) * 6 + f]
-                        if v >= 0:
-                            break
-            out[e] = v if v >= 0 else BACKFACE
 
 
 @dataclass(frozen=True)
@@ -132,8 +110,7 @@ class Cells:
         table = np.full(n ** 3 * 6, -1, np.int64)
         table[keys[::-1]] = np.arange(len(keys) - 1, -1, -1)   # the first voxel of a key, should two share it
         voxel = np.empty(len(triangle), np.int64)
-        _entry_voxels(first, np.asarray(triangle, np.int64), face_facing(scene.face_normals), table,
-                      _NEIGHBOUR_ORDER, n, voxel)
+        entry_voxels(first, np.asarray(triangle, np.int64), face_facing(scene.face_normals), table, n, voxel)
         return Cells(lo, h, n, first, np.asarray(triangle, np.int64), voxel, *scene.edges, largest)
 
     @staticmethod

@@ -139,3 +139,37 @@ def _merged(first, triangle, moved, cell, fresh, cells):
                 e += 1
             w += 1
     return out_first, out
+
+
+NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
+NEIGHBOUR_ORDER = np.ascontiguousarray(NEIGHBOURS[np.argsort(np.abs(NEIGHBOURS).sum(axis=1))], np.int64)
+"""The cell and its 26 neighbours, nearest first: where a grazing entry looks for its voxel."""
+
+
+def entry_voxels(first: np.ndarray, triangle: np.ndarray, facing: np.ndarray, table: np.ndarray, n: int,
+                 out: np.ndarray) -> None:
+    """Each listed entry's voxel into `out`: the key `table`'s (flat cell x 6 + the triangle's `facing`
+    -> voxel, -1 for none) in the entry's cell, else in the nearest neighbouring cell that has one of
+    that facing, else dda.BACKFACE (the surface is opaque and dark)."""
+    from viewer.rays.dda import BACKFACE
+
+    _entry_voxels(first, triangle, facing, table, NEIGHBOUR_ORDER, n, BACKFACE, out)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _entry_voxels(first, triangle, facing, table, order, n, backface, out):
+    """Each entry's voxel: the key table's (flat cell x 6 + the triangle's facing -> voxel, -1 for none)
+    in the entry's cell, else in the first neighbour in `order` that has one, else `backface`."""
+    for c in numba.prange(n * n * n):
+        x, y, z = c % n, (c // n) % n, c // (n * n)
+        for e in range(first[c], first[c + 1]):
+            f = facing[triangle[e]]
+            v = table[c * 6 + f]
+            if v < 0:
+                for o in range(order.shape[0]):
+                    a, b, d = x + order[o, 0], y + order[o, 1], z + order[o, 2]
+                    if 0 <= a < n and 0 <= b < n and 0 <= d < n:
+                        v = table[(a + n * (b + n * d)) * 6 + f]
+                        if v >= 0:
+                            break
+            out[e] = v if v >= 0 else backface
