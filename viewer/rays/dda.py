@@ -110,7 +110,7 @@ class Cells:
         table = np.full(n ** 3 * 6, -1, np.int64)
         table[keys[::-1]] = np.arange(len(keys) - 1, -1, -1)   # the first voxel of a key, should two share it
         voxel = np.empty(len(triangle), np.int64)
-        entry_voxels(first, np.asarray(triangle, np.int64), face_facing(scene.face_normals), table, n, voxel)
+        entry_voxels(first, np.asarray(triangle, np.int64), face_facing(scene.face_normals), table, n, BACKFACE, voxel)
         return Cells(lo, h, n, first, np.asarray(triangle, np.int64), voxel, *scene.edges, largest)
 
     @staticmethod

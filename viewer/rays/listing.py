@@ -147,13 +147,11 @@ NEIGHBOUR_ORDER = np.ascontiguousarray(NEIGHBOURS[np.argsort(np.abs(NEIGHBOURS).
 
 
 def entry_voxels(first: np.ndarray, triangle: np.ndarray, facing: np.ndarray, table: np.ndarray, n: int,
-                 out: np.ndarray) -> None:
+                 backface: int, out: np.ndarray) -> None:
     """Each listed entry's voxel into `out`: the key `table`'s (flat cell x 6 + the triangle's `facing`
     -> voxel, -1 for none) in the entry's cell, else in the nearest neighbouring cell that has one of
-    that facing, else dda.BACKFACE (the surface is opaque and dark)."""
-    from viewer.rays.dda import BACKFACE
-
-    _entry_voxels(first, triangle, facing, table, NEIGHBOUR_ORDER, n, BACKFACE, out)
+    that facing, else `backface` (dda.BACKFACE: the surface is opaque and dark)."""
+    _entry_voxels(first, triangle, facing, table, NEIGHBOUR_ORDER, n, backface, out)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
