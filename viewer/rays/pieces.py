@@ -54,22 +54,38 @@ def face_pairs(triangles: np.ndarray, areas: np.ndarray, facing: np.ndarray, lo:
     rows = np.arange(len(triangles)) if rows is None else np.asarray(rows, np.int64)
     lo = np.asarray(lo, np.float64)
     level = np.empty(len(rows), np.int64)
-    bound = _plan(triangles, rows, PIECE_EDGE * size, lo, float(size), resolution, level)
-    slot = np.full(resolution ** 3, -1, np.int32)
-    key = np.empty(bound, np.int64)
-    face = np.empty(bound, np.int64)
-    area = np.empty(bound)
-    moment = np.empty((bound, 3))
-    count = _bin(triangles, rows, np.asarray(areas, np.float64), level, np.asarray(facing, np.int64), lo, float(size),
-                 resolution, slot, key, face, area, moment)
-    return key[:count], face[:count], area[:count], moment[:count]
+    offset = np.zeros(len(rows) + 1, np.int64)   # each face's room for its pairs, then where it starts
+    _plan(triangles, rows, PIECE_EDGE * size, lo, float(size), resolution, level, offset)
+    np.cumsum(offset, out=offset)
+    bound = int(offset[-1])
+    key, face, area, moment = np.empty(bound, np.int64), np.empty(bound, np.int64), np.empty(bound), np.empty((bound, 3))
+    made = np.zeros(len(rows), np.int64)
+    _bin(triangles, rows, np.asarray(areas, np.float64), level, np.asarray(facing, np.int64), lo, float(size),
+         resolution, _chunks(level), offset, key, face, area, moment, made)
+    if made.sum() == bound:
+        return key, face, area, moment
+    start = np.zeros(len(rows) + 1, np.int64)
+    np.cumsum(made, out=start[1:])
+    out = (np.empty(start[-1], np.int64), np.empty(start[-1], np.int64), np.empty(start[-1]), np.empty((start[-1], 3)))
+    _packed(offset, start, key, face, area, moment, *out)
+    return out
+
+
+def _chunks(level: np.ndarray) -> np.ndarray:
+    """(C + 1,) the faces split into runs of about equal work (a face's pieces, 4^level), four a core:
+    a wall of the Cornell box is 65,536 pieces, a scan's triangle one."""
+    work = np.cumsum((1 << (2 * level)) + 1)
+    count = 4 * numba.get_num_threads()
+    if len(level) == 0:
+        return np.zeros(1, np.int64)
+    ends = np.searchsorted(work, np.linspace(0, work[-1], count + 1)[1:-1], side="right")
+    return np.unique(np.concatenate([[0], ends, [len(level)]])).astype(np.int64)
 
 
 @numba.njit(cache=True, nogil=True)
-def _plan(triangles, rows, max_edge, lo, size, n, level):
-    """Each face's `piece_levels` into `level`; returns how many pairs the faces can make at most (a pair
-    a piece, or a pair a cell of the face's bounding box, whichever is fewer)."""
-    bound = 0
+def _plan(triangles, rows, max_edge, lo, size, n, level, bound):
+    """Each face's `piece_levels` into `level`, and into `bound[f + 1]` how many pairs it can make at most
+    (a pair a piece, or a pair a cell of the face's bounding box, whichever is fewer)."""
     for f in range(len(rows)):
         t = rows[f]
         longest = 0.0
@@ -81,46 +97,58 @@ def _plan(triangles, rows, max_edge, lo, size, n, level):
             high = max(triangles[t, 0, e], triangles[t, 1, e], triangles[t, 2, e])
             cells *= _cell(high, lo[e], size, n) - _cell(low, lo[e], size, n) + 1
         level[f] = int(np.ceil(np.log2(max(longest / max_edge, 1.0))))
-        bound += min(cells, 1 << (2 * level[f]))
-    return bound
+        bound[f + 1] = min(cells, 1 << (2 * level[f]))
 
 
-@numba.njit(cache=True, nogil=True)
-def _bin(triangles, rows, areas, level, facing, lo, size, n, slot, key, face, area, moment):
-    count = 0
-    for f in range(len(rows)):
-        side = 1 << level[f]
-        piece = areas[rows[f]] / (side * side)
-        a, b, c = triangles[rows[f], 0], triangles[rows[f], 1], triangles[rows[f], 2]
-        first = count
-        for flip in range(2):
-            offset = (1.0 + flip) / 3.0
-            for i in range(side):
-                for j in range(side - i - flip):
-                    u = (i + offset) / side
-                    v = (j + offset) / side
-                    w = 1.0 - u - v
-                    x = w * a[0] + u * b[0] + v * c[0]
-                    y = w * a[1] + u * b[1] + v * c[1]
-                    z = w * a[2] + u * b[2] + v * c[2]
-                    cell = (_cell(x, lo[0], size, n) + n * _cell(y, lo[1], size, n)
-                            + n * n * _cell(z, lo[2], size, n))
-                    s = slot[cell]
-                    if s < 0:
-                        s = count
-                        slot[cell] = s
-                        key[s] = cell * 6 + facing[f]
-                        face[s] = f
-                        area[s] = 0.0
-                        moment[s, 0] = moment[s, 1] = moment[s, 2] = 0.0
-                        count += 1
-                    area[s] += piece
-                    moment[s, 0] += x * piece
-                    moment[s, 1] += y * piece
-                    moment[s, 2] += z * piece
-        for s in range(first, count):    # the next face starts from an empty table
-            slot[key[s] // 6] = -1
-    return count
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _bin(triangles, rows, areas, level, facing, lo, size, n, chunks, offset, key, face, area, moment, made):
+    """The pairs of each face from `offset[f]` on (how many into `made[f]`), the runs of faces in
+    `chunks` on every core, each with a table of its own (cell -> the face's pair there)."""
+    for chunk in numba.prange(len(chunks) - 1):
+        slot = np.full(n * n * n, -1, np.int32)
+        for f in range(chunks[chunk], chunks[chunk + 1]):
+            side = 1 << level[f]
+            piece = areas[rows[f]] / (side * side)
+            a, b, c = triangles[rows[f], 0], triangles[rows[f], 1], triangles[rows[f], 2]
+            first = count = offset[f]
+            for flip in range(2):
+                shift = (1.0 + flip) / 3.0
+                for i in range(side):
+                    for j in range(side - i - flip):
+                        u = (i + shift) / side
+                        v = (j + shift) / side
+                        w = 1.0 - u - v
+                        x = w * a[0] + u * b[0] + v * c[0]
+                        y = w * a[1] + u * b[1] + v * c[1]
+                        z = w * a[2] + u * b[2] + v * c[2]
+                        cell = (_cell(x, lo[0], size, n) + n * _cell(y, lo[1], size, n)
+                                + n * n * _cell(z, lo[2], size, n))
+                        s = slot[cell]
+                        if s < 0:
+                            s = count
+                            slot[cell] = s
+                            key[s] = cell * 6 + facing[f]
+                            face[s] = f
+                            area[s] = 0.0
+                            moment[s, 0] = moment[s, 1] = moment[s, 2] = 0.0
+                            count += 1
+                        area[s] += piece
+                        moment[s, 0] += x * piece
+                        moment[s, 1] += y * piece
+                        moment[s, 2] += z * piece
+            for s in range(first, count):    # the next face starts from an empty table
+                slot[key[s] // 6] = -1
+            made[f] = count - first
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _packed(offset, start, key, face, area, moment, out_key, out_face, out_area, out_moment):
+    """Each face's pairs from its room (`offset`) to their place one after another (`start`)."""
+    for f in numba.prange(len(start) - 1):
+        for q in range(start[f + 1] - start[f]):
+            a, b = offset[f] + q, start[f] + q
+            out_key[b], out_face[b], out_area[b] = key[a], face[a], area[a]
+            out_moment[b, 0], out_moment[b, 1], out_moment[b, 2] = moment[a, 0], moment[a, 1], moment[a, 2]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
