@@ -38,7 +38,10 @@ def test_the_command_prints_every_edit_with_its_share(capsys):
     table = {cells[1].strip(): [float(c) for c in cells[2:]] for cells in rows}
     assert set(table) == {"albedo", "lamp moved", "small-box moved", "new scene"}
     for neural, solver, ratio in table.values():
-        assert neural > 0 and solver > 0 and ratio == pytest.approx(neural / solver, rel=0.05, abs=0.01)   # whole milliseconds
+        # the milliseconds are printed whole and the share to two places: the share lies within what the
+        # rounded times allow (an 11 ms solve printed as 11 may be 10.5 or 11.4)
+        assert neural > 0 and solver > 0
+        assert (neural - 0.5) / (solver + 0.5) - 0.005 <= ratio <= (neural + 0.5) / (solver - 0.5) + 0.005
 
 
 @pytest.mark.parametrize("argv", [["cornell", "--move", "no-such-group"], ["no-such-scene"]])
