@@ -127,6 +127,13 @@ def test_changed_rows_are_the_rows_numpy_finds_different():
     assert changed_rows((a, b), (c, d)) is first and not first.flags.writeable   # kept for the same arrays
     assert changed_rows((b, a), (c, d)) is not first                            # asked of others: made again
     np.testing.assert_array_equal(changed_rows((a, b), (c, d.copy())), expected)
+    same, base = a.copy(), c.copy()
+    same.setflags(write=False)
+    view = base[:]
+    view.setflags(write=False)                   # read-only, but its base is not: never kept
+    assert not changed_rows((a, same), (c, view)).any()
+    base[3, 0] = -5.0
+    assert np.flatnonzero(changed_rows((a, same), (c, view))).tolist() == [3]
 
 
 def test_the_moved_box_holds_every_corner_of_the_moved_faces_before_and_after():

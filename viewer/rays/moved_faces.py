@@ -29,7 +29,7 @@ def changed_rows(*pairs) -> np.ndarray:
             raise ValueError(f"rows of shapes {np.shape(a)} and {np.shape(b)} cannot be compared row by row")
         if a is not b:
             _changed(np.ascontiguousarray(a).reshape(len(a), -1), np.ascontiguousarray(b).reshape(len(b), -1), out)
-    if all(isinstance(a, np.ndarray) and not a.flags.writeable for a in arrays):
+    if all(_frozen(a) for a in arrays):
         out.setflags(write=False)
         _last = ([weakref.ref(a) for a in arrays], out)
     return out
@@ -37,6 +37,15 @@ def changed_rows(*pairs) -> np.ndarray:
 
 _last: tuple | None = None
 """(weak references to the arrays last compared, read-only, and the answer)."""
+
+
+def _frozen(array) -> bool:
+    """Whether nothing can change `array`'s values: it and every array it views into are read-only."""
+    while isinstance(array, np.ndarray):
+        if array.flags.writeable:
+            return False
+        array = array.base
+    return True
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
