@@ -143,7 +143,7 @@ class LatticeShadows:
             if before is not None and before[0] == key and self.blockers is not None:
                 visible = before[1].copy()
                 unit = np.asarray(direction, np.float64) / np.linalg.norm(direction)
-                near = np.flatnonzero(_meets_box(self.points, unit, True, self._before[0], self._before[1]))
+                near = np.flatnonzero(_rays_meet_box(self.points, unit, self._before[0], self._before[1]))
                 visible[near] = encoding.sun_visibility(self.blockers, self.points[near], direction)
             else:
                 visible = encoding.sun_visibility(self.blockers, self.points, direction)
@@ -170,16 +170,12 @@ def moved_box(before: VoxelRays | None, after: VoxelRays | None) -> tuple[np.nda
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _meets_box(points, end, is_direction, lo, hi):
-    """(P,) bool: the segment from each point to `end` (or, `is_direction`, the ray from it along `end`)
-    passes through the box [lo, hi]."""
+def _rays_meet_box(points, direction, lo, hi):
+    """(P,) bool: the ray from each point along `direction` passes through the box [lo, hi]."""
     out = np.empty(points.shape[0], np.bool_)
     for p in numba.prange(points.shape[0]):
-        x, y, z = points[p, 0], points[p, 1], points[p, 2]
-        if is_direction:
-            out[p] = meets_box(x, y, z, end[0], end[1], end[2], np.inf, lo, hi)
-        else:
-            out[p] = meets_box(x, y, z, end[0] - x, end[1] - y, end[2] - z, 1.0, lo, hi)
+        out[p] = meets_box(points[p, 0], points[p, 1], points[p, 2], direction[0], direction[1], direction[2],
+                           np.inf, lo, hi)
     return out
 
 

@@ -141,8 +141,8 @@ def _merged(first, triangle, moved, cell, fresh, cells):
     return out_first, out
 
 
-NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
-NEIGHBOUR_ORDER = np.ascontiguousarray(NEIGHBOURS[np.argsort(np.abs(NEIGHBOURS).sum(axis=1))], np.int64)
+_OFFSETS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
+NEIGHBOUR_ORDER = np.ascontiguousarray(_OFFSETS[np.argsort(np.abs(_OFFSETS).sum(axis=1))], np.int64)
 """The cell and its 26 neighbours, nearest first: where a grazing entry looks for its voxel."""
 
 

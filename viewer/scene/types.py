@@ -212,7 +212,7 @@ class Scene(TriangleGeometry):
 
     @property
     def has_emitters(self) -> bool:
-        return bool(np.any(self.emission > 0)) or (self.sun is not None and np.any(self.sun.irradiance > 0))
+        return bool(self.emitting.any()) or (self.sun is not None and np.any(self.sun.irradiance > 0))
 
     # ---- edits (return new scenes) ----------------------------------------------------------------
     def group_index(self, group: str) -> int:
