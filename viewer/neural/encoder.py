@@ -108,6 +108,11 @@ class Encoder:
         self._last: Encoding | None = None
         self._last_voxels: VoxelGrid | None = None
 
+    @property
+    def seen(self) -> "encoding.SeenRays | None":
+        """The seen rays of the last encoded geometry (None without occluders)."""
+        return self._seen
+
     def fits(self, lo, hi, resolution: int) -> bool:
         return (int(resolution) == self.resolution and np.array_equal(np.asarray(lo, np.float64), self.lo)
                 and np.array_equal(np.asarray(hi, np.float64), self.hi))

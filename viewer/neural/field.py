@@ -22,7 +22,7 @@ from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.neural.domain import Domain, Shape, measure, outside
 from viewer.neural.encoder import Encoder
-from viewer.neural.network_feed import FILTERED, feed
+from viewer.neural.network_feed import FILTERED, WallTaps, feed, wall_taps
 from viewer.probes.grid import ProbeGrid
 from viewer.resources import DEFAULT_MODEL
 from viewer.scene import Scene
@@ -198,7 +198,7 @@ class NeuralField:
             encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m)
             enc = encoder.encode(voxels, sun, blockers)
         encoded = clock_now()
-        out = self._network(encoder, enc.inputs) if reuse else self.run(enc.inputs)  # (3, 19, M, M, M)
+        out = self._network(encoder, enc.inputs) if reuse else self.run(enc.inputs, wall_taps(encoder.seen))
         ran = clock_now()
         grid = unpack(out, enc.scale, enc.lo, enc.hi, include_emitted)
         if reuse and blockers is not None:   # the geometry's first vote on which probes are valid stays
@@ -227,21 +227,23 @@ class NeuralField:
         keys = [(encoder.serial, int(r)) for r in encoder.revisions]
         stale = [c for c in range(3) if self._output is None or self._output_keys[c] != keys[c]
                  or self._output.shape[2:] != inputs.shape[2:]]
+        walls = wall_taps(encoder.seen)
         if len(stale) == 3:
-            self._output = self.run(inputs)
+            self._output = self.run(inputs, walls)
         elif stale:
-            fresh = self.run(np.ascontiguousarray(inputs[stale]))
+            fresh = self.run(np.ascontiguousarray(inputs[stale]), walls)
             self._output[stale] = fresh   # private: the grids unpacked from it hold copies
         self.passes_run = len(stale)
         self._output_keys = keys
         return self._output
 
-    def run(self, inputs: np.ndarray) -> np.ndarray:
-        """The network on encoded inputs (passes, CHANNELS, M, M, M): its raw output (passes, 19, M, M, M)."""
+    def run(self, inputs: np.ndarray, walls: WallTaps | None = None) -> np.ndarray:
+        """The network on encoded inputs (passes, CHANNELS, M, M, M): its raw output (passes, 19, M, M, M);
+        its seen filter stopped at the `walls` of the inputs' geometry (`network_feed.wall_taps`)."""
         self.passes_run = len(inputs)
         if inputs.shape[1] != self.channels:
             inputs = np.ascontiguousarray(inputs[:, :self.channels])
-        return self.session.run(None, feed(self.input_names, inputs, self.kernels))[0]
+        return self.session.run(None, feed(self.input_names, inputs, self.kernels, walls))[0]
 
     def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:
         """Voxelize the scene at the card's resolution, list its occluders, and predict over its bounds."""

@@ -11,6 +11,8 @@ writes the kernels on the model's card; a graph that filters itself is fed as be
 
 from __future__ import annotations
 
+import weakref
+
 import numba
 import numpy as np
 
@@ -20,31 +22,109 @@ FILTERED = {"seen_filtered": encoding.SEEN, "bounce_filtered": encoding.BOUNCE}
 """The graph inputs of a split network, and the encoding's channels each filters (times the open share)."""
 
 
-def feed(names: list[str], inputs: np.ndarray, kernels: np.ndarray | None) -> dict[str, np.ndarray]:
+def feed(names: list[str], inputs: np.ndarray, kernels: np.ndarray | None,
+         walls: "WallTaps | None" = None) -> dict[str, np.ndarray]:
     """The session's inputs by `names` for encoded `inputs` (passes, CHANNELS, M, M, M): `inputs`, the
-    asinh `compressed` ones, and the FILTERED ones by `kernels` (9, 27) (the card's)."""
+    asinh `compressed` ones, and the FILTERED ones by `kernels` (9, 27) (the card's), stopped at the
+    `walls` of the lattice where given (`WallTaps`)."""
     out = {names[0]: inputs}
     for name in names[1:]:
         if name in FILTERED:
             if kernels is None:
                 raise ValueError(f"the network takes {name} but its card has no filter kernels")
-            out[name] = filtered(inputs, FILTERED[name], kernels)
+            out[name] = filtered(inputs, FILTERED[name], kernels, walls)
         else:
             out[name] = encoding.compressed(inputs)
     return out
 
 
-def filtered(inputs: np.ndarray, channels: slice, kernels: np.ndarray) -> np.ndarray:
+def filtered(inputs: np.ndarray, channels: slice, kernels: np.ndarray, walls: "WallTaps | None" = None) -> np.ndarray:
     """(passes, 9, M, M, M) float32: `inputs`' 9 `channels` times the open share, each convolved with its
-    3x3x3 kernel (`kernels` (9, 27): the Conv3d weight (9, 1, 3, 3, 3) flattened), the lattice's faces repeated beyond it: what
-    `ProbeNet.seen_filter` (a grouped Conv3d, replicate padding) gives."""
-    inputs = np.asarray(inputs, np.float32)
+    3x3x3 kernel (`kernels` (9, 27): the Conv3d weight (9, 1, 3, 3, 3) flattened), the lattice's faces
+    repeated beyond it: what `ProbeNet.seen_filter` (a grouped Conv3d, replicate padding) gives. With
+    `walls`, a tap across a surface takes the probe's own light as a tap beyond the faces does, and the
+    probe's sum is scaled so that the graph's division by the plain average of the open shares around it
+    divides by the average of those the taps took (`WallTaps`)."""
+    inputs = np.ascontiguousarray(inputs, np.float32)
     weights = np.ascontiguousarray(np.asarray(kernels, np.float32).reshape(-1, 3, 3, 3))
     if weights.shape[0] != channels.stop - channels.start:
         raise ValueError(f"{weights.shape[0]} filter kernels for {channels.stop - channels.start} channels")
     out = np.empty((inputs.shape[0], weights.shape[0], *inputs.shape[2:]), np.float32)
     _depthwise(inputs, channels.start, encoding.OPEN, weights, out)
+    if walls is not None and len(walls.rows) and walls.side == inputs.shape[2]:
+        _walled(inputs, channels.start, encoding.OPEN, weights.reshape(weights.shape[0], 27), walls.rows,
+                walls.sources, walls.scale, out)
     return out
+
+
+class WallTaps:
+    """Where the network's 3x3x3 seen filter must stop at a surface: the probes of a cubic lattice some of
+    whose 27 taps cross a closed link (`SeenRays.links`: the segment between two neighbours meets a
+    face), and the probe each of their taps takes instead, as `SeenRays.filtered` takes them (the link
+    along the last axis from the probe, then along the second from there, then along the first: a tap
+    across a wall takes the probe's own light, one beyond the lattice's faces repeats it). The network
+    was trained with plain taps, and a thin wall's dark side averaged in the lit side's light: the
+    doorway's dark room got 1.36x its true light where the seen light itself gave 1.04x.
+
+    Made once per geometry (links and open shares are the geometry's)."""
+
+    def __init__(self, links: np.ndarray, opened: np.ndarray):
+        m = links.shape[1]
+        self.side = m
+        plain, walled = tap_sources(np.ascontiguousarray(links, np.bool_))
+        rows = np.flatnonzero(np.any(plain != walled, axis=0)).astype(np.int64)
+        self.rows = rows
+        """(S,) the probes (flat, x slowest) whose taps differ from the plain filter's."""
+        self.sources = np.ascontiguousarray(walled[:, rows].T, np.int64)
+        """(S, 27) the probe each of their taps takes, in the kernel's flat order."""
+        w = np.asarray(opened, np.float32).reshape(-1)
+        plain_weight = np.maximum(w[plain[:, rows]].mean(axis=0), 1.0 / 27.0)
+        walled_weight = np.maximum(w[self.sources.T].mean(axis=0), 1.0 / 27.0)
+        self.scale = (plain_weight / walled_weight).astype(np.float32)
+        """(S,) the graph's open-share average over each probe's plain taps, over the one its taps take."""
+
+
+_last_walls: tuple = (None, None)
+
+
+def wall_taps(seen) -> "WallTaps | None":
+    """The `WallTaps` of `seen` (`SeenRays`; None, or one without links: no walls to stop at), kept for
+    the last seen rays asked about: their geometry's."""
+    global _last_walls
+    if seen is None or seen.links is None:
+        return None
+    if _last_walls[0] is None or _last_walls[0]() is not seen:
+        _last_walls = (weakref.ref(seen), WallTaps(seen.links, seen.open))
+    return _last_walls[1]
+
+
+def tap_sources(links: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(27, M^3) int64 twice: the probe each tap of each probe takes with the faces repeated (plain), and
+    with closed `links` (3, M, M, M) taken as the faces are (walled)."""
+    m = links.shape[1]
+    i, j, k = (a.reshape(-1) for a in np.meshgrid(np.arange(m), np.arange(m), np.arange(m), indexing="ij"))
+    plain, walled = np.empty((27, m ** 3), np.int64), np.empty((27, m ** 3), np.int64)
+
+    def step(axis, offset, here, at):
+        there = here + offset
+        inside = (there >= 0) & (there < m)
+        if offset == 0:
+            return here, here
+        low = np.where(inside, np.minimum(here, there), 0)
+        index = [a if n != axis else low for n, a in enumerate(at)]
+        open_ = inside & links[(axis, *index)]
+        return np.where(inside, there, here), np.where(open_, there, here)
+
+    for t in range(27):
+        di, dj, dk = t // 9 - 1, (t // 3) % 3 - 1, t % 3 - 1
+        kp, kw = step(2, dk, k, (i, j, k))
+        jp, _ = step(1, dj, j, (i, j, kp))
+        _, jw = step(1, dj, j, (i, j, kw))
+        ip, _ = step(0, di, i, (i, jp, kp))
+        _, iw = step(0, di, i, (i, jw, kw))
+        plain[t] = (ip * m + jp) * m + kp
+        walled[t] = (iw * m + jw) * m + kw
+    return plain, walled
 
 
 @numba.njit(cache=True, nogil=True, parallel=True, fastmath=True)
@@ -80,3 +160,21 @@ def _depthwise(inputs, first, opened, weights, out):
                         w0, w1, w2 = weights[c, i, j, 0], weights[c, i, j, 1], weights[c, i, j, 2]
                         for x in range(m):
                             row[x] += w0 * taps[x] + w1 * taps[x + 1] + w2 * taps[x + 2]
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _walled(inputs, first, opened, weights, rows, sources, scale, out):
+    """`_depthwise`'s sums made again at the probes `rows` (S,) over the taps `sources` (S, 27), times
+    their `scale` (S,) (`WallTaps`)."""
+    passes, count, m = out.shape[0], out.shape[1], out.shape[2]
+    for job in numba.prange(passes * count):
+        b, c = job // count, job % count
+        source = inputs[b, first + c].reshape(-1)
+        share = inputs[b, opened].reshape(-1)
+        target = out[b, c].reshape(-1)
+        for s in range(rows.shape[0]):
+            total = 0.0
+            for t in range(27):
+                q = sources[s, t]
+                total += weights[c, t] * source[q] * share[q]
+            target[rows[s]] = total * scale[s]
