@@ -100,6 +100,13 @@ def test_the_split_streams_from_memory_mapped_shard_caches(tiny):
     # selecting and joining rows reads the same rows as the arrays they came from
     rows = first.subset([3, 1])
     np.testing.assert_array_equal(rows.targets[np.arange(2)], first.targets[np.array([3, 1])])
+    # each room keeps where its seen filter stops, and its batches carry them to the network
+    assert first.links.shape == (len(first), 3, 8, 8, 8) and not np.all(first.links[np.arange(len(first))])
+    np.testing.assert_array_equal(rows.links[np.arange(2)], first.links[np.array([3, 1])])
+    from viewer.training.batches import batches
+    batch = next(batches(first, np.array([3, 1]), 2))
+    np.testing.assert_array_equal(batch.links.numpy(), first.links[np.array([1, 3])])
+    assert batch.mirrored(0).links.shape == batch.links.shape
     assert rows.names == [first.names[3], first.names[1]]
     joined = concat(first, first, keep=[first.names[2]])
     assert joined.names == first.names + [first.names[2]]

@@ -6,7 +6,7 @@ read the same batches, and the mirror images must match the encoding's channels 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -50,11 +50,30 @@ class Batch:
     """(B, 9, M, M, M) Mitsuba's reflected light where `has_unbiased`, else zeros."""
     has_unbiased: torch.Tensor
     """(B,) 1.0 for the rows of rooms with Mitsuba's probes."""
+    links: torch.Tensor | None = None
+    """(rooms, 3, M, M, M) bool: where each room's seen filter stops (`encoding.Encoding.links`)."""
 
     def mirrored(self, axis: int) -> "Batch":
         x, y, valid = mirror(self.x, self.y, self.valid, axis)
         unbiased = mirror_sh(self.unbiased, axis)
-        return Batch(self.pick, x, y, valid, unbiased, self.has_unbiased)
+        return Batch(self.pick, x, y, valid, unbiased, self.has_unbiased,
+                     None if self.links is None else mirror_links(self.links, axis))
+
+    def but(self, **changes) -> "Batch":
+        """The same batch with some of its fields replaced."""
+        return replace(self, **changes)
+
+
+def mirror_links(links: torch.Tensor, axis: int) -> torch.Tensor:
+    """(rooms, 3, X, Y, Z) links mirrored in world axis `axis`: the links along the other axes flip with
+    their probes; those along `axis` join probes i and i + 1, which the mirror makes M - 2 - i and M - 1 - i
+    (the last layer's links stay True: `seen.lattice_links`)."""
+    dim = 2 + axis
+    out = links.flip(dim)
+    along = links[:, axis].narrow(axis + 1, 0, links.shape[dim] - 1).flip(axis + 1)
+    out[:, axis] = True
+    out[:, axis].narrow(axis + 1, 0, links.shape[dim] - 1).copy_(along)
+    return out
 
 
 def sh_signs(axis: int) -> torch.Tensor:
@@ -81,14 +100,15 @@ def batches(samples: Samples, indices: np.ndarray, size: int):
             has = torch.from_numpy(np.repeat(samples.has_unbiased[pick], 3).astype(np.float32))
         else:
             u, has = torch.zeros_like(y[:, 9:]), torch.zeros(len(y))
-        yield Batch(pick, x, y, v, u, has)
+        links = None if samples.links is None else torch.from_numpy(np.asarray(samples.links[pick], bool))
+        yield Batch(pick, x, y, v, u, has, links)
 
 
 def traced_direct(batch: Batch) -> Batch:
     """The batch with the truth's direct light in place of the encoding's."""
     x = batch.x.clone()
     x[:, encoding.DIRECT] = batch.y[:, TOTAL] - batch.y[:, REFLECTED]
-    return Batch(batch.pick, x, batch.y, batch.valid, batch.unbiased, batch.has_unbiased)
+    return batch.but(x=x)
 
 
 def reflected_target(batch: Batch) -> torch.Tensor:

@@ -13,11 +13,13 @@ Why this shape:
 - Shadows and contact are local: the finest level keeps each probe's own cell and its neighbours.
 - The head is per probe (1x1x1 convolutions): cheap at 16^3 = 4096 probes, and the same weights work
   for any lattice size divisible by 2^levels.
-- The shadowed direct light, one unshadowed bounce of it and two bounces seen through exact rays are
+- The shadowed direct light, its bounces gathered unshadowed and seen through exact rays are
   inputs (`viewer.neural.encoding`), and the head's outputs are corrections to them: the reflected
-  light (9 SH) on top of the two bounces, and in training what the direct input missed (9 SH), each
+  light (9 SH) on top of the seen bounces, and in training what the direct input missed (9 SH), each
   times a learned gain, the seen one through a learned 3x3x3 filter per coefficient (it starts as the
-  box filter: 16 rays a probe are noisy, and the finest level of the network is otherwise per probe). The corrections are relative
+  box filter: 16 rays a probe are noisy, and the finest level of the network is otherwise per probe),
+  which stops at walls: a tap across a surface takes the probe's own light (`walled_filter`, trained as
+  the viewer runs it: viewer.neural.network_feed.WallTaps). The corrections are relative
   (times the local light, `MAGNITUDE_FLOOR`) and the convolutions read the light through asinh
   (`compress`): the light spans five orders of magnitude within a room. All the light is their sum, so
   the two outputs the renderer and `sample` read never disagree.
@@ -29,11 +31,13 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+import numpy as np
 import torch
 from torch import nn
 from torch.nn import functional as F
 
 from viewer.neural import encoding
+from viewer.neural.network_feed import tap_sources
 
 
 BOUNCE_GAIN, SEEN_GAIN = 0.0, 1.0
@@ -120,9 +124,12 @@ class ProbeNet(nn.Module):
         self.seen_filter = nn.Conv3d(9, 9, 3, padding=1, padding_mode="replicate", groups=9, bias=False)
         nn.init.constant_(self.seen_filter.weight, 1.0 / 27.0)
 
-    def forward(self, x: torch.Tensor, x_in: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, x_in: torch.Tensor | None = None,
+                links: torch.Tensor | None = None) -> torch.Tensor:
         """`x` the encoded inputs; `x_in` the same through `compress` where the caller made it already
-        (the exported network takes it as its second input: `encoding.compressed`)."""
+        (the exported network takes it as its second input: `encoding.compressed`); `links` (rooms, 3, M,
+        M, M) where the seen filter stops (the rooms' three colour passes are consecutive rows of `x`:
+        `walled_taps`), as the viewer stops it (viewer.neural.network_feed.WallTaps)."""
         if not self.config.seen:
             x = torch.cat([x[:, :encoding.SEEN.start], torch.zeros_like(x[:, encoding.SEEN]), x[:, encoding.SEEN.stop:]],
                           dim=1)
@@ -143,10 +150,17 @@ class ProbeNet(nn.Module):
             hidden = self.project[i](levels[i]) + self._up(hidden)
         hidden = F.relu(self.local(x_in) + self._up(hidden))
         out = self.head(hidden)
-        seen = self.seen_filter(x[:, encoding.SEEN] * opened)
         bounce = x[:, encoding.BOUNCE]
-        weight = F.avg_pool3d(F.pad(opened, (1,) * 6, mode="replicate"), 3, stride=1).clamp_min(1.0 / 27.0)
-        smooth = self.seen_filter(bounce * opened) / weight
+        if links is None:
+            seen = self.seen_filter(x[:, encoding.SEEN] * opened)
+            weight = F.avg_pool3d(F.pad(opened, (1,) * 6, mode="replicate"), 3, stride=1).clamp_min(1.0 / 27.0)
+            smooth = self.seen_filter(bounce * opened)
+        else:
+            taps = walled_taps(links, x.shape[0] // links.shape[0])
+            seen = walled_filter(self.seen_filter.weight, x[:, encoding.SEEN] * opened, taps)
+            weight = walled_filter(torch.full((1, 1, 3, 3, 3), 1.0 / 27.0), opened, taps).clamp_min(1.0 / 27.0)
+            smooth = walled_filter(self.seen_filter.weight, bounce * opened, taps)
+        smooth = smooth / weight
         seen = seen / weight
         seen = seen + detail_gain(seen, smooth) * (bounce - smooth)
         reflected = self.bounce_gain * bounce + self.seen_gain * seen
@@ -161,6 +175,27 @@ class ProbeNet(nn.Module):
         if self.config.upsample == "nearest":
             return F.interpolate(x, scale_factor=2, mode="nearest")
         return F.interpolate(x, scale_factor=2, mode="trilinear", align_corners=False)
+
+
+def walled_taps(links: torch.Tensor, passes: int) -> torch.Tensor:
+    """(rooms x passes, 27, M^3) int64: the probe each of the 27 taps of each probe takes
+    (viewer.neural.network_feed.tap_sources) in each room of `links` (rooms, 3, M, M, M), repeated for its
+    `passes` rows."""
+    taps = np.stack([tap_sources(np.ascontiguousarray(room.numpy(), bool))[1] for room in links])
+    return torch.from_numpy(taps).repeat_interleave(passes, dim=0)
+
+
+def walled_filter(kernels: torch.Tensor, light: torch.Tensor, taps: torch.Tensor) -> torch.Tensor:
+    """(B, C, M, M, M): `light` (B, C, M, M, M) filtered with the 3x3x3 `kernels` (C or 1, 1, 3, 3, 3: the
+    grouped Conv3d's weight) over the probes `taps` (B, 27, M^3) gives each tap (`walled_taps`): the
+    grouped convolution with replicate padding where no tap crosses a wall."""
+    b, c = light.shape[:2]
+    flat = light.reshape(b, c, -1)
+    weights = kernels.reshape(kernels.shape[0], 27)
+    out = torch.zeros_like(flat)
+    for t in range(27):
+        out = out + weights[:, t, None] * flat.gather(2, taps[:, t, None, :].expand(b, c, -1))
+    return out.reshape(light.shape)
 
 
 TOTAL, REFLECTED, VALIDITY = slice(0, 9), slice(9, 18), 18

@@ -41,7 +41,7 @@ from viewer.rays.voxels import voxelize
 ENCODING_VOXELS = 24
 """Voxel resolution the encoder reads, recorded in the model card: the probe lattice's (24^3), so that a
 lattice cell holds one voxel's surface and the features are as sharp as the targets."""
-CACHE_VERSION = 4
+CACHE_VERSION = 5
 """Bump when what a cache holds changes, so that stale caches are rebuilt."""
 
 
@@ -108,6 +108,8 @@ class Samples:
     """(S, 3, 9, M, M, M) float16: Mitsuba's reflected light / scale where `has_unbiased`, else zeros."""
     has_unbiased: np.ndarray | None = None
     """(S,) bool."""
+    links: Stacked | None = None
+    """(S, 3, M, M, M) bool: where the seen filter stops (`encoding.Encoding.links`)."""
 
     def __len__(self) -> int:
         return len(self.names)
@@ -121,7 +123,8 @@ class Samples:
         return Samples(self.inputs.select(index), self.targets.select(index), self.valid.select(index),
                        self.scale[index], [self.names[i] for i in index],
                        self.unbiased.select(index) if self.unbiased is not None else None,
-                       self.has_unbiased[index] if self.has_unbiased is not None else None)
+                       self.has_unbiased[index] if self.has_unbiased is not None else None,
+                       self.links.select(index) if self.links is not None else None)
 
 
 PAPER_TRAINING = ("paper-train-1", "paper-train-2", "paper-train-3", "paper-train-4", "paper-train-5")
@@ -150,7 +153,7 @@ def concat(a: Samples, b: Samples, keep=None) -> Samples:
     has = None if a.has_unbiased is None or b.has_unbiased is None else np.concatenate([a.has_unbiased, b.has_unbiased])
     return Samples(Stacked.join(a.inputs, b.inputs), Stacked.join(a.targets, b.targets),
                    Stacked.join(a.valid, b.valid), np.concatenate([a.scale, b.scale]), list(a.names) + list(b.names),
-                   join(a.unbiased, b.unbiased), has)
+                   join(a.unbiased, b.unbiased), has, join(a.links, b.links))
 
 
 def encode_scene(path: str, resolution: int, voxels: int = ENCODING_VOXELS) -> dict[str, np.ndarray]:
@@ -175,6 +178,7 @@ def encode_scene(path: str, resolution: int, voxels: int = ENCODING_VOXELS) -> d
                 if has_unbiased else np.zeros_like(reflected))
     return {"inputs": enc.inputs.astype(np.float16), "targets": scaled(target), "unbiased": scaled(unbiased),
             "has_unbiased": np.array(has_unbiased), "valid": valid, "scale": enc.scale,
+            "links": np.ones((3,) + valid.shape, bool) if enc.links is None else enc.links,
             "names": np.array(room_of(path))}
 
 
@@ -199,7 +203,8 @@ def load_split(root: Path, split: str, resolution: int, workers: int = 2, quiet:
     arrays = encoded_split(root, split, "probenet", partial(encode_scene, voxels=voxels), resolution, workers,
                            quiet, key_extra=voxels, encode=encode, rooms=rooms)
     return Samples(arrays["inputs"], arrays["targets"], arrays["valid"], np.asarray(arrays["scale"]),
-                   [str(n) for n in arrays["names"]], arrays["unbiased"], np.asarray(arrays["has_unbiased"], bool))
+                   [str(n) for n in arrays["names"]], arrays["unbiased"], np.asarray(arrays["has_unbiased"], bool),
+                   arrays.get("links"))
 
 
 def containers(root: Path, split: str) -> dict[str, list[str]]:

@@ -110,9 +110,9 @@ def loss_terms(model, batch: Batch, settings: "TrainSettings"):
     - the reflected light, what the renderer shades from the probes, weighted by `reflected_weight`:
       against Mitsuba's unbiased probes where the room has them, else against the truth's (biased), the
       latter rooms weighted by `solver_weight`."""
-    out = model(batch.x)
+    out = model(batch.x) if batch.links is None else model(batch.x, links=batch.links)
     if not settings.mitsuba:
-        batch = Batch(batch.pick, batch.x, batch.y, batch.valid, batch.unbiased, torch.zeros_like(batch.has_unbiased))
+        batch = batch.but(has_unbiased=torch.zeros_like(batch.has_unbiased))
     w = probe_weights(batch)
     direct = out[:, TOTAL] - out[:, REFLECTED]
     direct_loss = (w * (direct - (batch.y[:, TOTAL] - batch.y[:, REFLECTED])) ** 2).mean()
