@@ -181,7 +181,7 @@ def walled_taps(links: torch.Tensor, passes: int) -> torch.Tensor:
     """(rooms x passes, 27, M^3) int64: the probe each of the 27 taps of each probe takes
     (viewer.neural.network_feed.tap_sources) in each room of `links` (rooms, 3, M, M, M), repeated for its
     `passes` rows."""
-    taps = np.stack([tap_sources(np.ascontiguousarray(room.numpy(), bool))[1] for room in links])
+    taps = np.stack([tap_sources(room.numpy()) for room in links])
     return torch.from_numpy(taps).repeat_interleave(passes, dim=0)
 
 
