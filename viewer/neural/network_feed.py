@@ -68,7 +68,7 @@ class WallTaps:
     (`viewer.training.models.walled_filter`).
 
     Made once per geometry (links and open shares are the geometry's): 1692 of the Cornell box's 13,824
-    probes, in about a millisecond."""
+    probes, in 1.8 ms on two cores; each filter of the network's seen light then takes 0.6 ms more."""
 
     def __init__(self, links: np.ndarray, opened: np.ndarray):
         m = links.shape[1]
