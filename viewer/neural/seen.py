@@ -19,7 +19,7 @@ and left gaps. The same rays and cost, and less error once filtered: on the solv
 instead of 31.1% in 20 validation rooms (median; 32 turned rays a probe give 7.7% and 28.0%).
 
 The light bounces on, and the seen feature follows it one bounce further (`seen_light`): what the rays
-gathered is read back at the voxels (half a voxel in front, as the direct light is) and reflected again,
+gathered is read back at the voxels (`bounce.READ_BACK` voxels in front of each) and reflected again,
 and gathered again. On 20 validation rooms, against the solver's reflected light (best gain a room,
 3x3x3 box filtered, median): the unshadowed bounce 46.6%, the seen bounce 33.0%, seen twice 29.5%
 (a third bounce 29.3%), where the solver's converged surface light gathered by the same 16 rays is
