@@ -12,13 +12,8 @@ from viewer.scene import Scene
 
 def voxel_direct(scene: Scene, m: int):
     """(voxels, their direct irradiance) on the encoding's lattice of m^3 cells over the scene."""
-    lo, hi = scene.bounds
-    grid = voxelize(scene, m)
-    spacing = (hi - lo) / m
-    flat = encoding.lattice_cells(grid.position, lo, spacing, m)
-    lights = encoding.emitting_patches(flat, grid)
-    pieces = encoding.patch_pieces(flat, grid, lights[3], encoding.NEAR_PIECES * spacing.max())
-    return grid, encoding.voxel_direct(grid, lights, pieces, encoding.occluders(scene, grid), scene.sun, lo, spacing)
+    grid, _, received = encoding.lit_voxels(scene, m)
+    return grid, received
 
 
 def test_under_a_lamp_the_irradiance_is_its_integral_and_surfaces_turned_away_get_none():

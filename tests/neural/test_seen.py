@@ -67,21 +67,14 @@ def test_the_seen_bounces_converge_to_the_solvers_probes(monkeypatch, read_back,
     from viewer.neural import bounce, encoding
     from viewer.physical.gi import GISettings, PhysicalGI
     from viewer.probes.grid import ProbeGrid
-    from viewer.rays.voxels import voxelize
 
     if read_back is not None:
         monkeypatch.setattr(bounce, "READ_BACK", read_back)
     m = 24
     scene = scenes.load("cornell")
     lo, hi = scene.bounds
-    grid = voxelize(scene, m)
-    blockers = encoding.occluders(scene, grid)
-    spacing = (hi - lo) / m
-    cells = encoding.lattice_cells(grid.position, lo, spacing, m)
-    lights = encoding.emitting_patches(cells, grid)
-    pieces = encoding.patch_pieces(cells, grid, lights[3], encoding.NEAR_PIECES * spacing.max())
+    grid, blockers, direct = encoding.lit_voxels(scene, m)
     rays = encoding.seen_rays(blockers, grid, ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3))
-    direct = encoding.voxel_direct(grid, lights, pieces, blockers, scene.sun, lo, spacing)
     seen, _ = encoding.seen_light(rays, encoding.Bounce(grid, lo, hi, m), grid.albedo,
                                   (grid.albedo * direct / np.pi).astype(np.float32))
     solver = PhysicalGI(GISettings(voxels=m, probes=m))

@@ -233,6 +233,23 @@ def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None
     return encode(grid, scene.sun, lo, hi, resolution, occluders(scene, grid))
 
 
+def lit_voxels(scene, resolution: int) -> tuple[VoxelGrid, VoxelRays | None, np.ndarray]:
+    """The scene voxelized on the lattice of `resolution`^3 cells over its bounds, what casts its shadows
+    (`occluders`) and each voxel's direct irradiance (`voxel_direct`, K x 3): where `encode`'s bounce and
+    seen features start."""
+    from viewer.rays.voxels import voxelize
+
+    lo, hi = scene.bounds
+    m = int(resolution)
+    grid = voxelize(scene, m)
+    blockers = occluders(scene, grid)
+    spacing = (hi - lo) / m
+    flat = lattice_cells(grid.position, lo, spacing, m)
+    lights = emitting_patches(flat, grid)
+    pieces = patch_pieces(flat, grid, lights[3], NEAR_PIECES * spacing.max())
+    return grid, blockers, voxel_direct(grid, lights, pieces, blockers, scene.sun, lo, spacing)
+
+
 def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays | None) -> Encoding:
     """The network's input for the probe lattice of `resolution`^3 cells over the box [lo, hi], with the
     direct light shadowed by `blockers` (`occluders`; None: nothing casts a shadow)."""
