@@ -6,7 +6,6 @@ import pytest
 
 from scenes import box, ceiling_lamp, lit_room
 from viewer.neural import encoding
-from viewer.rays.voxels import voxelize
 from viewer.scene import Scene
 
 
