@@ -6,7 +6,8 @@ probes' open share, with one learned 3x3x3 kernel per SH coefficient (the edges 
 CPU convolution has no depthwise path in 3D: on the Cornell box's three colour passes the two filters
 took 13.5 ms of the network's 40 (one thread, a 2-core AMD EPYC machine). The export moves them out of
 the graph (`viewer.training.export.split_filters`), which then takes their products as inputs, and
-writes the kernels on the model's card; a graph that filters itself is fed as before.
+writes the kernels on the model's card; a graph that filters itself is fed as before. Outside the graph
+the filter also stops at walls (`WallTaps`), as training's does.
 """
 
 from __future__ import annotations
@@ -94,9 +95,11 @@ def wall_taps(seen) -> "WallTaps | None":
     global _last_walls
     if seen is None or seen.links is None:
         return None
-    if _last_walls[0] is None or _last_walls[0]() is not seen:
-        _last_walls = (weakref.ref(seen), WallTaps(seen.links, seen.open))
-    return _last_walls[1]
+    kept, taps = _last_walls   # read once: another thread's field may replace it meanwhile
+    if kept is None or kept() is not seen:
+        taps = WallTaps(seen.links, seen.open)
+        _last_walls = (weakref.ref(seen), taps)
+    return taps
 
 
 def tap_sources(links: np.ndarray) -> np.ndarray:
