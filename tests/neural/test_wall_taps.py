@@ -6,7 +6,7 @@ import numpy as np
 from viewer import scene as scenes
 from viewer.neural import encoding
 from viewer.neural.encoder import Encoder
-from viewer.neural.network_feed import WallTaps, filtered, wall_taps
+from viewer.neural.network_feed import WallTaps, encoding_walls, filtered, wall_taps
 from viewer.rays.voxels import voxelize
 
 
@@ -27,6 +27,10 @@ def test_the_box_kernel_stopped_at_walls_is_the_seen_lights_own_filter():
     inputs = encoder.encode(voxels, scene.sun, encoding.occluders(scene, voxels)).inputs
     walls = wall_taps(encoder.seen)
     assert walls is wall_taps(encoder.seen)   # kept for the same rays
+    # the same taps from a plain encoding's links, for callers without the encoder's seen rays
+    again = encoding_walls(encoding.encode_scene(scene, 8, 16))
+    np.testing.assert_array_equal(again.rows, walls.rows)
+    np.testing.assert_array_equal(again.sources, walls.sources)
     assert 0 < len(walls.rows) < 8 ** 3       # the two boxes' faces close links, the open room does not
     box = np.full((9, 27), 1.0 / 27.0, np.float32)
     got = filtered(inputs, encoding.SEEN, box, walls) / plain_average(inputs[:, encoding.OPEN])

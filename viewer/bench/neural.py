@@ -28,6 +28,7 @@ import numpy as np
 
 from viewer.neural import encoding
 from viewer.neural import field as neural
+from viewer.neural.network_feed import encoding_walls
 from viewer import scene as scenes
 from viewer.evaluation.report import replace_block
 from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI, open_session
@@ -124,7 +125,7 @@ def _before(scene: Scene, field: NeuralField, probes: int, voxels: int) -> dict[
     with one_blas_thread():
         enc = encoding.encode(grid, scene.sun, lo, hi, probes, blockers)
     encoded = clock_now()
-    out = field.run(enc.inputs)
+    out = field.run(enc.inputs, encoding_walls(enc))   # the filter stopped at walls, as the viewer runs it
     ran = clock_now()
     coefficients = (out[:, 9:18] * enc.scale[:, None, None, None, None]).transpose(2, 3, 4, 1, 0)
     _ = np.ascontiguousarray(coefficients, np.float32), out[:, 18].mean(axis=0) > 0.0

@@ -102,6 +102,14 @@ def wall_taps(seen) -> "WallTaps | None":
     return taps
 
 
+def encoding_walls(enc: encoding.Encoding) -> "WallTaps | None":
+    """The `WallTaps` of an `encoding.encode` result (its seen rays' links and open shares), for callers
+    that run the network on one without an `Encoder`'s seen rays; None where nothing was seen."""
+    if enc.links is None:
+        return None
+    return WallTaps(enc.links, enc.inputs[0, encoding.OPEN])
+
+
 def tap_sources(links: np.ndarray) -> np.ndarray:
     """(27, M^3) int64: the probe each tap of each probe takes, with closed `links` (3, M, M, M) taken as
     the lattice's faces are: from the probe along the last axis, then along the second from there, then

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from viewer.neural import encoding
+from viewer.neural.network_feed import encoding_walls
 from viewer.physical.gi import GISettings, PhysicalGI
 from viewer.rays.voxels import voxelize
 from viewer.training import ladder
@@ -76,7 +77,7 @@ def room_errors(example, target: np.ndarray, valid: np.ndarray, probes: int, vox
     out = {name: ladder.best_gain_error(estimate, target, valid) for name, estimate in zip(GATHERS, estimates)}
     t = target[..., valid]
     if field is not None:
-        reflected = field.run(enc.inputs.astype(np.float32))[:, 9:18] * scale
+        reflected = field.run(enc.inputs.astype(np.float32), encoding_walls(enc))[:, 9:18] * scale
         out[NETWORK] = float(np.sqrt(((reflected[..., valid] - t) ** 2).sum() / max(float((t ** 2).sum()), 1e-30)))
     return out
 
