@@ -53,8 +53,9 @@ from viewer.probes import sh
 from viewer.rays.voxels import VoxelGrid, face_facing
 
 # The features' parts, re-exported: callers read them as `encoding.<name>`.
-from viewer.neural.bounce import BOUNCE_LATTICE, BOUNCE_PATCH, Bounce, bounce_sh  # noqa: F401
-from viewer.neural.seen import SEEN_RAYS, SeenRays, seen_light  # noqa: F401
+from viewer.neural.bounce import BOUNCE_LATTICE, BOUNCE_PATCH, READ_BACK, Bounce, bounce_sh  # noqa: F401
+from viewer.neural.seen import (INTERLEAVE, SEED, SEEN_BOUNCES, SEEN_RAYS, TAIL_RATIO_MAX, SeenRays,  # noqa: F401
+                                seen_light)
 from viewer.neural.irradiance import (emitter_irradiance_rows, sun_irradiance, surface_points,  # noqa: F401
                                       voxel_direct)
 from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBILITY_CELLS,  # noqa: F401
@@ -92,6 +93,12 @@ FEATURES = (
     "open",             # the share of those rays that leave the probe into the open (0 inside a solid)
 )
 CHANNELS = len(FEATURES)
+SETTINGS = {"seen_rays": SEEN_RAYS, "seen_bounces": SEEN_BOUNCES, "tail_ratio_max": TAIL_RATIO_MAX,
+            "interleave": INTERLEAVE, "seed": SEED, "read_back": READ_BACK, "bounce_patch": BOUNCE_PATCH,
+            "bounce_lattice": BOUNCE_LATTICE, "near_pieces": NEAR_PIECES, "shadow_offset": SHADOW_OFFSET,
+            "visibility_cells": VISIBILITY_CELLS}
+"""The constants the features are made with besides their version: a training cache is keyed by them,
+so that features tuned without a version bump are made again rather than read stale."""
 VERSION_CHANNELS = {10: CHANNELS, 11: CHANNELS}
 """The features a network of each encoding version reads: the first this many of FEATURES. A version-10
 network is fed version 11's features: the same features with the seen light's amount closer to the

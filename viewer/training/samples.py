@@ -220,8 +220,9 @@ def encoded_split(root: Path, split: str, tag: str, encoder, resolution: int, wo
                   quiet: bool = False, key_extra=None, encode: bool = True, rooms: int = 0) -> dict[str, Stacked]:
     """{name: rows of every container} of `encoder(ref, resolution)` -> dict over a split's rooms, cached
     per container (shard) in `<root>/cache/<split>/` under a key of its rooms and their files' sizes, the
-    encoder's tag and CACHE_VERSION, and read back memory-mapped. `rooms`: only the containers that hold
-    the first so many rooms (0: all), so that a run on part of a dataset encodes no more than it reads."""
+    encoder's tag, CACHE_VERSION and the encoding's version and `SETTINGS`, and read back memory-mapped.
+    `rooms`: only the containers that hold the first so many rooms (0: all), so that a run on part of a
+    dataset encodes no more than it reads."""
     groups = containers(root, split)
     if not groups:
         raise FileNotFoundError(f"no scenes in {Path(root) / split}")
@@ -244,7 +245,8 @@ def _cached(root: Path, split: str, container: str, refs: list[str], tag: str, e
             workers: int, quiet: bool, key_extra, encode: bool = True) -> dict[str, np.ndarray] | None:
     files = sorted({ref.partition("#")[0] for ref in refs})
     rooms = [(room_of(ref), Path(ref.partition("#")[0]).stat().st_size) for ref in refs]
-    key = hashlib.sha1(json.dumps([CACHE_VERSION, encoding.VERSION, list(encoding.FEATURES), tag, key_extra,
+    key = hashlib.sha1(json.dumps([CACHE_VERSION, encoding.VERSION, list(encoding.FEATURES), encoding.SETTINGS,
+                                   tag, key_extra,
                                    resolution, rooms, [Path(f).name for f in files]]).encode()).hexdigest()[:12]
     folder = root / "cache" / split / f"{Path(container).stem}-{tag}-m{resolution}-{key}"
     if not (folder / "done").exists():
