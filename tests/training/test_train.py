@@ -67,6 +67,11 @@ def test_export_runs_in_the_neural_source(tiny, tmp_path):
     inputs = train_set.inputs[0].astype(np.float32)
     card = export.export(run, tmp_path / "m.onnx", 8, inputs, {"note": "test"}, {})
     assert card["metrics"]["onnx_relative_difference"] < 1e-5 and card["inputs"]["voxels"] == ENCODING_VOXELS
+    # a fine-tune can start from the exported file alone: its weights read back are the run's
+    kept, back = export.load_run(run).state_dict(), export.read_back(tmp_path / "m.onnx").state_dict()
+    assert kept.keys() == back.keys()
+    for name in kept:
+        torch.testing.assert_close(back[name], kept[name], rtol=0, atol=0)
     example = dataset.load_example(dataset.room_refs(tiny, "val")[0])
     grid = neural.NeuralField(tmp_path / "m.onnx").solve(example.scene)
     assert grid.coefficients.shape == (8, 8, 8, 9, 3) and np.all(np.isfinite(grid.coefficients))
@@ -220,3 +225,26 @@ def test_all_the_light_is_the_direct_input_and_the_reflected_light_at_inference(
     torch.testing.assert_close(plain[:, TOTAL], x[:, encoding.DIRECT] + plain[:, REFLECTED])
     torch.testing.assert_close(training[:, REFLECTED], inference[:, REFLECTED])
     assert (training[:, TOTAL] - inference[:, TOTAL]).abs().max() > 1e-3
+
+
+def test_a_network_without_the_unshadowed_bounce_keeps_its_gain_at_zero():
+    """The unshadowed gather passes through walls: a network configured without it never takes it
+    (its gain is 0 and not learned), and a fine-tune from one that did moves that gain to the seen light,
+    which carries the same light with visibility, so it starts from the same amount of light."""
+    from viewer.scene import load
+    from viewer.training.models import REFLECTED
+
+    x = torch.from_numpy(encoding.encode_scene(load("cornell"), 8, 16).inputs)
+    torch.manual_seed(5)
+    before = ProbeNet(ProbeNetConfig(width=4, hidden=8, bounce_gain=0.25, seen_gain=0.75))
+    after = ProbeNet(ProbeNetConfig(width=4, hidden=8, unshadowed=False))
+    assert float(after.bounce_gain) == 0.0 and not after.bounce_gain.requires_grad
+    after.load_unshadowed(before.state_dict())
+    assert float(after.bounce_gain) == 0.0 and float(after.seen_gain) == pytest.approx(1.0)
+    same = ProbeNet(ProbeNetConfig(width=4, hidden=8))
+    same.load_unshadowed(before.state_dict())   # a network that takes it loads the gains as they are
+    assert float(same.bounce_gain) == pytest.approx(0.25)
+    optimizer = torch.optim.Adam(after.parameters(), lr=0.1)
+    after.train()(x)[:, REFLECTED].square().mean().backward()
+    optimizer.step()
+    assert float(after.bounce_gain) == 0.0 and float(after.seen_gain) != pytest.approx(1.0)

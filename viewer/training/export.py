@@ -230,6 +230,40 @@ def export(run: Path, out: Path, resolution: int, inputs: np.ndarray, training: 
     return write_card(out, model, resolution, training, {**metrics, "onnx_relative_difference": difference}, ranges)
 
 
+def read_back(path: Path) -> ProbeNet:
+    """The ProbeNet an exported network holds, its weights read back from the ONNX file at `path` and
+    its card (the seen filter's kernels, which the graph leaves to its feed; the global code's matrix,
+    which the exporter stores transposed): the start of a fine-tune of a network whose training run is
+    gone. Checked against onnxruntime as an export is."""
+    import onnx
+    from onnx import numpy_helper
+
+    from viewer.scene import load
+
+    card = json.loads(Path(path).with_suffix(".json").read_text())
+    model = ProbeNet(ProbeNetConfig(**{k: v for k, v in card["architecture"].items() if k != "family"}))
+    stored = {i.name: numpy_helper.to_array(i) for i in onnx.load(str(path)).graph.initializer}
+    unnamed = [a for name, a in stored.items() if name not in model.state_dict()]
+    state = {}
+    for name, value in model.state_dict().items():
+        if name in stored:
+            array = stored[name]
+        elif name == "seen_filter.weight":
+            array = np.asarray(card["inputs"]["filtered"]["kernels"], np.float32).reshape(value.shape)
+        else:   # a Linear's weight, stored transposed as a MatMul's operand
+            matches = [a.T for a in unnamed if a.T.shape == tuple(value.shape)]
+            if len(matches) != 1:
+                raise ValueError(f"{path}: no single weight of shape {tuple(value.shape)} for {name}")
+            array = matches[0]
+        state[name] = torch.from_numpy(np.array(array, np.float32))
+    model.load_state_dict(state)
+    inputs = encoding.encode_scene(load("paper-test"), 8, 8).inputs
+    difference = max_difference(model, Path(path), inputs)
+    if difference > TOLERANCE:
+        raise ValueError(f"{path}: the weights read back differ from onnxruntime by {difference:.2e}")
+    return model.eval()
+
+
 def main(argv=None) -> int:
     from viewer.cli_parsing import add_out, tool_parser
     from viewer.scene import load
@@ -240,7 +274,19 @@ def main(argv=None) -> int:
     add_out(parser, ROOT / "models")
     parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--metrics", type=Path, help="JSON of measured metrics to put on the card")
+    parser.add_argument("--read-back", action="store_true",
+                        help="the other way: `run` is an exported .onnx file (its card beside it), whose weights "
+                             "go to --out as a run's checkpoint, the start of `train --init`")
     args = parser.parse_args(argv)
+    if args.read_back:
+        if not args.run.is_file() or not args.run.with_suffix(".json").is_file():
+            parser.error(f"{args.run}: no exported network with its card beside it")
+        model = read_back(args.run)
+        args.out.mkdir(parents=True, exist_ok=True)
+        torch.save({"model": model.state_dict(), "history": {"epochs": []}, "config": model.config.to_dict(),
+                    "read_back_from": str(args.run), "sha256": file_sha256(args.run)}, args.out / "best.pt")
+        print(f"wrote {args.out / 'best.pt'} from {args.run}", file=sys.stderr)
+        return 0
     scene = load("paper-test")
     inputs = encoding.encode_scene(scene, args.probes, ENCODING_VOXELS).inputs
     history = json.loads((args.run / "history.json").read_text())

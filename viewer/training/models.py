@@ -77,6 +77,11 @@ class ProbeNetConfig:
     all the light); trained without it, the reflected light takes up the direct input's error instead:
     the same error at free-space points, but images 0.8-0.9 dB further from Mitsuba's (38.3-38.5 dB
     against 39.2-39.3) and 1% darker."""
+    unshadowed: bool = True
+    """Whether the reflected light takes the unshadowed bounce itself, times `bounce_gain`; without, that
+    gain stays 0 and the unshadowed gather enters only as the seen light's detail, scaled by what the
+    rays let through (`detail_gain`). It passes through walls: with its learned gain 0.087 the doorway's
+    dark room got 1.24x its true light, 1.07x with the gain moved to the seen light."""
     seen: bool = True
     """Whether the network reads the seen bounce (viewer/neural/seen.py); without it, those features are
     zeroed as they come in: the same network blind to visibility beyond the direct light's shadows
@@ -117,6 +122,10 @@ class ProbeNet(nn.Module):
         nn.init.zeros_(self.head[-1].bias)
         self.bounce_gain = nn.Parameter(torch.tensor(float(config.bounce_gain)))
         self.seen_gain = nn.Parameter(torch.tensor(float(config.seen_gain)))
+        if not config.unshadowed:
+            self.bounce_gain.requires_grad_(False)
+            with torch.no_grad():
+                self.bounce_gain.zero_()
         # the seen bounce's denoiser at the probes' own resolution: one 3x3x3 kernel per SH coefficient,
         # starting as the box filter (which takes its raw 62% to 30% on the validation rooms), each
         # probe weighted by its open share and the sum divided by the neighbourhood's (a normalized
@@ -170,6 +179,15 @@ class ProbeNet(nn.Module):
         if self.config.direct_correction and self.training:   # the sink for the direct input's error
             total = total + out[:, TOTAL] * (direct_dc.abs() + bounce_dc.abs() + MAGNITUDE_FLOOR)
         return torch.cat([total, reflected, out[:, VALIDITY:]], dim=1)
+
+    def load_unshadowed(self, state: dict) -> None:
+        """Load `state` (a state dict); where this network takes no unshadowed bounce, that bounce's
+        learned gain is moved to the seen light, which carries the same light with visibility."""
+        self.load_state_dict(state)
+        if not self.config.unshadowed:
+            with torch.no_grad():
+                self.seen_gain += self.bounce_gain
+                self.bounce_gain.zero_()
 
     def _up(self, x: torch.Tensor) -> torch.Tensor:
         if self.config.upsample == "nearest":

@@ -295,6 +295,9 @@ def main(argv=None) -> int:
                         default=(ProbeNetConfig.bounce_gain, ProbeNetConfig.seen_gain),
                         help="the reflected light's start: the unshadowed bounce's and the filtered seen "
                              "light's gains")
+    parser.add_argument("--no-unshadowed", action="store_true",
+                        help="keep the unshadowed bounce's gain at 0 (it passes through walls): it enters "
+                             "only as the seen light's detail; a fine-tune moves its gain to the seen light")
     parser.add_argument("--no-reflected-correction", action="store_true",
                         help="the reflected light is the bounces times their gains alone (the seen one "
                              "filtered): the head corrects the direct light only")
@@ -331,10 +334,10 @@ def main(argv=None) -> int:
     config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels,
                             seen=not args.without_seen, bounce_gain=args.start_gains[0],
                             seen_gain=args.start_gains[1], reflected_correction=not args.no_reflected_correction,
-                            direct_correction=not args.no_direct_correction)
+                            direct_correction=not args.no_direct_correction, unshadowed=not args.no_unshadowed)
     model = ProbeNet(config)
     if args.init and not (args.out / "checkpoint.pt").exists():
-        model.load_state_dict(torch.load(args.init, weights_only=False)["model"])
+        model.load_unshadowed(torch.load(args.init, weights_only=False)["model"])
     print(f"ProbeNet {config}: {parameter_count(model)} parameters, {len(train_set)} training scenes",
           file=sys.stderr)
     settings = TrainSettings(epochs=args.epochs, batch=args.batch, learning_rate=args.lr,
