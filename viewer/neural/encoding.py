@@ -102,8 +102,8 @@ so that features tuned without a version bump are made again rather than read st
 VERSION_CHANNELS = {10: CHANNELS, 11: CHANNELS}
 """The features a network of each encoding version reads: the first this many of FEATURES. A version-10
 network is fed version 11's features: the same features with the seen light's amount closer to the
-truth, on which the shipped version-10 network's indirect light is closer to Mitsuba on the public
-scenes, and its images too (docs/TRAINING.md). Networks of
+truth, on which the version-10 network's indirect light is closer to Mitsuba on the public scenes, and
+its images too (the shipped network is that one fine-tuned on them, docs/TRAINING.md). Networks of
 versions 4-7 are refused: they learnt to correct a direct light of one term per lattice cell of lamp and
 overcorrect version 8's (the version-7 network's paper-test went from 6.4% to 9.1% off Mitsuba), and
 version 8's learnt the reflected light of surfaces lit as the probes' SH lit them, and version 9's a
