@@ -49,10 +49,11 @@ def test_a_cubic_lattice_is_interleaved_and_other_point_sets_are_turned_at_rando
     cubic, basis, sets = lattice_rays(4 ** 3, 16, SEED)
     np.testing.assert_array_equal(cubic, interleaved_lattices(4, 16, SEED))
     # the probes share INTERLEAVE^3 sets of SH weights: each probe's set is its own directions' basis
-    assert basis.shape == (INTERLEAVE ** 3, 16, 9) and sets.shape == (4 ** 3,)
-    np.testing.assert_allclose(basis[sets], sh.basis(cubic) * (4 * np.pi / 16), rtol=1e-6, atol=1e-7)
+    assert basis.shape == (INTERLEAVE ** 3, 9, 16) and sets.shape == (4 ** 3,)
+    np.testing.assert_allclose(basis[sets].transpose(0, 2, 1), sh.basis(cubic) * (4 * np.pi / 16), rtol=1e-6,
+                               atol=1e-7)
     other, basis, sets = lattice_rays(10, 16, SEED)
-    assert other.shape == (10, 16, 3) and basis.shape == (10, 16, 9)
+    assert other.shape == (10, 16, 3) and basis.shape == (10, 9, 16)
     np.testing.assert_array_equal(sets, np.arange(10))
     assert not np.allclose(other[0], other[1])
 
@@ -87,3 +88,28 @@ def test_the_seen_bounces_converge_to_the_solvers_probes(monkeypatch, read_back,
         np.testing.assert_allclose(ratio, 1.0, atol=0.015)
     else:
         assert ratio[0] < 0.96
+
+
+def test_the_rays_gather_each_probes_sum_of_basis_times_radiance():
+    """`SeenRays.gathered` is, for every probe, the sum over its rays of the SH weights of the ray's
+    direction times the radiance of the voxel it lands on (nothing where it lands on none), on a cubic
+    lattice (shared sets) and on loose points (a set a probe)."""
+    from viewer import scene as scenes
+    from viewer.neural import encoding
+    from viewer.neural.seen import SeenRays
+    from viewer.probes.grid import ProbeGrid
+    from viewer.rays.voxels import voxelize
+
+    scene = scenes.load("cornell")
+    voxels = voxelize(scene, 12)
+    landing = encoding.occluders(scene, voxels)
+    lo, hi = scene.bounds
+    radiance = np.random.default_rng(4).random((voxels.count, 3)).astype(np.float32)
+    padded = np.vstack([radiance, np.zeros((1, 3), np.float32)])
+    for points in (ProbeGrid.positions_for(lo, hi, 6).reshape(-1, 3),
+                   lo + (hi - lo) * np.random.default_rng(5).random((7, 3))):
+        rays = SeenRays(landing, voxels.count, points, 16)
+        _, basis, sets = lattice_rays(len(points), 16, SEED)
+        landed = padded[rays.voxel.reshape(len(points), 16)]                   # (P, R, C)
+        expected = np.einsum("pbr,prc->pbc", basis[sets].astype(np.float64), landed)
+        np.testing.assert_allclose(rays.gathered(radiance), expected, rtol=1e-5, atol=1e-6)
