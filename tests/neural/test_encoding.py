@@ -380,3 +380,14 @@ def test_the_compressed_light_is_asinh_of_it():
     assert np.allclose(out, expected, rtol=3e-5, atol=0)
     assert np.array_equal(out[:, encoding.OPEN], inputs[:, encoding.OPEN])
     assert np.all(np.sign(out) == np.sign(inputs))
+    # given an earlier call, equal rows are copied from its answer and the others computed: an edit of
+    # one row (one value of it) gives what a fresh call gives
+    edited = inputs.copy()
+    edited[1, encoding.SEEN.start, 2, 3, 4] *= 2.0
+    edited[2, encoding.OPEN] = 0.5
+    np.testing.assert_array_equal(encoding.compressed(edited, (inputs, out)), encoding.compressed(edited))
+    marked = out.copy()
+    marked[0, encoding.DIRECT.start] = -1.0   # a kept row comes from the earlier answer, not computed again
+    again = encoding.compressed(edited, (inputs, marked))
+    assert np.all(again[0, encoding.DIRECT.start] == -1.0)
+    np.testing.assert_array_equal(encoding.compressed(edited, (inputs[:2], out[:2])), encoding.compressed(edited))

@@ -167,6 +167,7 @@ class NeuralField:
         self._encoder: Encoder | None = None
         self._output: np.ndarray | None = None       # the network's last output, and per colour pass
         self._output_keys: list = [None] * 3         # the (encoder, revision) of the inputs it ran on
+        self._fed: dict | None = None                # the last run's feed (`network_feed.feed`'s previous)
         self._valid: tuple | None = None
         """(encoder, blockers, valid): the validity the network voted for the geometry's first probes. A
         probe's validity is where it stands (inside a solid or not), so a colour edit keeps it: a
@@ -243,7 +244,11 @@ class NeuralField:
         self.passes_run = len(inputs)
         if inputs.shape[1] != self.channels:
             inputs = np.ascontiguousarray(inputs[:, :self.channels])
-        return self.session.run(None, feed(self.input_names, inputs, self.kernels, walls))[0]
+        fed = feed(self.input_names, inputs, self.kernels, walls, self._fed)
+        # its compressed rows serve the next run where the inputs stay the same: only inputs nobody can
+        # change in place (the encoder's are read-only), so that equal rows are truly the same values
+        self._fed = None if inputs.flags.writeable else fed
+        return self.session.run(None, fed)[0]
 
     def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:
         """Voxelize the scene at the card's resolution, list its occluders, and predict over its bounds."""
@@ -296,11 +301,15 @@ class SceneVoxels:
         if self._colours is None or not (_same(self._colours[0], scene.albedo)
                                          and _same(self._colours[1], scene.emission)):
             grid, faces = self.voxelization.grid, self.voxelization.faces
-            lights = grid.lights
-            if lights.face is not None and lights.count:
-                lights = replace(lights, radiance=scene.emission[lights.face])
             albedo = voxel_albedo(faces, self.voxelization.tint, scene)
-            self._grid = replace(grid, albedo=albedo, emission=faces @ scene.emission, lights=lights)
+            if self._colours is not None and _same(self._colours[1], scene.emission):
+                # an albedo edit: the emission and lights as they were (0.7 ms of a 68k-triangle scan's)
+                self._grid = replace(self._grid, albedo=albedo)
+            else:
+                lights = grid.lights
+                if lights.face is not None and lights.count:
+                    lights = replace(lights, radiance=scene.emission[lights.face])
+                self._grid = replace(grid, albedo=albedo, emission=faces @ scene.emission, lights=lights)
             self._colours = (scene.albedo, scene.emission)
         return self._grid
 

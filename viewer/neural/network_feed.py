@@ -24,10 +24,11 @@ FILTERED = {"seen_filtered": encoding.SEEN, "bounce_filtered": encoding.BOUNCE}
 
 
 def feed(names: list[str], inputs: np.ndarray, kernels: np.ndarray | None,
-         walls: "WallTaps | None" = None) -> dict[str, np.ndarray]:
+         walls: "WallTaps | None" = None, previous: dict | None = None) -> dict[str, np.ndarray]:
     """The session's inputs by `names` for encoded `inputs` (passes, CHANNELS, M, M, M): `inputs`, the
     asinh `compressed` ones, and the FILTERED ones by `kernels` (9, 27) (the card's), stopped at the
-    `walls` of the lattice where given (`WallTaps`)."""
+    `walls` of the lattice where given (`WallTaps`). `previous`: an earlier feed of the same names,
+    whose compressed rows are reused where the inputs are the same (`encoding.compressed`)."""
     out = {names[0]: inputs}
     for name in names[1:]:
         if name in FILTERED:
@@ -35,7 +36,8 @@ def feed(names: list[str], inputs: np.ndarray, kernels: np.ndarray | None,
                 raise ValueError(f"the network takes {name} but its card has no filter kernels")
             out[name] = filtered(inputs, FILTERED[name], kernels, walls)
         else:
-            out[name] = encoding.compressed(inputs)
+            out[name] = encoding.compressed(inputs, None if previous is None else (previous[names[0]],
+                                                                                   previous[name]))
     return out
 
 
