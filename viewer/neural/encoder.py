@@ -47,8 +47,8 @@ from scipy import ndimage
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
-from viewer.neural.encoding import BOUNCE, CHANNELS, DIRECT, OPEN, SEEN, Encoding
-from viewer.neural.lattice import GEOMETRY, PLACE, LatticeGeometry, LatticeShadows, moved_box, transposed
+from viewer.neural.encoding import CHANNELS, Encoding
+from viewer.neural.lattice import LatticeGeometry, LatticeShadows, assemble, moved_box
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
 
@@ -201,22 +201,11 @@ class Encoder:
                                                                surface)
             bounce[..., redo] = self._bounce.gathered(surface)
         inv = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1.0), 0.0)
-        inputs = np.empty((3, CHANNELS, m ** 3), np.float32)
         previous = None if self._last is None else self._last.inputs.reshape(3, CHANNELS, -1)
-        emitted = self._emitted.T / g.cell_area
-        opened = 1.0 if self._seen is None or not voxels.count else self._seen.open
-        for c in range(3):
-            if unchanged[c] and previous is not None:
-                inputs[c] = previous[c]
-                continue
-            inputs[c, GEOMETRY] = g.features[GEOMETRY]   # density and normal
-            inputs[c, PLACE] = g.features[PLACE]         # coordinates and extent
-            inputs[c, 4] = self._albedo_feature[c]
-            inputs[c, 5] = emitted[c] * inv[c]
-            np.multiply(direct[c], np.float32(inv[c]), out=inputs[c, DIRECT])
-            transposed(bounce, c, inv[c], inputs[c, BOUNCE])   # bounce[:, :, c].T x inv[c], in one pass
-            transposed(seen, c, inv[c], inputs[c, SEEN])
-            inputs[c, OPEN] = opened
+        opened = (np.ones(m ** 3, np.float32) if self._seen is None or not voxels.count
+                  else self._seen.open)
+        inputs = assemble(g.features, self._albedo_feature, self._emitted.T / g.cell_area, direct, bounce, seen,
+                          opened, inv, unchanged, previous)
         inputs = inputs.reshape(3, CHANNELS, m, m, m)
         inputs.flags.writeable = False  # shared with the next encoding when it is the same
         return inputs
