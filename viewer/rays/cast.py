@@ -33,11 +33,13 @@ except ImportError:   # pragma: no cover - depends on the installation
 
 MOVED_SHARE = 0.5
 """A caster made from a previous one builds the moved faces apart while they are at most this share of
-the faces (a lamp, an object); past it, one hierarchy of all the faces costs as much."""
+the faces (a lamp, an object); past it, one hierarchy of all the faces costs as much..."""
 PARTED_FACES = 20_000
 """... and while the faces that stayed are at least this many: a second level costs every ray a sixth of
 its speed, which a box room's hierarchy, built in a fraction of a millisecond, does not pay back (its
-moved box's probes took 66 ms instead of 60-62 with parts)."""
+moved box's probes took 66 ms instead of 60-62 with parts). Moved faces at least this many are built
+apart whatever their share (a scan in a room): the next move of the same faces by a translation (a
+drag) keeps their hierarchy, which a million triangles took 100-200 ms to build."""
 NO_FACE = -1
 """Hits.face of a ray that meets nothing within its length."""
 EMBREE_CHUNK = 1 << 14
@@ -104,6 +106,8 @@ class _Stayed:
     faces: np.ndarray
     hierarchy: "embree.Hierarchy"
     hull: np.ndarray | None = None
+    shift: np.ndarray | None = None
+    """Where the hierarchy serves its faces moved since it was built: their translation (the moved faces')."""
 
 
 def corners(scene, faces: np.ndarray) -> np.ndarray:
@@ -131,6 +135,9 @@ class TriangleCaster:
     _stayed: _Stayed | None = None
     """The faces that stayed, where this caster was made from a previous one with some faces moved: the
     next move of the same faces keeps them."""
+    _went: _Stayed | None = None
+    """... and the faces that moved, in the hierarchy built of them at the first move: a later move of the
+    same faces by a translation (a drag) keeps it, moved (`moved_faces.translation`)."""
 
     def __init__(self, scene, cells: dda.Cells | None = None, backend: str | None = None,
                  previous: "TriangleCaster | None" = None, quick: bool = False):
@@ -157,28 +164,37 @@ class TriangleCaster:
         parts = self._parted(scene, faces, previous) if backend == "embree" else None
         if parts is not None:
             faces = np.concatenate([parts[0], parts[1]])
-            mesh = corners(scene, parts[1])   # the moved faces alone: the stayed ones' hierarchy is kept
+            # the moved faces alone (the stayed ones' hierarchy is kept), unless their own is kept too
+            mesh = corners(scene, parts[1]) if parts[3] is None else parts[3].hierarchy.corners
         else:
             mesh = np.asarray(scene.triangles)[faces]
         self._embrace(mesh, faces, *scene.edges, backend == "embree", parts)
 
     def _parted(self, scene, faces: np.ndarray, previous: "TriangleCaster | None"):
-        """(faces that stayed, faces that moved, `_Stayed` of the former) where `previous` holds the same
-        faces with at most MOVED_SHARE of them elsewhere now; the previous one's `_Stayed` where it held
-        the same faces apart, else made here. None: one hierarchy of all."""
+        """(faces that stayed, faces that moved, `_Stayed` of the former, of the latter or None) where
+        `previous` holds the same faces with at most MOVED_SHARE of them elsewhere now; the previous one's
+        `_Stayed` where it held the same faces apart, else made here; its moved faces' where the same
+        faces moved again by a translation (with that shift), else None: they are built again. None: one
+        hierarchy of all."""
         v0, e1, e2 = scene.edges
         if (previous is None or previous._direct is None or not embree.available()
                 or previous.v0.shape != v0.shape):
             return None
         moved = moved_faces.changed_rows((previous.v0, v0), (previous.e1, e1), (previous.e2, e2))[faces]
-        count = int(moved.sum())
-        if count == 0 or count > MOVED_SHARE * len(faces) or len(faces) - count < PARTED_FACES:
+        count, stayed_count = int(moved.sum()), len(faces) - int(moved.sum())
+        few_moved = count <= MOVED_SHARE * len(faces) and stayed_count >= PARTED_FACES
+        if count == 0 or stayed_count == 0 or not (few_moved or count >= PARTED_FACES):
             return None
         stayed, went = faces[~moved], faces[moved]
-        kept = previous._stayed
-        if kept is not None and np.array_equal(kept.faces, stayed):
-            return stayed, went, kept
-        return stayed, went, _Stayed(stayed, embree.Hierarchy(corners(scene, stayed), self._quick))
+        kept, gone = previous._stayed, previous._went
+        if gone is not None and np.array_equal(gone.faces, went):
+            shift = moved_faces.translation(gone.hierarchy.corners, (v0, e1, e2), went)
+            gone = None if shift is None else _Stayed(went, gone.hierarchy, shift=shift)
+        else:
+            gone = None
+        if kept is None or not np.array_equal(kept.faces, stayed):
+            kept = _Stayed(stayed, embree.Hierarchy(corners(scene, stayed), self._quick))
+        return stayed, went, kept, gone
 
     def _embrace(self, mesh, faces, v0, e1, e2, direct: bool = True, parts=None) -> None:
         self.mesh = np.ascontiguousarray(mesh, np.float32)
@@ -191,7 +207,8 @@ class TriangleCaster:
                 self._direct = embree.Scene(self.mesh, quick=self._quick)
             else:
                 self._stayed = parts[2]
-                self._direct = embree.Scene(parts[2].hierarchy, self.mesh, quick=self._quick)
+                self._went = parts[3] or _Stayed(parts[1], embree.Hierarchy(self.mesh, self._quick))
+                self._direct = embree.Scene(parts[2].hierarchy, self._went.hierarchy, shifts=[None, self._went.shift])
         else:
             self._embree = rtcore_scene.EmbreeScene()
             TriangleMesh(self._embree, self.mesh)
