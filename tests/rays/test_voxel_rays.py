@@ -107,3 +107,43 @@ def test_a_bundle_traced_in_one_loop_lands_where_its_rays_one_by_one_do():
         one_by_one = rays.first_hits(np.repeat(origins, 40, axis=0), each.reshape(-1, 3)).reshape(300, 40)
         assert len(np.unique(bundle)) > 20 and (bundle == dda.MISS).any()   # both outcomes are tested
         np.testing.assert_array_equal(bundle, one_by_one)
+
+
+def _sphere_room():
+    """The lit room with a finely tessellated sphere in it (5,120 triangles, many per cell)."""
+    import trimesh
+
+    from viewer.scene import Scene
+    from scenes import lit_room
+
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=0.35)
+    sphere = Scene("ball", np.asarray(ball.vertices) + [0.1, -0.5, 0.0], np.asarray(ball.faces), 0.7, 0.0, 0,
+                   ("ball",))
+    return lit_room(sphere)
+
+
+@needs_embree
+@pytest.mark.parametrize("name", ["cornell", "sphere room"])
+def test_keyed_cells_name_the_voxels_the_listing_names(name):
+    """Rays cast through Embree and looked up by key (`keyed_cells`: no triangle listed in any cell) land on
+    the voxel the cell listing names, ray for ray, through every lookup: one by one, in a bundle, and
+    kept across a call; the key table is the listing's own."""
+    from viewer.rays.voxel_rays import keyed_cells
+    from viewer.rays.voxels import voxelize_with_faces
+
+    scene = load("cornell") if name == "cornell" else _sphere_room()
+    voxelization = voxelize_with_faces(scene, 24)
+    listed = VoxelRays(scene, dda.Cells.of(voxelization, scene), "embree")
+    keyed = VoxelRays(scene, keyed_cells(voxelization.grid, voxelization.keys, scene), "embree", listed.caster)
+    assert len(keyed.cells.first) == 0 and len(listed.cells.triangle) > len(scene.faces)
+    rng = np.random.default_rng(5)
+    lo, hi = scene.bounds
+    origins = rng.uniform(lo, hi, (400, 3))
+    directions = rng.normal(size=(400, 64, 3))
+    directions /= np.linalg.norm(directions, axis=2, keepdims=True)
+    ours, theirs = keyed.kept_bundle(origins, directions)[0], listed.kept_bundle(origins, directions)[0]
+    assert (theirs >= 0).mean() > 0.5 and (theirs == dda.BACKFACE).any()   # fronts and backs are met
+    np.testing.assert_array_equal(ours, theirs)
+    np.testing.assert_array_equal(keyed.bundle_hits(origins, directions), theirs)
+    flat = np.repeat(origins, 64, axis=0), directions.reshape(-1, 3)
+    np.testing.assert_array_equal(keyed.first_hits(*flat), listed.first_hits(*flat))

@@ -48,7 +48,7 @@ import numpy as np
 
 from viewer.rays import dda
 from viewer.rays.cast import embree_available
-from viewer.rays.voxel_rays import VoxelRays
+from viewer.rays.voxel_rays import VoxelRays, keyed_cells
 from viewer.probes import sh
 from viewer.rays.voxels import VoxelGrid, face_facing
 
@@ -221,8 +221,18 @@ class Occluders(VoxelRays):
         grid = (scene, voxels.lo, voxels.voxel_size / k, voxels.resolution * k)
         super().__init__(scene, dda.Cells.unlisted(*grid) if backend == "embree" else dda.Cells.blocking(*grid), backend,
                          previous=previous, quick=True)   # a few hundred thousand rays a build
-        self.landing = VoxelRays(scene, landing_cells(scene, voxels, None if previous is None else previous.landing.cells),
-                                 self.backend, self.caster)
+        if self.backend == "embree":   # Embree names the faces: their voxels are looked up by key
+            landing = keyed_cells(voxels, voxel_keys(voxels), scene)
+        else:
+            landing = landing_cells(scene, voxels, None if previous is None else previous.landing.cells)
+        self.landing = VoxelRays(scene, landing, self.backend, self.caster)
+
+
+def voxel_keys(voxels: VoxelGrid) -> np.ndarray:
+    """(K,) each voxel's key (flat cell x 6 + facing), remade from its cell and its normal, whose signed
+    dominant axis is its pieces' (their area-weighted mean keeps it)."""
+    n, c = voxels.resolution, voxels.coords
+    return (c[:, 0] + n * (c[:, 1] + n * c[:, 2])) * 6 + face_facing(voxels.normal)
 
 
 def occluders(scene, voxels: VoxelGrid, previous: Occluders | None = None) -> Occluders:
@@ -232,12 +242,9 @@ def occluders(scene, voxels: VoxelGrid, previous: Occluders | None = None) -> Oc
 
 
 def landing_cells(scene, voxels: VoxelGrid, previous: dda.Cells | None = None) -> dda.Cells:
-    """`dda.Cells.of` for a voxel grid without its voxelization: each voxel's key (flat cell x 6 +
-    facing) is remade from its cell and its normal, whose signed dominant axis is its pieces' (their
-    area-weighted mean keeps it). `previous`: the landing cells of the same faces before some moved."""
-    n, c = voxels.resolution, voxels.coords
-    keys = (c[:, 0] + n * (c[:, 1] + n * c[:, 2])) * 6 + face_facing(voxels.normal)
-    return dda.Cells.of(SimpleNamespace(grid=voxels, keys=keys), scene, previous)
+    """`dda.Cells.of` for a voxel grid without its voxelization (`voxel_keys`). `previous`: the landing
+    cells of the same faces before some moved."""
+    return dda.Cells.of(SimpleNamespace(grid=voxels, keys=voxel_keys(voxels)), scene, previous)
 
 
 def seen_rays(blockers: VoxelRays | None, voxels: VoxelGrid, points: np.ndarray, previous: SeenRays | None = None,
