@@ -82,11 +82,11 @@ def _chunks(level: np.ndarray) -> np.ndarray:
     return np.unique(np.concatenate([[0], ends, [len(level)]])).astype(np.int64)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _plan(triangles, rows, max_edge, lo, size, n, level, bound):
     """Each face's `piece_levels` into `level`, and into `bound[f + 1]` how many pairs it can make at most
-    (a pair a piece, or a pair a cell of the face's bounding box, whichever is fewer)."""
-    for f in range(len(rows)):
+    (a pair a piece, or a pair a cell of the face's bounding box, whichever is fewer), on every core."""
+    for f in numba.prange(len(rows)):
         t = rows[f]
         longest = 0.0
         cells = 1

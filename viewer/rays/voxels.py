@@ -235,9 +235,9 @@ def face_facing(normals: np.ndarray, rows: np.ndarray | None = None) -> np.ndarr
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _facing(normals, rows, out):
-    for i in range(len(rows)):
+    for i in numba.prange(len(rows)):
         f = rows[i]
         x, y, z = normals[f, 0], normals[f, 1], normals[f, 2]
         ax, ay, az = abs(x), abs(y), abs(z)
