@@ -238,30 +238,38 @@ def _open_sides(triangles: np.ndarray, areas: np.ndarray, normals: np.ndarray, l
                 hi: np.ndarray) -> int:
     """How many of the six sides of the scene's box surfaces do not cover (`COVERED`): the area of the
     faces facing each side's axis (|normal| > 0.7 along it) that lie within SIDE_TOLERANCE of its plane,
-    in one compiled pass over the faces (a 68k-triangle scan: 8 ms in numpy, every time an object moved)."""
+    in one compiled pass over the faces on every core (a 68k-triangle scan: 8 ms in numpy, every time an
+    object moved; a million-triangle one 9 ms on one core)."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     covered = _side_areas(np.ascontiguousarray(triangles, np.float64), np.ascontiguousarray(areas, np.float64),
                           np.ascontiguousarray(normals, np.float64), lo, hi,
-                          SIDE_TOLERANCE * float((hi - lo).max()))
+                          SIDE_TOLERANCE * float((hi - lo).max())).sum(axis=0)
     extent = hi - lo
     sides = np.repeat([extent[1] * extent[2], extent[0] * extent[2], extent[0] * extent[1]], 2)
     return int(np.sum(covered < COVERED * sides))
 
 
-@numba.njit(cache=True, nogil=True)
+SIDE_RUNS = 64
+"""Runs of faces `_side_areas` sums apart, shared among the cores."""
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _side_areas(triangles, areas, normals, lo, hi, tolerance):
-    """(6,) the area of the faces lying on each side of the box [lo, hi] (low, high side of x, y, z)."""
-    out = np.zeros(6)
-    for f in range(triangles.shape[0]):
-        for axis in range(3):
-            if abs(normals[f, axis]) <= 0.7:
-                continue
-            a, b, c = triangles[f, 0, axis], triangles[f, 1, axis], triangles[f, 2, axis]
-            low, high = min(a, b, c), max(a, b, c)
-            if low >= lo[axis] - tolerance and high <= lo[axis] + tolerance:
-                out[2 * axis] += areas[f]
-            if low >= hi[axis] - tolerance and high <= hi[axis] + tolerance:
-                out[2 * axis + 1] += areas[f]
+    """(SIDE_RUNS, 6) the area of the faces of each run lying on each side of the box [lo, hi] (low, high
+    side of x, y, z)."""
+    out = np.zeros((SIDE_RUNS, 6))
+    step = (triangles.shape[0] + SIDE_RUNS - 1) // SIDE_RUNS
+    for run in numba.prange(SIDE_RUNS):
+        for f in range(run * step, min((run + 1) * step, triangles.shape[0])):
+            for axis in range(3):
+                if abs(normals[f, axis]) <= 0.7:
+                    continue
+                a, b, c = triangles[f, 0, axis], triangles[f, 1, axis], triangles[f, 2, axis]
+                low, high = min(a, b, c), max(a, b, c)
+                if low >= lo[axis] - tolerance and high <= lo[axis] + tolerance:
+                    out[run, 2 * axis] += areas[f]
+                if low >= hi[axis] - tolerance and high <= hi[axis] + tolerance:
+                    out[run, 2 * axis + 1] += areas[f]
     return out
 
 
