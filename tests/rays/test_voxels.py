@@ -80,3 +80,33 @@ def test_a_face_joins_the_facing_of_its_largest_dot_product_the_first_of_equals(
                      [-0.0, 0, 0], [0, 2, -2], [-3, 0, 3]], np.float64)
     normals = np.concatenate([rng.normal(size=(2000, 3)), ties])
     np.testing.assert_array_equal(face_facing(normals), np.argmax(normals @ FACINGS.T, axis=1))
+
+
+@pytest.mark.parametrize("name", ["cornell", "textured"])
+def test_voxel_albedo_kept_across_edits_is_the_whole_product_to_the_bit(name):
+    """`VoxelAlbedo` sums again only the voxels of the faces recoloured (a wall), all of them where many
+    faces changed or the faces are textured; every answer is `voxel_albedo`'s, bit for bit, and an
+    unchanged albedo gives the same array back."""
+    from pathlib import Path
+
+    from viewer.rays.voxels import VoxelAlbedo, voxel_albedo, voxelize_with_faces
+
+    documented = Path(__file__).resolve().parents[2] / "docs" / "data" / "textured-room.gltf"
+    scene = scenes.load("cornell" if name == "cornell" else documented)
+    assert scene.textured == (name == "textured")
+    voxelization = voxelize_with_faces(scene, 16)
+    first = voxel_albedo(voxelization.faces, voxelization.tint, scene)
+    kept = VoxelAlbedo(voxelization.faces, voxelization.tint, scene, first)
+    assert kept.of(scene) is first
+    wall = scene.largest_group()
+    edits = [scene.with_albedo(wall, [0.2, 0.8, 0.3]), scene,
+             scene.with_albedo(wall, [0.9, 0.1, 0.1]).with_albedo(scene.groups[-1], [0.4, 0.4, 0.1]),
+             scene.with_albedo(wall, [0.9, 0.1, 0.1])]
+    everything = scene
+    for group in scene.groups:
+        everything = everything.with_albedo(group, [0.3, 0.5, 0.7])
+    for edited in edits + [everything]:
+        answer = kept.of(edited)
+        np.testing.assert_array_equal(answer, voxel_albedo(voxelization.faces, voxelization.tint, edited))
+        assert kept.of(edited) is answer
+    assert name != "cornell" or kept._columns is not None   # a wall alone was summed again

@@ -27,7 +27,7 @@ from viewer.probes.grid import ProbeGrid
 from viewer.resources import DEFAULT_MODEL
 from viewer.scene import Scene
 from viewer.rays.voxel_faces import FaceVoxels
-from viewer.rays.voxels import VoxelGrid, voxel_albedo, voxelize
+from viewer.rays.voxels import VoxelAlbedo, VoxelGrid, voxelize
 
 OUTPUTS = 19
 """Per probe and colour pass: 9 SH of all the light, 9 of the reflected light, 1 validity logit."""
@@ -281,6 +281,7 @@ class SceneVoxels:
         self.shape = Shape.of(scene)
         self._grid = self.voxelization.grid   # its colours are the faces' shares', as every edit's come
         self._colours = (scene.albedo, scene.emission)
+        self._albedo = VoxelAlbedo(self.voxelization.faces, self.voxelization.tint, scene, self._grid.albedo)
         self.blockers = encoding.occluders(scene, self._grid, None if previous is None else previous.blockers)
         """The occluders of these triangles, one object for every colour edit (the encoder keeps its
         shadows while it is given the same)."""
@@ -298,11 +299,11 @@ class SceneVoxels:
     def voxels_of(self, scene: Scene) -> VoxelGrid:
         """The voxels with `scene`'s albedo and emission (area-weighted per voxel, as `voxelize` gives
         them, to round-off); the same object while the colours stay the same."""
-        if self._colours is None or not (_same(self._colours[0], scene.albedo)
-                                         and _same(self._colours[1], scene.emission)):
+        albedo = self._albedo.of(scene)   # the voxels of the faces recoloured alone summed again
+        same_light = _same(self._colours[1], scene.emission)
+        if not same_light or albedo is not self._grid.albedo:
             grid, faces = self.voxelization.grid, self.voxelization.faces
-            albedo = voxel_albedo(faces, self.voxelization.tint, scene)
-            if self._colours is not None and _same(self._colours[1], scene.emission):
+            if same_light:
                 # an albedo edit: the emission and lights as they were (0.7 ms of a 68k-triangle scan's)
                 self._grid = replace(self._grid, albedo=albedo)
             else:
