@@ -51,6 +51,21 @@ def test_a_colour_edit_relights_only_and_equals_a_full_solve():
     assert np.abs(a - b).max() <= 1e-5 * np.abs(b).max()
 
 
+def test_edits_materials_are_those_of_the_edited_scene_to_the_bit():
+    """A colour edit's materials keep what it did not change (the voxel albedo of the faces not
+    recoloured, the emission of an albedo edit) and are those made afresh for the edited scene, bit
+    for bit, through albedo edits, a lamp's colour and back."""
+    base = lit_room()
+    warm, _ = solver(base)
+    edits = [base.with_albedo("room", (0.9, 0.2, 0.6)), base.with_emission("lamp", (12.0, 6.0, 2.0)),
+             base.with_emission("lamp", (12.0, 6.0, 2.0)).with_albedo("room", (0.1, 0.5, 0.5)), base]
+    for edited in edits:
+        assert warm.update(edited) == ["relight"]
+        fresh = relight.materials(edited, warm.geometry, warm.lights)
+        for name in ("albedo", "emission", "lamp", "sun"):
+            np.testing.assert_array_equal(getattr(warm.materials, name), getattr(fresh, name))
+
+
 def test_a_lamp_colour_and_intensity_edit_relights_only():
     base = lit_room()
     warm, _ = solver(base)

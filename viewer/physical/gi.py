@@ -133,6 +133,8 @@ class PhysicalGI:
         self.lights: lightpaths.LightPaths | None = None
         self.sun: geometry.SunPaths | None = None
         self.materials: relight.Materials | None = None
+        self._albedo: voxels.VoxelAlbedo | None = None
+        self._last_emission: tuple | None = None
         self.lighting: relight.Lighting | None = None
 
     def update(self, scene: Scene, timings: Timings | None = None, stale_geometry: bool = False,
@@ -222,7 +224,14 @@ class PhysicalGI:
     def relight(self, scene: Scene, timings: Timings | None = None, bounces: int | None = None) -> relight.Lighting:
         """The relight stage: the scene's colours and lights on the installed geometry."""
         clock = time.perf_counter()
-        self.materials = relight.materials(scene, self.geometry, self.lights)
+        g = self.geometry
+        if self._albedo is None or self._albedo.faces is not g.faces:   # kept while the geometry is
+            self._albedo = voxels.VoxelAlbedo(g.faces, g.tint, scene, voxels.voxel_albedo(g.faces, g.tint, scene))
+        last = self._last_emission   # (the scene's emission, geometry, lamp paths) of the last materials
+        same = last is not None and self.materials is not None and last[1] is g and last[2] is self.lights
+        self.materials = relight.materials(scene, g, self.lights, self._albedo,
+                                           (last[0], self.materials) if same else None)
+        self._last_emission = (scene.emission, g, self.lights)
         settings = relight.RelightSettings(bounces=bounces or self._bounces())
         self.lighting = self.relighter.solve(self.geometry, self.lights, self.sun, self.materials, settings,
                                              self.lighting)
