@@ -102,3 +102,18 @@ def test_a_drag_gets_a_digest_of_its_own_made_from_its_source(cornell):
     other = cornell.transformed_group("light", shift(0.2))
     assert len({cornell.geometry_digest, moved.geometry_digest, other.geometry_digest}) == 3
     assert cornell.transformed_group("light", shift(0.1)).geometry_digest == moved.geometry_digest
+
+
+def test_a_moved_scene_digest_tells_its_triangles_apart_and_a_turn_holds_a_fresh_scene(cornell):
+    """The same move of the same scene has the same digest (the group and its matrix are hashed, not its
+    corners), another move or the source another; a turned box holds what a fresh scene holds."""
+    a, b = (cornell.transformed_group("small-box", shift(0.1)) for _ in range(2))
+    other = cornell.transformed_group("small-box", shift(0.2))
+    assert a.geometry_digest == b.geometry_digest
+    assert len({a.geometry_digest, other.geometry_digest, cornell.geometry_digest}) == 3
+    angle = 0.3
+    turn = np.eye(4)
+    turn[[0, 0, 2, 2], [0, 2, 0, 2]] = np.cos(angle), np.sin(angle), -np.sin(angle), np.cos(angle)
+    turned = cornell.transformed_group("small-box", turn)
+    assert_same_geometry(turned, fresh(turned))
+    assert turned.geometry_digest not in (a.geometry_digest, cornell.geometry_digest)

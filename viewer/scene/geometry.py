@@ -16,6 +16,7 @@ import hashlib
 from dataclasses import replace
 from functools import cached_property
 
+import numba
 import numpy as np
 
 FLAT = 1e-6
@@ -53,15 +54,6 @@ def cross_rows(name: str, cross: np.ndarray) -> np.ndarray:
     return np.divide(cross, length, out=np.zeros_like(cross), where=length > 0)
 
 
-def _patched(array, rows: np.ndarray, values):
-    """A read-only copy of `array` (or of each array of a tuple) with `rows` set to `values`."""
-    if isinstance(array, tuple):
-        return tuple(_patched(a, rows, v) for a, v in zip(array, values))
-    out = array.copy()
-    out[rows] = values
-    return read_only(out)
-
-
 class TriangleGeometry:
     """The Scene's derived geometry (cached properties over its `vertices` (V, 3) and `faces` (F, 3))."""
 
@@ -78,9 +70,10 @@ class TriangleGeometry:
     @cached_property
     def geometry_digest(self) -> bytes:
         """A hash of the triangles' corners (what traced geometry depends on; not colours or lights). A moved
-        scene's hashes its source's and the moved corners (a million-triangle scan's corners took 61 ms to
-        hash): the same triangles reached by other edits may then have another digest, and a solver that
-        keys its traces by it traces again; different triangles never share one."""
+        scene's hashes its source's and the move: the group and its matrix (`Scene.transformed_group`), or
+        the moved vertices and their places (a million-triangle scan's corners took 61 ms to hash): the same
+        triangles reached by other edits may then have another digest, and a solver that keys its traces by
+        it traces again; different triangles never share one."""
         return hashlib.blake2b(np.ascontiguousarray(self.triangles).tobytes(), digest_size=16).digest()
 
     @cached_property
@@ -140,32 +133,39 @@ class TriangleGeometry:
         return read_only(np.array(lo)), read_only(np.array(hi))
 
     # ---- a moved copy -------------------------------------------------------------------------------
-    def _moved(self, vertices: np.ndarray, moved: np.ndarray):
+    def _moved(self, vertices: np.ndarray, moved: np.ndarray, recipe: bytes | None = None):
         """A copy whose vertices at the indices `moved` took new places in `vertices` (the others as here;
         the array becomes the copy's own, read-only). The new places are checked alone (`_check_positions`);
-        the DERIVED properties this scene has made are made from its, when first asked (`_from_moved`)."""
+        the DERIVED properties this scene has made are made from its, when first asked (`_from_moved`).
+        `recipe`: bytes that name the move made of this scene (a group and its matrix), which the digest
+        then hashes instead of the moved vertices (a million-triangle scan's: 72 MB, 55 ms)."""
         v = np.ascontiguousarray(vertices, np.float64)
         moved = np.asarray(moved, np.int64)
         if v.shape != self.vertices.shape:
             return replace(self, vertices=v)
-        self._check_positions(v[moved])
+        finite, after = _row_box(v, moved)   # the new places' box, in one pass on every core
+        self._check_positions(after if finite else np.array([np.nan]))
         v.setflags(write=False)
         touched = np.zeros(len(v), bool)
         touched[moved] = True
-        faces = np.flatnonzero(touched[self.faces].any(axis=1))
+        faces = np.flatnonzero(_touching(np.asarray(self.faces, np.int64), touched))
         scene = copy.copy(self)
         for name in DERIVED + FROM_POSITIONS + ("_moved_from",):
             scene.__dict__.pop(name, None)
         object.__setattr__(scene, "vertices", v)
         scene.__dict__["_moved_from"] = (faces, {n: self.__dict__[n] for n in DERIVED if n in self.__dict__})
-        if "geometry_digest" in self.__dict__:   # the source's digest and what moved, not every corner again
-            corners = np.ascontiguousarray(v[self.faces[faces]])
-            scene.__dict__["geometry_digest"] = hashlib.blake2b(
-                self.geometry_digest + faces.tobytes() + corners.tobytes(), digest_size=16).digest()
+        if "geometry_digest" in self.__dict__:   # the source's digest and what moved, not every corner again:
+            digest = hashlib.blake2b(self.geometry_digest, digest_size=16)   # the faces are the same
+            if recipe is not None:
+                digest.update(recipe)
+            else:   # the moved vertices and their places
+                digest.update(moved.tobytes())
+                digest.update(np.ascontiguousarray(v[moved]).tobytes())
+            scene.__dict__["geometry_digest"] = digest.digest()
         if "_extremes" in self.__dict__ and len(moved):
             lo, hi = self._extremes
-            before, after = self.vertices[moved], v[moved]
-            if np.all((before > lo) & (before < hi)) and np.all((after >= lo) & (after <= hi)):
+            before = _row_box(np.ascontiguousarray(self.vertices, np.float64), moved)[1]
+            if np.all((before[0] > lo) & (before[1] < hi)) and np.all((after[0] >= lo) & (after[1] <= hi)):
                 scene.__dict__["_extremes"] = self._extremes   # the extremes lie on vertices that stayed
         if not np.any(scene.face_areas > 0):
             raise self._error("every triangle is degenerate (zero area)")
@@ -180,12 +180,111 @@ class TriangleGeometry:
         base = kept.get(name)
         if base is None:   # another thread made it first
             return None
-        out = _patched(base, faces, corner_rows(name, self.vertices[self.faces[faces]]))
+        out = tuple(a.copy() for a in base) if name == "edges" else base.copy()
+        parts = dict(zip(("v0", "e1", "e2"), out)) if name == "edges" else {name.replace("face_", ""): out}
+        _moved_rows(np.ascontiguousarray(self.vertices, np.float64), np.asarray(self.faces, np.int64),
+                    np.asarray(faces, np.int64), *(parts.get(k, EMPTY[k]) for k in ROW_PARTS))
         kept.pop(name, None)   # the source's array is not held once this one is made
-        return out
+        return tuple(map(read_only, out)) if name == "edges" else read_only(out)
 
     def _check_positions(self, v: np.ndarray) -> None:
         raise NotImplementedError
 
     def _error(self, message: str) -> Exception:
         raise NotImplementedError
+
+
+ROW_PARTS = ("triangles", "v0", "e1", "e2", "cross", "areas", "normals")
+"""What `_moved_rows` writes, in its order (an empty array: not asked for)."""
+EMPTY = {"triangles": np.zeros((0, 3, 3)), "areas": np.zeros(0),
+         **{k: np.zeros((0, 3)) for k in ("v0", "e1", "e2", "cross", "normals")}}
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _moved_rows(vertices, faces, rows, triangles, v0, e1, e2, cross, areas, normals):
+    """The `rows` of the DERIVED arrays given (writable copies, or empty ones where not asked for) made again
+    from the corners in one pass on every core, with `corner_rows`' arithmetic (the same numbers to the
+    last bit: numpy's gather, differences, cross products and norms of a million moved triangles took 0.6
+    s, with their temporaries)."""
+    for i in numba.prange(rows.shape[0]):
+        f = rows[i]
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        u0, u1, u2 = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
+        w0, w1, w2 = vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1], vertices[c, 2] - vertices[a, 2]
+        for k in range(3):
+            if triangles.shape[0]:
+                triangles[f, 0, k], triangles[f, 1, k], triangles[f, 2, k] = vertices[a, k], vertices[b, k], vertices[c, k]
+            if v0.shape[0]:
+                v0[f, k] = vertices[a, k]
+        if e1.shape[0]:
+            e1[f, 0], e1[f, 1], e1[f, 2] = u0, u1, u2
+            e2[f, 0], e2[f, 1], e2[f, 2] = w0, w1, w2
+        if cross.shape[0] or areas.shape[0] or normals.shape[0]:
+            c0, c1, c2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+            if cross.shape[0]:
+                cross[f, 0], cross[f, 1], cross[f, 2] = c0, c1, c2
+            length = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+            if areas.shape[0]:
+                areas[f] = 0.5 * length
+            if normals.shape[0]:
+                if length > 0:
+                    normals[f, 0], normals[f, 1], normals[f, 2] = c0 / length, c1 / length, c2 / length
+                else:
+                    normals[f, 0] = normals[f, 1] = normals[f, 2] = 0.0
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _touching(faces, touched):
+    """(F,) bool: the faces with a corner among the `touched` vertices (V,) bool, on every core."""
+    out = np.empty(faces.shape[0], np.bool_)
+    for f in numba.prange(faces.shape[0]):
+        out[f] = touched[faces[f, 0]] or touched[faces[f, 1]] or touched[faces[f, 2]]
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _row_box(v, rows):
+    """(whether every coordinate of the `rows` of `v` is finite, (2, 3) their least and greatest
+    coordinates), in one pass on every core."""
+    runs = 64
+    out = np.empty((runs, 2, 3))
+    out[:, 0], out[:, 1] = np.inf, -np.inf
+    finite = np.ones(runs, np.bool_)
+    step = (rows.shape[0] + runs - 1) // runs
+    for run in numba.prange(runs):
+        for i in range(run * step, min((run + 1) * step, rows.shape[0])):
+            for k in range(3):
+                x = v[rows[i], k]
+                if not np.isfinite(x):
+                    finite[run] = False
+                out[run, 0, k] = min(out[run, 0, k], x)
+                out[run, 1, k] = max(out[run, 1, k], x)
+    box = np.empty((2, 3))
+    for k in range(3):
+        box[0, k] = out[:, 0, k].min()
+        box[1, k] = out[:, 1, k].max()
+    return finite.all(), box
+
+
+def group_vertices(faces: np.ndarray, face_group: np.ndarray, group: int, count: int) -> np.ndarray:
+    """(K,) ascending: the vertices (of `count`) that faces of `group` use."""
+    used = np.zeros(count, np.bool_)
+    _mark_group(np.asarray(faces, np.int64), np.asarray(face_group, np.int64), int(group), used)
+    return np.flatnonzero(used)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _mark_group(faces, face_group, group, used):
+    for f in numba.prange(faces.shape[0]):
+        if face_group[f] == group:   # the cores may mark one vertex at once: each writes True
+            used[faces[f, 0]] = used[faces[f, 1]] = used[faces[f, 2]] = True
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def transform_rows(v, rows, matrix):
+    """The `rows` of the positions `v` (V, 3) moved in place by the 4x4 affine `matrix`."""
+    for i in numba.prange(rows.shape[0]):
+        r = rows[i]
+        x, y, z = v[r, 0], v[r, 1], v[r, 2]
+        for k in range(3):
+            v[r, k] = matrix[k, 0] * x + matrix[k, 1] * y + matrix[k, 2] * z + matrix[k, 3]

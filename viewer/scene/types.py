@@ -20,7 +20,7 @@ from functools import cached_property
 
 import numpy as np
 
-from viewer.scene.geometry import TriangleGeometry
+from viewer.scene.geometry import TriangleGeometry, group_vertices, transform_rows
 
 
 MAX_COORDINATE = 1e15
@@ -263,12 +263,14 @@ class Scene(TriangleGeometry):
     def transformed_group(self, group: str, matrix: np.ndarray) -> "Scene":
         """Move the vertices of one group by a 4x4 affine matrix (faces of a group own their vertices
         after `load`, so no other group moves)."""
-        mask = self.face_group == self.group_index(group)
-        idx = np.unique(self.faces[mask])
+        index = self.group_index(group)
+        m = np.ascontiguousarray(matrix, np.float64)
+        # the group's corners and their new places in compiled passes: np.unique of a million-triangle
+        # scan's corners took 0.64 s, and the product and its gathers 40 ms
+        idx = group_vertices(self.faces, self.face_group, index, len(self.vertices))
         v = self.vertices.copy()
-        m = np.asarray(matrix, np.float64)
-        v[idx] = v[idx] @ m[:3, :3].T + m[:3, 3]
-        return self._moved(v, idx)
+        transform_rows(v, idx, m)
+        return self._moved(v, idx, recipe=b"group %d " % index + m.tobytes())
 
     def largest_group(self) -> str:
         """The group whose faces have the largest total area (a room's biggest wall or floor)."""
