@@ -15,6 +15,8 @@ makes the new geometry's weights and rays on its worker. Edits:
 - `albedo`: the largest material group's colour (between two colours, so every edit changes it);
 - `light colour`: the lamp's colour;
 - `lamp move`: the lamp moved by 5% of the scene's size (back and forth);
+- `object move`: the panel's object (at first the largest group that does not emit: a scan, a box) moved
+  as far (back and forth);
 - `new scene`: another scene file opened (voxelizing and everything after it).
 
 Medians of `repeats` edits after one untimed warm-up of each. `--write` puts the table into
@@ -34,7 +36,7 @@ from viewer import sources as gi_sources
 from viewer.evaluation.report import show_table
 
 MARKER = "<!-- bench-edits -->"
-EDITS = ("albedo", "light colour", "lamp move", "new scene")
+EDITS = ("albedo", "light colour", "lamp move", "object move", "new scene")
 
 
 def largest_group(viewer) -> str:
@@ -57,6 +59,11 @@ def make_edit(viewer, edit: str, step: int, other_scene: Path) -> None:
         offset = np.zeros(3)
         offset[2] = -0.05 * float(np.max(hi - lo)) * (step % 2)
         session.edits.set_light(offset=offset)
+    elif edit == "object move":
+        lo, hi = session.scene.bounds
+        offset = np.zeros(3)
+        offset[0] = 0.05 * float(np.max(hi - lo)) * (step % 2)
+        session.edits.set_offset(session.edits.selected, offset)
     elif edit == "new scene":
         session.load_file(other_scene if step % 2 else viewer.scene_path)
     else:

@@ -28,18 +28,13 @@ from viewer.cli_parsing import add_repeats, tool_parser
 from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI
 from viewer.physical.gi import GISettings, PhysicalGI
 from viewer.scene import Scene, SceneError
-from viewer.ui.scene_edits import emitter_group
+from viewer.ui.scene_edits import emitter_group, largest_object
 
 
 def moved_group(scene: Scene) -> str | None:
-    """The non-emitting group with the most triangles (the smaller by area of a tie): what a user drags."""
-    lit = set(np.unique(scene.face_group[np.any(scene.emission > 0, axis=1)]).tolist())
-    count = np.bincount(scene.face_group, minlength=len(scene.groups))
-    area = np.bincount(scene.face_group, scene.face_areas, minlength=len(scene.groups))
-    candidates = [g for g in range(len(scene.groups)) if g not in lit and count[g] > 0]
-    if not candidates:
-        return None
-    return scene.groups[min(candidates, key=lambda g: (-count[g], area[g]))]
+    """The non-emitting group with the most triangles (the smaller by area of a tie): what a user drags
+    (viewer.ui.scene_edits.largest_object)."""
+    return largest_object(scene)
 
 
 def edits(scene: Scene, group: str | None) -> dict[str, Scene]:

@@ -1,4 +1,4 @@
-"""The imgui windows: the settings panel (scene, GI, light, materials, view, performance), the help
+"""The imgui windows: the settings panel (scene, GI, light, objects, materials, view, performance), the help
 overlay, messages, and the loading indicator. Each section edits the objects it is given and says
 whether it changed anything; the app decides what that means for the scene, the GI and the view.
 """
@@ -18,10 +18,11 @@ from viewer.ui.background import BackgroundTask
 from viewer.ui.frame_graph import FrameTimes, draw_frame_graph
 from viewer.ui.gi_sources import GIController
 from viewer.ui.messages import PANEL_WIDTH, Message  # noqa: F401 (the panels' own names too)
+from viewer.ui.edit_panels import light_section, materials_section, objects_section
+from viewer.ui.panel_style import NOTE_COLOUR, tooltip as _tooltip
 from viewer.ui.scene_edits import SceneEdits
 
 ERROR_COLOUR = imgui.ImVec4(1.0, 0.45, 0.4, 1.0)
-NOTE_COLOUR = imgui.ImVec4(0.75, 0.75, 0.75, 1.0)
 WARNING_COLOUR = imgui.ImVec4(1.0, 0.78, 0.3, 1.0)
 BAKING_NOTE = "Lightmap: tracing the final gather for the new geometry..."
 """Shown while Renderer.baking (seconds after a new scene, one or two after a lamp move; the picture
@@ -59,29 +60,6 @@ class ViewOptions:
     """The settings panel on the right (the scene is drawn left of it)."""
     show_frame_times: bool = True
     """The frame-time graph in the top-left corner of the view."""
-
-
-def _to_srgb(linear) -> list[float]:
-    """Linear colour -> sRGB-encoded, as colour pickers show colours (IEC 61966-2-1)."""
-    x = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
-    return list(np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055))
-
-
-def _to_linear(srgb) -> np.ndarray:
-    x = np.clip(np.asarray(srgb, np.float64), 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
-
-
-def colour_edit(label: str, linear) -> tuple[bool, np.ndarray]:
-    """A colour picker that shows a linear colour as it looks on screen (sRGB) and returns it linear."""
-    changed, picked = imgui.color_edit3(label, _to_srgb(linear))
-    return changed, _to_linear(picked) if changed else np.asarray(linear, np.float64)
-
-
-def _tooltip(text: str) -> None:
-    imgui.same_line()
-    imgui.text_disabled("(?)")
-    imgui.set_item_tooltip(text)
 
 
 def scene_section(name: str, triangles: int, edits: SceneEdits, loading: BackgroundTask | None) -> bool:
@@ -147,50 +125,6 @@ def gi_section(gi: GIController, baking: bool = False) -> None:
         imgui.push_text_wrap_pos(0.0)
         imgui.text_colored(WARNING_COLOUR, warning)
         imgui.pop_text_wrap_pos()
-
-
-def light_section(edits: SceneEdits, scene_size: float) -> bool:
-    light = edits.light
-    changed = False
-    if light.group is None and light.direction is None:
-        imgui.text_colored(NOTE_COLOUR, "This scene has no emitter and no sun.")
-        return False
-    if light.group is not None:
-        imgui.text(f"Emitter: {light.group}")
-        moved, offset = imgui.drag_float3("position", list(light.centre + light.offset), 0.005 * scene_size)
-        if moved:
-            edits.set_light(offset=np.asarray(offset) - light.centre)
-        resized, size = imgui.slider_float("size", light.size, 0.1, 4.0, "%.2f x",
-                                           imgui.SliderFlags_.logarithmic)
-        if resized:
-            edits.set_light(size=size)
-        changed |= moved or resized
-    else:
-        imgui.text("Sun")
-        turned, direction = imgui.drag_float3("direction", list(light.direction), 0.01, -1.0, 1.0)
-        if turned:
-            edits.set_light(direction=direction)
-        changed |= turned
-    recoloured, colour = colour_edit("colour", light.colour)
-    if recoloured:
-        edits.set_light(colour=colour)
-    top = max(100.0, 10.0 ** np.ceil(np.log10(max(edits.initial_intensity, 1e-3) * 5.0)))
-    brighter, intensity = imgui.slider_float("intensity", light.intensity, 0.01, top, "%.2f",
-                                             imgui.SliderFlags_.logarithmic)
-    if brighter:
-        edits.set_light(intensity=intensity)
-    return changed or recoloured or brighter
-
-
-def materials_section(edits: SceneEdits) -> bool:
-    """Albedo per group (shown sRGB-encoded; the scene keeps linear reflectance)."""
-    changed = False
-    for group in edits.material_groups:
-        edited, rgb = colour_edit(group, edits.albedo_of(group))
-        if edited:
-            edits.set_albedo(group, rgb)
-            changed = True
-    return changed
 
 
 def view_section(options: ViewOptions, settings: RenderSettings, viewport) -> None:
@@ -381,6 +315,7 @@ def draw_windows(session, view: ViewOptions, settings: RenderSettings, viewport,
         "Scene": (scene, True),
         "Global illumination": (lambda: gi_section(session.gi, session.renderer.baking), True),
         "Light": (lambda: light_section(session.edits, session.scene_size), True),
+        "Objects": (lambda: objects_section(session.edits, session.scene_size), False),
         "Materials": (lambda: materials_section(session.edits), False),
         "View": (lambda: view_section(view, settings, viewport), True),
     })

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from viewer.scene import DirectionalLight, Scene
+from viewer.scene.geometry import group_vertices
 from viewer.scene.gltf_lights import shade_group
 
 
@@ -21,6 +22,19 @@ def emitter_group(scene: Scene) -> str | None:
     power = np.bincount(scene.face_group, scene.face_areas * scene.emission.mean(axis=1),
                         minlength=len(scene.groups))
     return scene.groups[int(np.argmax(power))] if power.max(initial=0.0) > 0 else None
+
+
+def largest_object(scene: Scene, exclude: tuple = ()) -> str | None:
+    """The group of the most triangles that does not emit (the smaller by area of a tie: a box room's
+    small box, a scan room's scan): what a user moves first. None where every group emits."""
+    lit = set(np.unique(scene.face_group[np.any(scene.emission > 0, axis=1)]).tolist())
+    count = np.bincount(scene.face_group, minlength=len(scene.groups))
+    area = np.bincount(scene.face_group, scene.face_areas, minlength=len(scene.groups))
+    candidates = [g for g in range(len(scene.groups))
+                  if g not in lit and count[g] > 0 and scene.groups[g] not in exclude]
+    if not candidates:
+        return None
+    return scene.groups[min(candidates, key=lambda g: (-count[g], area[g]))]
 
 
 def _split_colour(rgb: np.ndarray) -> tuple[np.ndarray, float]:
@@ -53,8 +67,13 @@ class SceneEdits:
         self.base = base
         self.version = 0
         self.albedo: dict[str, np.ndarray] = {}
+        self.offsets: dict[str, np.ndarray] = {}
+        """Group -> world translation of a moved object."""
         self.light = self._initial_light(base)
         self.initial_intensity = self.light.intensity
+        self.selected = largest_object(base, self._light_groups())
+        """The object the panel moves (a material group)."""
+        self._centres: dict[str, np.ndarray] = {}
 
     @staticmethod
     def _initial_light(scene: Scene) -> LightEdit:
@@ -72,17 +91,41 @@ class SceneEdits:
                              direction=scene.sun.direction.copy())
         return LightEdit(None, 0.5 * (lo + hi))
 
+    def _light_groups(self) -> tuple:
+        return self.light.group, shade_group(str(self.light.group))
+
     @property
     def material_groups(self) -> list[str]:
-        """Groups whose colour can be edited (all but the light)."""
-        return [g for g in self.base.groups if g not in (self.light.group, shade_group(str(self.light.group)))]
+        """Groups whose colour can be edited and that can be moved (all but the light)."""
+        return [g for g in self.base.groups if g not in self._light_groups()]
 
     def albedo_of(self, group: str) -> np.ndarray:
         return self.albedo.get(group, self.base.group_albedo(group))
 
+    def centre_of(self, group: str) -> np.ndarray:
+        """Centre of the box around the group's vertices in the base scene (where the panel shows it)."""
+        if group not in self._centres:
+            corners = self.base.vertices[group_vertices(self.base.faces, self.base.face_group,
+                                                        self.base.group_index(group), len(self.base.vertices))]
+            self._centres[group] = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
+        return self._centres[group]
+
+    def offset_of(self, group: str) -> np.ndarray:
+        return self.offsets.get(group, np.zeros(3))
+
     # ---- changes --------------------------------------------------------------------------------------
     def set_albedo(self, group: str, rgb) -> None:
         self.albedo[group] = np.clip(np.asarray(rgb, np.float64), 0.0, 1.0)
+        self.version += 1
+
+    def set_offset(self, group: str, offset) -> None:
+        """Move a material group to its place in the base scene plus `offset` (an object dragged)."""
+        if group not in self.material_groups:
+            raise ValueError(f"{group!r} is not a group that can be moved")
+        offset = np.asarray(offset, np.float64)
+        if not np.all(np.isfinite(offset)):
+            raise ValueError("an object's offset must be finite")
+        self.offsets[group] = offset
         self.version += 1
 
     def set_light(self, offset=None, size=None, colour=None, intensity=None, direction=None) -> None:
@@ -101,6 +144,7 @@ class SceneEdits:
 
     def reset(self) -> None:
         self.albedo.clear()
+        self.offsets.clear()
         self.light = self._initial_light(self.base)
         self.version += 1
 
@@ -109,6 +153,11 @@ class SceneEdits:
         scene = self.base
         for group, rgb in self.albedo.items():
             scene = scene.with_albedo(group, rgb)
+        for group, offset in self.offsets.items():
+            if np.any(offset != 0.0):   # else keep the vertices bit for bit
+                matrix = np.eye(4)
+                matrix[:3, 3] = offset
+                scene = scene.transformed_group(group, matrix)
         light = self.light
         if light.group is not None:
             if light.size != 1.0 or np.any(light.offset != 0.0):   # else keep the vertices bit for bit
