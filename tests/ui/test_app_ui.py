@@ -340,6 +340,17 @@ def test_compute_source_solves_only_the_latest_of_quick_edits(ctx):
     assert indirect == pytest.approx(np.ones_like(indirect), rel=0.1)   # furnace: indirect L = 1
 
 
+def _new_probes(session):
+    """Step the session until its GI source is idle with probes newer than it had: the renderer's."""
+    version = session.probes_version
+    deadline = time.monotonic() + 600.0
+    while (session.gi.busy or session.probes_version == version) and time.monotonic() < deadline:
+        session.update("final")
+        time.sleep(0.02)
+    assert not session.gi.busy and session.renderer.probes is not None
+    return session.renderer.probes
+
+
 def test_recolouring_a_wall_updates_the_indirect_light_in_the_background(ctx, cornell):
     """An edit re-renders at once and re-solves the GI off the render thread; the new probes replace the
     old ones when done: a red wall made blue turns the light bouncing off it blue."""
@@ -353,13 +364,7 @@ def test_recolouring_a_wall_updates_the_indirect_light_in_the_background(ctx, co
     near_left_wall = np.array([[-0.8, 0.0, 0.0]])
 
     def solved():
-        version = session.probes_version
-        deadline = time.monotonic() + 600.0
-        while (gi.busy or session.probes_version == version) and time.monotonic() < deadline:
-            session.update("final")
-            time.sleep(0.02)
-        assert not gi.busy and renderer.probes is not None
-        return renderer.probes
+        return _new_probes(session)
 
     try:
         before = solved().irradiance(near_left_wall, np.array([[-1.0, 0.0, 0.0]]))[0]
@@ -435,13 +440,9 @@ def test_an_object_moved_in_the_panel_moves_the_shown_light(ctx, imgui_frame):
     session = Session(renderer, gi, load("cornell"), "cornell", log=lambda line: None, edit_interval=0.0)
 
     def settled():
-        version = session.probes_version
-        deadline = time.monotonic() + 600.0
-        while (gi.busy or session.probes_version == version) and time.monotonic() < deadline:
-            session.update("final")
-            time.sleep(0.01)
-        assert not gi.busy and gi.status()[2] is None and renderer.probes is not None
-        return renderer.probes
+        probes = _new_probes(session)
+        assert gi.status()[2] is None
+        return probes
 
     try:
         before = settled()

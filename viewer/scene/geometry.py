@@ -148,7 +148,7 @@ class TriangleGeometry:
         v.setflags(write=False)
         touched = np.zeros(len(v), bool)
         touched[moved] = True
-        faces = np.flatnonzero(_touching(np.asarray(self.faces, np.int64), touched))
+        faces = np.flatnonzero(faces_touching(np.asarray(self.faces, np.int64), touched))
         scene = copy.copy(self)
         for name in DERIVED + FROM_POSITIONS + ("_moved_from",):
             scene.__dict__.pop(name, None)
@@ -234,7 +234,7 @@ def _moved_rows(vertices, faces, rows, triangles, v0, e1, e2, cross, areas, norm
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _touching(faces, touched):
+def faces_touching(faces, touched):
     """(F,) bool: the faces with a corner among the `touched` vertices (V,) bool, on every core."""
     out = np.empty(faces.shape[0], np.bool_)
     for f in numba.prange(faces.shape[0]):
