@@ -62,7 +62,7 @@ from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBI
                                   Pieces, emitter_sh, emitter_sh_rows, emitting_patches, facings, lattice_cells,
                                   patch_pieces, patch_visibility, shadow_targets, splat, sun_sh, sun_visibility)
 
-VERSION = 11
+VERSION = 12
 """Bump when the features change: a model card records the version its network was trained on, and
 `viewer.neural.field` refuses a model of a version it cannot feed (`VERSION_CHANNELS`). Version 7 deals
 the seen rays' directions out over the lattice (`viewer.neural.seen.interleaved_lattices`) where
@@ -79,7 +79,8 @@ detail its filter of the seen light blurs (`viewer.training.models.ProbeNet`). V
 bounces before the tail where version 10 gathered three (`seen.SEEN_BOUNCES`), and reads each further
 bounce three quarters of a voxel in front of the voxels where version 10 read it at half
 (`bounce.READ_BACK`): the same features, the seen light's amount within 1.1% of the solver's probes on
-the public scenes where it was 1-7% short."""
+the public scenes where it was 1-7% short. Version 12 casts 32 seen rays a probe where version 11 cast
+16 (`seen.SEEN_RAYS`): the same features, with less noise in the directions of the seen light."""
 FEATURES = (
     "density",          # surface area in the cell / cell face area
     "normal_x", "normal_y", "normal_z",  # area-weighted normals / cell face area
@@ -99,11 +100,12 @@ SETTINGS = {"seen_rays": SEEN_RAYS, "seen_bounces": SEEN_BOUNCES, "tail_ratio_ma
             "visibility_cells": VISIBILITY_CELLS}
 """The constants the features are made with besides their version: a training cache is keyed by them,
 so that features tuned without a version bump are made again rather than read stale."""
-VERSION_CHANNELS = {10: CHANNELS, 11: CHANNELS}
+VERSION_CHANNELS = {10: CHANNELS, 11: CHANNELS, 12: CHANNELS}
 """The features a network of each encoding version reads: the first this many of FEATURES. A version-10
 network is fed version 11's features: the same features with the seen light's amount closer to the
 truth, on which the version-10 network's indirect light is closer to Mitsuba on the public scenes, and
-its images too (the shipped network is that one fine-tuned on them, docs/TRAINING.md). Networks of
+its images too; a version-11 network is fed version 12's, whose directions are less noisy (9.6% -> 9.3%
+and 8.2% -> 7.7% off Mitsuba's indirect light in paper-test and CornellBox-Original, docs/TRAINING.md). Networks of
 versions 4-7 are refused: they learnt to correct a direct light of one term per lattice cell of lamp and
 overcorrect version 8's (the version-7 network's paper-test went from 6.4% to 9.1% off Mitsuba), and
 version 8's learnt the reflected light of surfaces lit as the probes' SH lit them, and version 9's a

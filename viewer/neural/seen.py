@@ -12,9 +12,9 @@ Each ray lands on the voxel whose surface it meets (viewer.rays.voxel_rays: the 
 solver's probe rays; a back face or nothing brings no light) and takes that voxel's once-reflected
 light: albedo x its direct irradiance / pi (`Bounce.leaving`). The directions are interleaved over the
 lattice (`interleaved_lattices`): the 27 probes of any 3x3x3 block take the 27 disjoint subsets of one
-spherical Fibonacci lattice of 27 x 16 directions, so the neighbourhood that the network's filter
-averages holds 432 evenly spread directions, where 27 independently turned lattices of 16 overlapped
-and left gaps. The same rays and cost, and less error once filtered: on the solver's converged light,
+spherical Fibonacci lattice of 27 x SEEN_RAYS directions, so the neighbourhood that the network's
+filter averages holds 864 evenly spread directions (432 at 16 rays a probe, where 27 independently
+turned lattices of 16 overlapped and left gaps). The same rays and cost, and less error once filtered: on the solver's converged light,
 3x3x3 box filtered against its probes, 8.0% instead of 8.9% on the paper's seven scenes and 29.4%
 instead of 31.1% in 20 validation rooms (median; 32 turned rays a probe give 7.7% and 28.0%).
 
@@ -43,10 +43,14 @@ from viewer.probes import sh
 from viewer.rays.dda import BACKFACE
 from viewer.rays.voxel_rays import VoxelRays
 
-SEEN_RAYS = 16
+SEEN_RAYS = 32
 """Rays a probe. On the ladder's 20 validation rooms (the converged light, box filtered): 8 rays 34.9%,
-16 rays 30.0%, 32 rays 28.1%, 64 rays 27.6%, for 80 / 184 / 362 / 823 ms of rays a geometry; 16 is
-where the error stops falling faster than the cost grows."""
+16 rays 30.0%, 32 rays 28.1%, 64 rays 27.6%, for 80 / 184 / 362 / 823 ms of rays a geometry then. Where
+the network's remaining error is, in the reflected light's directions (L1 and L2), 32 rays buy more: the
+version-11 network fed 32 rays' features was 9.3% and 7.7% off Mitsuba's indirect light in paper-test
+and CornellBox-Original where 16 gave 9.6% and 8.2% (64: 9.2% and 7.6%), for 11-17 ms more of a new
+scene's 72-103 ms on the Cornell box and the 68k-triangle scan (Embree called from compiled loops), and
+an albedo edit in the same 28-30 ms."""
 SEEN_BOUNCES = 4
 """Bounces the seen feature gathers; the last one also carries the bounces after it (`seen_light`). With
 three, the tail fell short where the walls reflect much: on the Cornell box the seen light's red was 7%
@@ -122,7 +126,7 @@ def seen_light(rays: SeenRays, bounce, albedo: np.ndarray, leaving: np.ndarray,
     leaving them, the tail's included), which the unshadowed gather takes (the `bounce` input).
     `leaving` (K, C) is their once-reflected radiance (`Bounce.leaving`), and each further bounce
     reflects what the rays gathered (`Bounce.reflected`, for the voxels' `albedo` (K, C)), read through
-    the open-weighted 3x3x3 filter (`SeenRays.filtered`): a voxel lit by 16 rays of one probe carries
+    the open-weighted 3x3x3 filter (`SeenRays.filtered`): a voxel lit by the few rays of one probe carries
     their noise into every later bounce, and filtered it is lit as the network's start sees it (the
     public scenes' seen light, box filtered, 12.0% -> 10.6% off Mitsuba's indirect light).
 

@@ -17,7 +17,7 @@ Why this shape:
   inputs (`viewer.neural.encoding`), and the head's outputs are corrections to them: the reflected
   light (9 SH) on top of the seen bounces, and in training what the direct input missed (9 SH), each
   times a learned gain, the seen one through a learned 3x3x3 filter per coefficient (it starts as the
-  box filter: 16 rays a probe are noisy, and the finest level of the network is otherwise per probe),
+  box filter: a few rays a probe are noisy, and the finest level of the network is otherwise per probe),
   which stops at walls: a tap across a surface takes the probe's own light (`walled_filter`, trained as
   the viewer runs it: viewer.neural.network_feed.WallTaps). The corrections are relative
   (times the local light, `MAGNITUDE_FLOOR`) and the convolutions read the light through asinh

@@ -3,7 +3,7 @@
     python -m viewer.training.surface_light [--val 20] [--dark 4] [--out docs/data/surface_light.json]
 
 For each scene of `viewer.training.evaluate`'s set (the public scenes, fresh validation rooms, dark
-rooms), the seen light (viewer/neural/seen.py: 16 rays a probe, `SEEN_BOUNCES` bounces and a tail) is gathered
+rooms), the seen light (viewer/neural/seen.py: SEEN_RAYS rays a probe, `SEEN_BOUNCES` bounces and a tail) is gathered
 from three surface lights on the encoder's 24^3 voxels:
 - `probes`: the voxels' direct light read from the probes' direct SH half a voxel in front (encoding
   versions up to 8);

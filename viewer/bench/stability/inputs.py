@@ -2,7 +2,7 @@
 network against the solver on the same lattice, both against Mitsuba.
 
 The encoding's direct light is traced per lattice cell, its bounces are read from the voxels and
-gathered by 16 rays a probe (viewer/neural/encoding.py). Each case below stresses one of them, drawn
+gathered by SEEN_RAYS rays a probe (viewer/neural/encoding.py). Each case below stresses one of them, drawn
 from the v2 generator at the end of its ranges (two rooms each, seeded), plus one room built by hand:
 
 - thin walls: two partitions 0.02 thick in every room; and `two-rooms-door`, two rooms split by a wall
