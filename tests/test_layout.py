@@ -25,6 +25,7 @@ RANKS = {
     "viewer": 0, "resources": 0, "progress": 0,
     "wake": 0,                        # a worker's result wakes the window's frame loop
     "output": 0,                      # files written whole, where the user said
+    "threads": 0,                     # how many cores a compiled pass uses
     "scene": 1,                       # the Scene type and everything that makes one
     "rays": 2,                        # voxels and the compiled ray kernels
     "probes": 3,                      # the ProbeGrid type, SH, the surface weights

@@ -27,3 +27,22 @@ def test_arrays_of_megabytes_reuse_freed_memory_without_page_faults():
     for _ in range(20):
         one_edit()
     assert resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before < 500
+
+
+def test_a_small_pass_runs_on_one_thread_and_the_count_comes_back():
+    """`cores_for`: a pass of few items runs on the calling thread alone (waking the others costs more than
+    it takes), a large one on all of them; the thread count is restored after either, even on an error."""
+    import numba
+
+    from viewer.threads import SERIAL_BELOW, cores_for
+
+    every = numba.get_num_threads()
+    with cores_for(36):
+        assert numba.get_num_threads() == 1
+    assert numba.get_num_threads() == every
+    with cores_for(SERIAL_BELOW):
+        assert numba.get_num_threads() == every
+    with pytest.raises(RuntimeError):
+        with cores_for(1):
+            raise RuntimeError("a failed pass")
+    assert numba.get_num_threads() == every

@@ -11,6 +11,7 @@ import numpy as np
 from viewer.rays.moved_faces import changed_rows
 from viewer.scene import Scene
 from viewer.scene.geometry import faces_touching
+from viewer.threads import cores_for
 
 SCENE_ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission", "in_uv")
 
@@ -131,8 +132,9 @@ def scene_vertices(scene: Scene, columns: int = 14, faces: np.ndarray | None = N
     chosen = np.flatnonzero(scene.face_areas > 0) if faces is None else np.asarray(faces, np.int64)
     out = np.empty((len(chosen), 3, columns), np.float32)
     uv = scene.uv if scene.uv is not None else np.zeros((0, 3, 2))
-    _write_vertices(scene.triangles, scene.face_normals, vertex_albedo(scene, chosen), scene.emission, uv,
-                    chosen, out)
+    with cores_for(len(chosen)):
+        _write_vertices(scene.triangles, scene.face_normals, vertex_albedo(scene, chosen), scene.emission, uv,
+                        chosen, out)
     return out.reshape(-1, columns)
 
 
@@ -260,7 +262,8 @@ class SceneMesh(TriangleBuffer):
         drawn = scene.face_areas > 0
         if not np.array_equal(drawn, previous.face_areas > 0):
             return False
-        moved = faces_touching(np.asarray(scene.faces, np.int64), changed_rows((scene.vertices, previous.vertices)))
+        with cores_for(len(scene.faces)):
+            moved = faces_touching(np.asarray(scene.faces, np.int64), changed_rows((scene.vertices, previous.vertices)))
         changed = moved | changed_rows((scene.albedo, previous.albedo), (scene.emission, previous.emission))
         rows = np.flatnonzero(changed[drawn])
         if len(rows):

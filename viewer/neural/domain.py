@@ -27,6 +27,7 @@ from scipy.sparse import csgraph
 
 from viewer.rays.moved_faces import changed_rows
 from viewer.scene import Scene
+from viewer.threads import cores_for
 
 ALBEDO_MARGIN = 0.02
 """Albedos this far below the trained minimum still count as inside (a surface that dark reflects
@@ -241,9 +242,10 @@ def _open_sides(triangles: np.ndarray, areas: np.ndarray, normals: np.ndarray, l
     in one compiled pass over the faces on every core (a 68k-triangle scan: 8 ms in numpy, every time an
     object moved; a million-triangle one 9 ms on one core)."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    covered = _side_areas(np.ascontiguousarray(triangles, np.float64), np.ascontiguousarray(areas, np.float64),
-                          np.ascontiguousarray(normals, np.float64), lo, hi,
-                          SIDE_TOLERANCE * float((hi - lo).max())).sum(axis=0)
+    with cores_for(len(areas)):
+        covered = _side_areas(np.ascontiguousarray(triangles, np.float64), np.ascontiguousarray(areas, np.float64),
+                              np.ascontiguousarray(normals, np.float64), lo, hi,
+                              SIDE_TOLERANCE * float((hi - lo).max())).sum(axis=0)
     extent = hi - lo
     sides = np.repeat([extent[1] * extent[2], extent[0] * extent[2], extent[0] * extent[1]], 2)
     return int(np.sum(covered < COVERED * sides))

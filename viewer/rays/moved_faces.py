@@ -11,6 +11,8 @@ import weakref
 import numba
 import numpy as np
 
+from viewer.threads import cores_for
+
 
 def changed_rows(*pairs) -> np.ndarray:
     """(F,) bool: the rows where the two arrays of any pair (a, b), each (F, ...), differ: the faces that
@@ -73,7 +75,8 @@ def moved_box(before, after, least: float = 1e-9, most: float = 1.0) -> tuple[np
         return moved, None
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for c in (before, after):
-        parts = _corner_boxes(moved, *(np.ascontiguousarray(a, np.float64) for a in (c.v0, c.e1, c.e2)))
+        with cores_for(len(moved)):
+            parts = _corner_boxes(moved, *(np.ascontiguousarray(a, np.float64) for a in (c.v0, c.e1, c.e2)))
         lo, hi = np.minimum(lo, parts[:, 0].min(axis=0)), np.maximum(hi, parts[:, 1].max(axis=0))
     margin = 1e-6 * max(float((hi - lo).max()), least)
     return moved, np.array([lo - margin, hi + margin])
@@ -114,7 +117,8 @@ def translation(corners: np.ndarray, edges: tuple, rows: np.ndarray) -> np.ndarr
     rows = np.ascontiguousarray(rows, np.int64)
     v0, e1, e2 = (np.ascontiguousarray(a, np.float64) for a in edges)
     shift = (v0[rows[0]] - corners[0, 0]).astype(np.float32)
-    error, size = _off_shift(np.ascontiguousarray(corners, np.float32), v0, e1, e2, rows, shift.astype(np.float64))
+    with cores_for(len(rows)):
+        error, size = _off_shift(np.ascontiguousarray(corners, np.float32), v0, e1, e2, rows, shift.astype(np.float64))
     return shift if error <= 8 * np.finfo(np.float32).eps * size else None
 
 

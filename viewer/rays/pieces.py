@@ -15,6 +15,8 @@ from functools import lru_cache
 import numba
 import numpy as np
 
+from viewer.threads import cores_for
+
 PIECE_EDGE = 0.25
 """The longest edge of a piece, in voxels."""
 
@@ -55,7 +57,8 @@ def face_pairs(triangles: np.ndarray, areas: np.ndarray, facing: np.ndarray, lo:
     lo = np.asarray(lo, np.float64)
     level = np.empty(len(rows), np.int64)
     offset = np.zeros(len(rows) + 1, np.int64)   # each face's room for its pairs, then where it starts
-    _plan(triangles, rows, PIECE_EDGE * size, lo, float(size), resolution, level, offset)
+    with cores_for(len(rows)):
+        _plan(triangles, rows, PIECE_EDGE * size, lo, float(size), resolution, level, offset)
     np.cumsum(offset, out=offset)
     bound = int(offset[-1])
     key, face, area, moment = np.empty(bound, np.int64), np.empty(bound, np.int64), np.empty(bound), np.empty((bound, 3))

@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from viewer.scene import Scene
+from viewer.threads import cores_for
 from viewer.rays.moved_faces import changed_rows
 from viewer.rays.pieces import PIECE_EDGE, face_pairs, piece_centroids, piece_levels
 from viewer.scene.textures import relative_at, textured_faces
@@ -274,7 +275,8 @@ def face_facing(normals: np.ndarray, rows: np.ndarray | None = None) -> np.ndarr
     normals = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
     rows = np.arange(len(normals)) if rows is None else np.asarray(rows, np.int64)
     out = np.empty(len(rows), np.int64)
-    _facing(normals, rows, out)
+    with cores_for(len(rows)):
+        _facing(normals, rows, out)
     return out
 
 

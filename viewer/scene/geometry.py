@@ -19,6 +19,8 @@ from functools import cached_property
 import numba
 import numpy as np
 
+from viewer.threads import cores_for
+
 FLAT = 1e-6
 """A bounding box thinner than this fraction of its largest extent along an axis is flat along it."""
 DERIVED = ("triangles", "edges", "face_cross", "face_areas", "face_normals")
@@ -143,12 +145,14 @@ class TriangleGeometry:
         moved = np.asarray(moved, np.int64)
         if v.shape != self.vertices.shape:
             return replace(self, vertices=v)
-        finite, after = _row_box(v, moved)   # the new places' box, in one pass on every core
+        with cores_for(len(moved)):
+            finite, after = _row_box(v, moved)   # the new places' box, in one pass on every core
         self._check_positions(after if finite else np.array([np.nan]))
         v.setflags(write=False)
         touched = np.zeros(len(v), bool)
         touched[moved] = True
-        faces = np.flatnonzero(faces_touching(np.asarray(self.faces, np.int64), touched))
+        with cores_for(len(self.faces)):
+            faces = np.flatnonzero(faces_touching(np.asarray(self.faces, np.int64), touched))
         scene = copy.copy(self)
         for name in DERIVED + FROM_POSITIONS + ("_moved_from",):
             scene.__dict__.pop(name, None)
@@ -164,7 +168,8 @@ class TriangleGeometry:
             scene.__dict__["geometry_digest"] = digest.digest()
         if "_extremes" in self.__dict__ and len(moved):
             lo, hi = self._extremes
-            before = _row_box(np.ascontiguousarray(self.vertices, np.float64), moved)[1]
+            with cores_for(len(moved)):
+                before = _row_box(np.ascontiguousarray(self.vertices, np.float64), moved)[1]
             if np.all((before[0] > lo) & (before[1] < hi)) and np.all((after[0] >= lo) & (after[1] <= hi)):
                 scene.__dict__["_extremes"] = self._extremes   # the extremes lie on vertices that stayed
         if not np.any(scene.face_areas > 0):
@@ -182,8 +187,9 @@ class TriangleGeometry:
             return None
         out = tuple(a.copy() for a in base) if name == "edges" else base.copy()
         parts = dict(zip(("v0", "e1", "e2"), out)) if name == "edges" else {name.replace("face_", ""): out}
-        _moved_rows(np.ascontiguousarray(self.vertices, np.float64), np.asarray(self.faces, np.int64),
-                    np.asarray(faces, np.int64), *(parts.get(k, EMPTY[k]) for k in ROW_PARTS))
+        with cores_for(len(faces)):
+            _moved_rows(np.ascontiguousarray(self.vertices, np.float64), np.asarray(self.faces, np.int64),
+                        np.asarray(faces, np.int64), *(parts.get(k, EMPTY[k]) for k in ROW_PARTS))
         kept.pop(name, None)   # the source's array is not held once this one is made
         return tuple(map(read_only, out)) if name == "edges" else read_only(out)
 
@@ -269,7 +275,8 @@ def _row_box(v, rows):
 def group_vertices(faces: np.ndarray, face_group: np.ndarray, group: int, count: int) -> np.ndarray:
     """(K,) ascending: the vertices (of `count`) that faces of `group` use."""
     used = np.zeros(count, np.bool_)
-    _mark_group(np.asarray(faces, np.int64), np.asarray(face_group, np.int64), int(group), used)
+    with cores_for(len(faces)):
+        _mark_group(np.asarray(faces, np.int64), np.asarray(face_group, np.int64), int(group), used)
     return np.flatnonzero(used)
 
 

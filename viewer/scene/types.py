@@ -21,6 +21,7 @@ from functools import cached_property
 import numpy as np
 
 from viewer.scene.geometry import TriangleGeometry, group_vertices, transform_rows
+from viewer.threads import cores_for
 
 
 MAX_COORDINATE = 1e15
@@ -269,7 +270,8 @@ class Scene(TriangleGeometry):
         # scan's corners took 0.64 s, and the product and its gathers 40 ms
         idx = group_vertices(self.faces, self.face_group, index, len(self.vertices))
         v = self.vertices.copy()
-        transform_rows(v, idx, m)
+        with cores_for(len(idx)):
+            transform_rows(v, idx, m)
         return self._moved(v, idx, recipe=b"group %d " % index + m.tobytes())
 
     def largest_group(self) -> str:
