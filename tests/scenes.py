@@ -48,6 +48,11 @@ def group_faces(scene, name):
     return scene.face_group == scene.group_index(name)
 
 
+def group_corners(scene, name):
+    """(K, 3) the positions of the vertices the group's faces use, in index order."""
+    return scene.vertices[np.unique(scene.faces[group_faces(scene, name)])]
+
+
 def srgb_to_linear(c):
     """IEC 61966-2-1 from 8-bit values: the tests' own, to check the loaders' decoding against."""
     c = np.asarray(c, np.float64) / 255

@@ -13,6 +13,9 @@ import numba
 
 SERIAL_BELOW = 20_000
 """Items below which a pass runs on the calling thread alone."""
+RUNS = 64
+"""Runs a reducing pass (bounds, sums) splits its items into, each run's answer its own, shared among the
+cores and combined after."""
 
 
 @contextmanager

@@ -5,14 +5,8 @@ while the lightmap's weights are made."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
-from viewer.scene import Camera, load
-
-
-@pytest.fixture(scope="module")
-def cornell():
-    return load("cornell")
+from viewer.scene import Camera
 
 
 def recording_renderer(gl_context, scene, record):

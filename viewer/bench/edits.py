@@ -55,19 +55,21 @@ def make_edit(viewer, edit: str, step: int, other_scene: Path) -> None:
     elif edit == "light colour":
         session.edits.set_light(colour=(1.0, 0.8, 0.6) if step % 2 else (0.7, 0.85, 1.0))
     elif edit == "lamp move":
-        lo, hi = session.scene.bounds
-        offset = np.zeros(3)
-        offset[2] = -0.05 * float(np.max(hi - lo)) * (step % 2)
-        session.edits.set_light(offset=offset)
+        session.edits.set_light(offset=_back_and_forth(session.scene, 2, -1.0, step))
     elif edit == "object move":
-        lo, hi = session.scene.bounds
-        offset = np.zeros(3)
-        offset[0] = 0.05 * float(np.max(hi - lo)) * (step % 2)
-        session.edits.set_offset(session.edits.selected, offset)
+        session.edits.set_offset(session.edits.selected, _back_and_forth(session.scene, 0, 1.0, step))
     elif edit == "new scene":
         session.load_file(other_scene if step % 2 else viewer.scene_path)
     else:
         raise ValueError(edit)
+
+
+def _back_and_forth(scene, axis: int, sign: float, step: int) -> np.ndarray:
+    """An offset of 5% of the scene's size along `axis` (times `sign`) on odd steps, none on even ones."""
+    lo, hi = scene.bounds
+    offset = np.zeros(3)
+    offset[axis] = sign * 0.05 * float(np.max(hi - lo)) * (step % 2)
+    return offset
 
 
 def settle(viewer, start: float) -> tuple[float, float]:

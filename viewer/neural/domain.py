@@ -27,7 +27,7 @@ from scipy.sparse import csgraph
 
 from viewer.rays.moved_faces import changed_rows
 from viewer.scene import Scene
-from viewer.threads import cores_for
+from viewer.threads import RUNS, cores_for
 
 ALBEDO_MARGIN = 0.02
 """Albedos this far below the trained minimum still count as inside (a surface that dark reflects
@@ -251,17 +251,13 @@ def _open_sides(triangles: np.ndarray, areas: np.ndarray, normals: np.ndarray, l
     return int(np.sum(covered < COVERED * sides))
 
 
-SIDE_RUNS = 64
-"""Runs of faces `_side_areas` sums apart, shared among the cores."""
-
-
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _side_areas(triangles, areas, normals, lo, hi, tolerance):
-    """(SIDE_RUNS, 6) the area of the faces of each run lying on each side of the box [lo, hi] (low, high
+    """(RUNS, 6) the area of the faces of each run lying on each side of the box [lo, hi] (low, high
     side of x, y, z)."""
-    out = np.zeros((SIDE_RUNS, 6))
-    step = (triangles.shape[0] + SIDE_RUNS - 1) // SIDE_RUNS
-    for run in numba.prange(SIDE_RUNS):
+    out = np.zeros((RUNS, 6))
+    step = (triangles.shape[0] + RUNS - 1) // RUNS
+    for run in numba.prange(RUNS):
         for f in range(run * step, min((run + 1) * step, triangles.shape[0])):
             for axis in range(3):
                 if abs(normals[f, axis]) <= 0.7:

@@ -280,7 +280,7 @@ class SceneVoxels:
         self.voxelization = self.pairs.voxelization(scene)
         self.shape = Shape.of(scene)
         self._grid = self.voxelization.grid   # its colours are the faces' shares', as every edit's come
-        self._colours = (scene.albedo, scene.emission)
+        self._emission = scene.emission   # what the voxels' emission and lights were made from
         self._albedo = VoxelAlbedo(self.voxelization.faces, self.voxelization.tint, scene, self._grid.albedo)
         self.blockers = encoding.occluders(scene, self._grid, None if previous is None else previous.blockers)
         """The occluders of these triangles, one object for every colour edit (the encoder keeps its
@@ -300,18 +300,17 @@ class SceneVoxels:
         """The voxels with `scene`'s albedo and emission (area-weighted per voxel, as `voxelize` gives
         them, to round-off); the same object while the colours stay the same."""
         albedo = self._albedo.of(scene)   # the voxels of the faces recoloured alone summed again
-        same_light = _same(self._colours[1], scene.emission)
-        if not same_light or albedo is not self._grid.albedo:
-            grid, faces = self.voxelization.grid, self.voxelization.faces
-            if same_light:
-                # an albedo edit: the emission and lights as they were (0.7 ms of a 68k-triangle scan's)
-                self._grid = replace(self._grid, albedo=albedo)
-            else:
-                lights = grid.lights
-                if lights.face is not None and lights.count:
-                    lights = replace(lights, radiance=scene.emission[lights.face])
-                self._grid = replace(grid, albedo=albedo, emission=faces @ scene.emission, lights=lights)
-            self._colours = (scene.albedo, scene.emission)
+        if not _same(self._emission, scene.emission):
+            grid = self.voxelization.grid
+            lights = grid.lights
+            if lights.face is not None and lights.count:
+                lights = replace(lights, radiance=scene.emission[lights.face])
+            self._grid = replace(grid, albedo=albedo, emission=self.voxelization.faces @ scene.emission,
+                                 lights=lights)
+            self._emission = scene.emission
+        elif albedo is not self._grid.albedo:
+            # an albedo edit: the emission and lights as they were (0.7 ms of a 68k-triangle scan's)
+            self._grid = replace(self._grid, albedo=albedo)
         return self._grid
 
 

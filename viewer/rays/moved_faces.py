@@ -11,7 +11,7 @@ import weakref
 import numba
 import numpy as np
 
-from viewer.threads import cores_for
+from viewer.threads import RUNS, cores_for
 
 
 def changed_rows(*pairs) -> np.ndarray:
@@ -82,19 +82,15 @@ def moved_box(before, after, least: float = 1e-9, most: float = 1.0) -> tuple[np
     return moved, np.array([lo - margin, hi + margin])
 
 
-BOX_RUNS = 64
-"""Runs of faces `_corner_boxes` bounds apart, shared among the cores."""
-
-
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _corner_boxes(faces, v0, e1, e2):
-    """(BOX_RUNS, 2, 3) the lowest and highest corners v0, v0 + e1, v0 + e2 of each run of `faces`: one
+    """(RUNS, 2, 3) the lowest and highest corners v0, v0 + e1, v0 + e2 of each run of `faces`: one
     pass over the moved faces on every core (numpy's reduction of a (3 F, 3) array down its rows took 116
     ms for a 272k-triangle scan moved; one core's pass, 9 ms for a million-triangle one)."""
-    out = np.empty((BOX_RUNS, 2, 3))
+    out = np.empty((RUNS, 2, 3))
     out[:, 0], out[:, 1] = np.inf, -np.inf
-    step = (len(faces) + BOX_RUNS - 1) // BOX_RUNS
-    for run in numba.prange(BOX_RUNS):
+    step = (len(faces) + RUNS - 1) // RUNS
+    for run in numba.prange(RUNS):
         for i in range(run * step, min((run + 1) * step, len(faces))):
             f = faces[i]
             for k in range(3):
@@ -103,7 +99,6 @@ def _corner_boxes(faces, v0, e1, e2):
                 out[run, 0, k] = min(out[run, 0, k], a, b, c)
                 out[run, 1, k] = max(out[run, 1, k], a, b, c)
     return out
-
 
 
 def translation(corners: np.ndarray, edges: tuple, rows: np.ndarray) -> np.ndarray | None:

@@ -19,7 +19,7 @@ from functools import cached_property
 import numba
 import numpy as np
 
-from viewer.threads import cores_for
+from viewer.threads import RUNS, cores_for
 
 FLAT = 1e-6
 """A bounding box thinner than this fraction of its largest extent along an axis is flat along it."""
@@ -252,12 +252,11 @@ def faces_touching(faces, touched):
 def _row_box(v, rows):
     """(whether every coordinate of the `rows` of `v` is finite, (2, 3) their least and greatest
     coordinates), in one pass on every core."""
-    runs = 64
-    out = np.empty((runs, 2, 3))
+    out = np.empty((RUNS, 2, 3))
     out[:, 0], out[:, 1] = np.inf, -np.inf
-    finite = np.ones(runs, np.bool_)
-    step = (rows.shape[0] + runs - 1) // runs
-    for run in numba.prange(runs):
+    finite = np.ones(RUNS, np.bool_)
+    step = (rows.shape[0] + RUNS - 1) // RUNS
+    for run in numba.prange(RUNS):
         for i in range(run * step, min((run + 1) * step, rows.shape[0])):
             for k in range(3):
                 x = v[rows[i], k]
