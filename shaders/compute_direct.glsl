@@ -6,7 +6,7 @@
 //   paper (KERNEL_PAPER 1):    E_i = s_i sum_s Le_s cos_i A_s / (r^2 + A_s / pi) [cos_s > 0], no
 //       visibility and no emitter cosine, but emitters one-sided; the weights clamped to the
 //       hemisphere like the rows of G (s_i = min(1, pi / sum_s weight));
-// plus E_sun max(0, n_i.l) V_sun; B1_i = albedo_i / pi * E_i.
+// plus E_sun max(0, n_i.l) V_sun (the share of the voxel the sun reaches); B1_i = albedo_i / pi * E_i.
 // One invocation per receiver; receivers first_item.. in this dispatch, emitting voxels
 // first_emitter..end_emitter-1 (chunks within llvmpipe's loop budget, see compute_bounce.glsl), the
 // lamp sum and weight sum kept in direct_irradiance between chunks; the last adds the sun and reflects.
@@ -16,6 +16,9 @@
 
 #ifndef KERNEL_PAPER
 #define KERNEL_PAPER 0
+#endif
+#ifndef SUN_SIDE
+#define SUN_SIDE 3
 #endif
 
 layout(local_size_x = 64) in;
@@ -42,6 +45,28 @@ uniform bool sun_enabled;
 uniform vec3 sun_direction;   // unit, towards the sun
 uniform vec3 sun_irradiance;
 uniform float sun_reach;      // 3 N h: far enough to leave the grid (Tracer.escapes)
+
+// viewer/rays/sun.py: the share of the voxel's surface the sun reaches. SUN_SIDE x SUN_SIDE points on
+// the plane through `start`, spanning the voxel and kept within its cell (and `surface_offset` of it);
+// a point reached from `start` only through a surface (a floor beside a wall runs on behind it) starts
+// its ray at `start`.
+float sun_cover(vec3 p, vec3 n, vec3 start) {
+    vec3 helper = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
+    vec3 t = normalize(cross(n, helper));
+    vec3 b = cross(n, t);
+    vec3 lo = grid_lo + floor((p - grid_lo) / voxel_size) * voxel_size - surface_offset;
+    vec3 hi = lo + voxel_size + 2.0 * surface_offset;
+    float seen = 0.0;
+    for (int u = 0; u < SUN_SIDE; ++u) {
+        for (int v = 0; v < SUN_SIDE; ++v) {
+            vec2 step = (vec2(u, v) + 0.5) / float(SUN_SIDE) - 0.5;
+            vec3 q = clamp(start + voxel_size * (step.x * t + step.y * b), lo, hi);
+            vec3 from = segment_clear(start, q) ? q : start;
+            seen += segment_clear(from, from + sun_direction * sun_reach) ? 1.0 : 0.0;
+        }
+    }
+    return seen / float(SUN_SIDE * SUN_SIDE);
+}
 
 void main() {
     int i = first_item + int(gl_GlobalInvocationID.x);
@@ -89,8 +114,8 @@ void main() {
 #endif
     if (sun_enabled) {
         float cos_sun = dot(n, sun_direction);
-        if (cos_sun > 0.0 && segment_clear(start, start + sun_direction * sun_reach)) {
-            irradiance += cos_sun * sun_irradiance;
+        if (cos_sun > 0.0) {
+            irradiance += cos_sun * sun_cover(p, n, start) * sun_irradiance;
         }
     }
     direct_irradiance[i] = vec4(irradiance, 0.0);

@@ -18,6 +18,7 @@ import numpy as np
 
 from viewer.gpu.compute_scene import ComputeScene, even_ranges
 from viewer.gpu.programs import ProgramLibrary
+from viewer.rays import sun
 
 VISIBILITY_MODES = ("auto", "bitset", "on-the-fly")
 MAX_GROUPS = 65535
@@ -64,7 +65,7 @@ class ComputeTransport:
             self._bitset_rows = self.ctx.buffer(self._row_offsets.tobytes() if self.scene.count else bytes(4))
         for name in ("compute_cluster_visibility", "compute_visibility"):
             self.programs.get(name)
-        self.programs.get("compute_direct", **self._kernel_defines())
+        self.programs.get("compute_direct", **self._direct_defines())
         self.programs.get("compute_bounce", **self._bounce_defines())
 
     @property
@@ -78,6 +79,9 @@ class ComputeTransport:
 
     def _kernel_defines(self) -> dict:
         return {"KERNEL_PAPER": int(self.kernel == "paper")}
+
+    def _direct_defines(self) -> dict:
+        return {**self._kernel_defines(), "SUN_SIDE": sun.SUN_SIDE}
 
     def _bounce_defines(self) -> dict:
         return {**self._kernel_defines(), "VISIBILITY_BITSET": int(self.visibility == "bitset")}
@@ -97,7 +101,7 @@ class ComputeTransport:
         for n, (e0, e1) in enumerate(chunks):
             self._dispatch("compute_direct", (-(-(end - first) // 64), 1),
                            {9: s.light_samples, 10: s.emitters, 12: b["last"], 13: b["reflected"],
-                            14: b["stats"], 15: b["direct"]}, self._kernel_defines(),
+                            14: b["stats"], 15: b["direct"]}, self._direct_defines(),
                            first_item=first, first_emitter=e0, end_emitter=e1, first_chunk=n == 0,
                            last_chunk=n == len(chunks) - 1, **s.light_uniforms())
 

@@ -148,7 +148,7 @@ class Encoder:
             self.recomputed.append("shadows")
         if shadows_changed or geometry_changed:
             self._voxel_shadows = LatticeShadows(blockers, encoding.surface_points(voxels), self.lo,
-                                                 self._geometry.spacing)
+                                                 self._geometry.spacing, across=voxels)
         g = self._geometry
         albedo_changed = (np.ones(3, bool) if geometry_changed
                           else ~_same_columns(self._albedo, voxels.albedo))

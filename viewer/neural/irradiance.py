@@ -15,7 +15,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from viewer.neural.direct import SH_BLOCK, Pieces, kernel_terms, patch_visibility, solid_angle, sun_visibility
+from viewer.neural.direct import SH_BLOCK, Pieces, kernel_terms, patch_visibility, solid_angle
+from viewer.rays.sun import voxel_sun_cover
 from viewer.rays.voxels import SURFACE_OFFSET, VoxelGrid
 
 
@@ -103,7 +104,7 @@ def voxel_direct(voxels: VoxelGrid, lights, pieces: Pieces, blockers, sun, lo: n
     """(K, 3) the irradiance each voxel receives straight from the emitting patches `lights`
     (`encoding.emitting_patches`, with their `pieces`) and the sun, shadowed by `blockers` (None:
     nothing casts a shadow): one ray per voxel and cluster of patches (`direct.shadow_targets`, as the
-    probes'), one towards the sun."""
+    probes'), nine towards the sun from across the voxel (`voxel_sun_cover`)."""
     points = surface_points(voxels)
     visible = None
     if blockers is not None and len(lights[2]):
@@ -111,5 +112,6 @@ def voxel_direct(voxels: VoxelGrid, lights, pieces: Pieces, blockers, sun, lo: n
     out = emitter_irradiance_rows(lights, points, voxels.normal, visible, pieces).T.astype(np.float64)
     seen_sun = None
     if sun is not None and np.any(np.asarray(sun.irradiance) > 0):
-        seen_sun = sun_visibility(blockers, points, np.asarray(sun.direction, np.float64))
+        seen_sun = voxel_sun_cover(blockers, voxels, np.asarray(sun.direction, np.float64))
     return out + sun_irradiance(sun, seen_sun, voxels.normal)
+

@@ -11,6 +11,7 @@ from scipy import sparse
 from viewer.neural import encoding
 from viewer.neural.encoding import CHANNELS
 from viewer.rays import moved_faces
+from viewer.rays.sun import voxel_sun_cover
 from viewer.rays.voxel_rays import VoxelRays, meets_box
 from viewer.rays.voxels import VoxelGrid
 
@@ -71,9 +72,12 @@ class LatticeShadows:
     moved triangles' old and new places are traced again (`moved_box`)."""
 
     def __init__(self, blockers: VoxelRays | None, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray,
-                 previous: "LatticeShadows | None" = None, box=None):
-        """`box`: `moved_box(previous.blockers, blockers)` where the caller has it already."""
+                 previous: "LatticeShadows | None" = None, box=None, across: VoxelGrid | None = None):
+        """`box`: `moved_box(previous.blockers, blockers)` where the caller has it already. `across`: the
+        voxels whose surface points `points` are; the sun's visibility is then the share of each voxel's
+        surface that sees it (`viewer.rays.sun`), not the one ray from its point."""
         self.blockers, self.points, self.lo, self.spacing = blockers, points, lo, spacing
+        self.across = across
         self._sun: tuple[bytes, np.ndarray] | None = None
         self._rows: dict[bytes, np.ndarray] = {}
         """Each traced ray end's visibility (P,), for the shadows of the next move."""
@@ -136,11 +140,14 @@ class LatticeShadows:
         return out
 
     def sun_visibility(self, direction: np.ndarray) -> np.ndarray:
-        """(P,) `encoding.sun_visibility` against these occluders, kept for the last direction asked."""
+        """(P,) `encoding.sun_visibility` against these occluders (the share of each voxel's surface, made
+        `across` voxels), kept for the last direction asked."""
         key = direction.tobytes()
         if self._sun is None or self._sun[0] != key:
             before = None if self._before is None else self._before[3]
-            if before is not None and before[0] == key and self.blockers is not None:
+            if self.across is not None:
+                visible = voxel_sun_cover(self.blockers, self.across, direction)
+            elif before is not None and before[0] == key and self.blockers is not None:
                 visible = before[1].copy()
                 unit = np.asarray(direction, np.float64) / np.linalg.norm(direction)
                 near = np.flatnonzero(_rays_meet_box(self.points, unit, self._before[0], self._before[1]))

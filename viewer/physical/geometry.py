@@ -28,6 +28,7 @@ from viewer.rays import dda
 from viewer.probes import sh
 from viewer.probes.grid import ProbeGrid, fill_waves
 from viewer.scene import DirectionalLight, Scene
+from viewer.rays.sun import voxel_sun_cover
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import SURFACE_OFFSET, VoxelGrid, Voxelization, voxelize_with_faces  # noqa: F401
 LAMP_SHARE = 0.1
@@ -235,7 +236,8 @@ class SunPaths:
     direction: np.ndarray | None
     """Unit vector towards the sun, or None (no sun)."""
     voxel_cosine: np.ndarray
-    """(K,) float32 cos(normal, sun) where the voxel sees the sun, else 0."""
+    """(K,) float32 cos(normal, sun) times the share of the voxel's surface that sees the sun
+    (`viewer.rays.sun`)."""
     probe_visible: np.ndarray
     """(P,) bool: the probe sees the sun."""
 
@@ -244,9 +246,6 @@ def sun_paths(geometry: Geometry, sun: DirectionalLight | None) -> SunPaths:
     grid = geometry.voxels
     if sun is None:
         return SunPaths(None, np.zeros(grid.count, np.float32), np.zeros(len(geometry.probe_points), bool))
-    cos = grid.normal @ sun.direction
-    lit = np.nonzero(cos > 0)[0]
-    start = grid.position[lit] + SURFACE_OFFSET * grid.voxel_size * grid.normal[lit]
-    cosine = np.zeros(grid.count, np.float32)
-    cosine[lit] = cos[lit] * geometry.rays.escapes(start, sun.direction)
+    cosine = (np.maximum(grid.normal @ sun.direction, 0.0) * voxel_sun_cover(geometry.rays, grid, sun.direction))
+    cosine = cosine.astype(np.float32)
     return SunPaths(np.array(sun.direction), cosine, geometry.rays.escapes(geometry.probe_points, sun.direction))

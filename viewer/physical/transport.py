@@ -27,6 +27,7 @@ import numpy as np
 from scipy import sparse
 
 from viewer.rays.raymarch import Tracer
+from viewer.rays.sun import voxel_sun_cover
 from viewer.scene import DirectionalLight
 from viewer.rays.voxels import FACINGS, SURFACE_OFFSET, VoxelGrid  # noqa: F401  (SURFACE_OFFSET: re-exported)
 
@@ -202,17 +203,14 @@ def _clamp_rows(g: sparse.csr_matrix) -> sparse.csr_matrix:
 
 
 def sun_irradiance(voxels: VoxelGrid, sun: DirectionalLight | None, tracer: Tracer | None = None) -> np.ndarray:
-    """(K, 3) irradiance from the directional light: E_sun * max(0, n.l) where the sun is not shadowed."""
+    """(K, 3) irradiance from the directional light: E_sun * max(0, n.l) times the share of the voxel's
+    surface that sees it (`viewer.rays.sun`)."""
     out = np.zeros((voxels.count, 3))
     if sun is None or not np.any(sun.irradiance > 0):
         return out
     tracer = tracer or Tracer.build(voxels)
-    cos = voxels.normal @ sun.direction
-    lit = np.nonzero(cos > 0)[0]
-    start = voxels.position[lit] + SURFACE_OFFSET * voxels.voxel_size * voxels.normal[lit]
-    clear = tracer.escapes(start, sun.direction)
-    out[lit[clear]] = cos[lit[clear], None] * sun.irradiance[None, :]
-    return out
+    share = np.maximum(voxels.normal @ sun.direction, 0.0) * voxel_sun_cover(tracer, voxels, sun.direction)
+    return share[:, None] * sun.irradiance[None, :]
 
 
 def direct_irradiance(voxels: VoxelGrid, tracer: Tracer | None = None, kernel: str = "physical",
