@@ -48,6 +48,7 @@ import numpy as np
 
 from viewer.rays import dda
 from viewer.rays.cast import embree_available
+from viewer.rays.sun import SUN_SIDE
 from viewer.rays.voxel_rays import VoxelRays, keyed_cells
 from viewer.probes import sh
 from viewer.rays.voxels import VoxelGrid, face_facing
@@ -62,7 +63,7 @@ from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBI
                                   Pieces, emitter_sh, emitter_sh_rows, emitting_patches, facings, lattice_cells,
                                   patch_pieces, patch_visibility, shadow_targets, splat, sun_sh, sun_visibility)
 
-VERSION = 12
+VERSION = 13
 """Bump when the features change: a model card records the version its network was trained on, and
 `viewer.neural.field` refuses a model of a version it cannot feed (`VERSION_CHANNELS`). Version 7 deals
 the seen rays' directions out over the lattice (`viewer.neural.seen.interleaved_lattices`) where
@@ -80,7 +81,9 @@ bounces before the tail where version 10 gathered three (`seen.SEEN_BOUNCES`), a
 bounce three quarters of a voxel in front of the voxels where version 10 read it at half
 (`bounce.READ_BACK`): the same features, the seen light's amount within 1.1% of the solver's probes on
 the public scenes where it was 1-7% short. Version 12 casts 32 seen rays a probe where version 11 cast
-16 (`seen.SEEN_RAYS`): the same features, with less noise in the directions of the seen light."""
+16 (`seen.SEEN_RAYS`): the same features, with less noise in the directions of the seen light. Version
+13 lights each voxel by the share of its surface the sun reaches (`viewer.rays.sun`) where version 12
+took one ray from its centre: the same features, the sunlit patch not drawn in whole voxels."""
 FEATURES = (
     "density",          # surface area in the cell / cell face area
     "normal_x", "normal_y", "normal_z",  # area-weighted normals / cell face area
@@ -97,10 +100,10 @@ CHANNELS = len(FEATURES)
 SETTINGS = {"seen_rays": SEEN_RAYS, "seen_bounces": SEEN_BOUNCES, "tail_ratio_max": TAIL_RATIO_MAX,
             "interleave": INTERLEAVE, "seed": SEED, "read_back": READ_BACK, "bounce_patch": BOUNCE_PATCH,
             "bounce_lattice": BOUNCE_LATTICE, "near_pieces": NEAR_PIECES, "shadow_offset": SHADOW_OFFSET,
-            "visibility_cells": VISIBILITY_CELLS}
+            "visibility_cells": VISIBILITY_CELLS, "sun_side": SUN_SIDE}
 """The constants the features are made with besides their version: a training cache is keyed by them,
 so that features tuned without a version bump are made again rather than read stale."""
-VERSION_CHANNELS = {10: CHANNELS, 11: CHANNELS, 12: CHANNELS}
+VERSION_CHANNELS = {10: CHANNELS, 11: CHANNELS, 12: CHANNELS, 13: CHANNELS}
 """The features a network of each encoding version reads: the first this many of FEATURES. A version-10
 network is fed version 11's features: the same features with the seen light's amount closer to the
 truth, on which the version-10 network's indirect light is closer to Mitsuba on the public scenes, and
