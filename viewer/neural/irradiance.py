@@ -114,4 +114,3 @@ def voxel_direct(voxels: VoxelGrid, lights, pieces: Pieces, blockers, sun, lo: n
     if sun is not None and np.any(np.asarray(sun.irradiance) > 0):
         seen_sun = voxel_sun_cover(blockers, voxels, np.asarray(sun.direction, np.float64))
     return out + sun_irradiance(sun, seen_sun, voxels.normal)
-

@@ -140,8 +140,9 @@ class LatticeShadows:
         return out
 
     def sun_visibility(self, direction: np.ndarray) -> np.ndarray:
-        """(P,) `encoding.sun_visibility` against these occluders (the share of each voxel's surface, made
-        `across` voxels), kept for the last direction asked."""
+        """(P,) 1 where each point sees the sun past these occluders (`encoding.sun_visibility`), or for
+        shadows made `across` voxels the share of each voxel's surface that does; kept for the last
+        direction asked."""
         key = direction.tobytes()
         if self._sun is None or self._sun[0] != key:
             before = None if self._before is None else self._before[3]

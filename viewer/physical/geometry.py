@@ -246,6 +246,6 @@ def sun_paths(geometry: Geometry, sun: DirectionalLight | None) -> SunPaths:
     grid = geometry.voxels
     if sun is None:
         return SunPaths(None, np.zeros(grid.count, np.float32), np.zeros(len(geometry.probe_points), bool))
-    cosine = (np.maximum(grid.normal @ sun.direction, 0.0) * voxel_sun_cover(geometry.rays, grid, sun.direction))
-    cosine = cosine.astype(np.float32)
-    return SunPaths(np.array(sun.direction), cosine, geometry.rays.escapes(geometry.probe_points, sun.direction))
+    cosine = np.maximum(grid.normal @ sun.direction, 0.0) * voxel_sun_cover(geometry.rays, grid, sun.direction)
+    return SunPaths(np.array(sun.direction), cosine.astype(np.float32),
+                    geometry.rays.escapes(geometry.probe_points, sun.direction))

@@ -205,9 +205,8 @@ def _clamp_rows(g: sparse.csr_matrix) -> sparse.csr_matrix:
 def sun_irradiance(voxels: VoxelGrid, sun: DirectionalLight | None, tracer: Tracer | None = None) -> np.ndarray:
     """(K, 3) irradiance from the directional light: E_sun * max(0, n.l) times the share of the voxel's
     surface that sees it (`viewer.rays.sun`)."""
-    out = np.zeros((voxels.count, 3))
     if sun is None or not np.any(sun.irradiance > 0):
-        return out
+        return np.zeros((voxels.count, 3))
     tracer = tracer or Tracer.build(voxels)
     share = np.maximum(voxels.normal @ sun.direction, 0.0) * voxel_sun_cover(tracer, voxels, sun.direction)
     return share[:, None] * sun.irradiance[None, :]
