@@ -44,7 +44,21 @@ def test_the_command_prints_every_edit_with_its_share(capsys):
         assert (neural - 0.5) / (solver + 0.5) - 0.005 <= ratio <= (neural + 0.5) / (solver - 0.5) + 0.005
 
 
-@pytest.mark.parametrize("argv", [["cornell", "--move", "no-such-group"], ["no-such-scene"]])
+def test_the_validation_rooms_are_the_training_generators():
+    """`--rooms` times the rooms `viewer.training.evaluate` scores: the dataset's validation rooms, before it
+    rounds them to its file's precisions."""
+    from viewer.training import dataset
+
+    for index in (0, 9):
+        room, stored = share.validation_room(index), dataset.make_scene("val", index, 14, "v2")[0]
+        assert room.name == stored.name and room.groups == stored.groups
+        assert np.array_equal(room.faces, stored.faces)
+        np.testing.assert_allclose(room.vertices, stored.vertices, atol=1e-6)
+        np.testing.assert_allclose(room.albedo, stored.albedo, atol=1e-3)
+        assert (room.sun is None) == (stored.sun is None)
+
+
+@pytest.mark.parametrize("argv", [["cornell", "--move", "no-such-group"], ["no-such-scene"], ["--rooms", "-1"]])
 def test_bad_input_is_one_line_and_status_2(argv, capsys):
     with pytest.raises(SystemExit) as exit_:
         share.main(argv)

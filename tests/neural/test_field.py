@@ -92,7 +92,10 @@ def test_neural_field_gives_probes_in_radiance_units(exported):
     with torch.no_grad():   # the viewer's filter stops at walls as training's does
         out = model(torch.from_numpy(enc.inputs), links=torch.from_numpy(enc.links[None])).numpy()
     expected = out[:, :9] * enc.scale[:, None, None, None, None]
-    np.testing.assert_allclose(grid.coefficients, expected.transpose(2, 3, 4, 1, 0), rtol=1e-4, atol=1e-5)
+    # the live encoder and `encode` sum the lamps' terms in their own orders: their inputs differ by
+    # float32 ulps (4e-6 of 18 at most), which a random network carries to its outputs
+    np.testing.assert_allclose(grid.coefficients, expected.transpose(2, 3, 4, 1, 0), rtol=1e-4,
+                               atol=1e-5 * np.abs(expected).max())
     reflected = field.solve(scene, include_emitted=False).coefficients
     assert not np.allclose(reflected, grid.coefficients)
 

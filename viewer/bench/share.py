@@ -1,7 +1,7 @@
 """The neural source's time against the physical solver's, edit by edit on the same scene: the neural
 source's speed bar (a new scene or a moved object in at most a third of the solver's time).
 
-    python -m viewer.bench.share [SCENE ...] [--move GROUP] [--repeats 5] [--threads N]
+    python -m viewer.bench.share [SCENE ...] [--rooms N] [--move GROUP] [--repeats 5] [--threads N]
 
 For each scene: the largest group's albedo, the brightest lamp moved by a tenth of the scene, a group
 moved as far (`--move`; by default the non-emitting group of the most triangles, the smaller by area
@@ -11,7 +11,9 @@ An edit flips the scene to the edited one and back, every update timed from the 
 `probe_grid`, the two in turn, so that both meet the machine's same moments. Medians of `repeats`
 updates (four times as many for the albedo), wall-clock milliseconds on all the cores, the share the
 neural source's time is of the solver's. The network runs on one thread unless `--threads` (the
-viewer's: viewer.ui.neural_source.NETWORK_THREADS).
+viewer's: viewer.ui.neural_source.NETWORK_THREADS). `--rooms N` adds the training generator's first N
+validation rooms (`viewer.training.evaluate`'s, before the dataset rounds them to its file's
+precisions): rooms of one to three lamps, some large, some with the sun through a window.
 """
 
 from __future__ import annotations
@@ -25,10 +27,15 @@ import numpy as np
 from viewer import scene as scenes
 from viewer.bench.edit_methods import Edit, moved_a_tenth
 from viewer.cli_parsing import add_repeats, tool_parser
+from viewer.evaluation import procedural
 from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI
+from viewer.neural.ranges import PRESETS
 from viewer.physical.gi import GISettings, PhysicalGI
 from viewer.scene import Scene, SceneError
 from viewer.ui.scene_edits import emitter_group, largest_object
+
+VALIDATION_SEED, VALIDATION_SPLIT = 14, 1
+"""The dataset's seed and the validation split's number in each room's generator seed."""
 
 
 def moved_group(scene: Scene) -> str | None:
@@ -46,6 +53,13 @@ def edits(scene: Scene, group: str | None) -> dict[str, Scene]:
     if group is not None:
         out[f"{group} moved"] = moved_a_tenth(scene, group)
     return out
+
+
+def validation_room(index: int) -> Scene:
+    """The training generator's validation room `index` (seed 14, v2 ranges: `viewer.training.dataset.
+    make_scene("val", index, 14, "v2")`, unrounded)."""
+    rng = np.random.default_rng([VALIDATION_SEED, VALIDATION_SPLIT, index])
+    return procedural.random_scene(rng, f"val-{index:05d}", PRESETS["v2"])[0]
 
 
 def _ms(function) -> float:
@@ -92,16 +106,22 @@ def table(results: dict[str, dict[str, tuple[float, float]]]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = tool_parser(__doc__, prog="python -m viewer.bench.share")
-    parser.add_argument("scenes", nargs="*", default=["cornell"])
+    parser.add_argument("scenes", nargs="*", default=None, help="scene files or built-in names (default: cornell, "
+                        "unless --rooms)")
+    parser.add_argument("--rooms", type=int, default=0, metavar="N",
+                        help="also the training generator's first N validation rooms")
     parser.add_argument("--move", help="the group moved (default: the non-emitting group of the most triangles)")
     parser.add_argument("--threads", type=int, default=1, help="onnxruntime's threads (the viewer's: up to 4)")
     add_repeats(parser, 5)
     args = parser.parse_args(argv)
+    if args.rooms < 0:
+        parser.error(f"--rooms must be 0 or more, not {args.rooms}")
+    names = args.scenes if args.scenes or args.rooms else ["cornell"]
     field = NeuralField(DEFAULT_MODEL, threads=args.threads)
     results = {}
-    for name in args.scenes:
+    for name in [*names, *range(args.rooms)]:
         try:
-            scene = scenes.load(name)
+            scene = validation_room(name) if isinstance(name, int) else scenes.load(name)
         except SceneError as exc:
             parser.error(str(exc))
         if args.move is not None and args.move not in scene.groups:
@@ -111,7 +131,8 @@ def main(argv: list[str] | None = None) -> int:
         results[scene.name] = measure(scene, field, group, args.repeats)
         print("\n".join(table({scene.name: results[scene.name]})[2:]), flush=True)
     print("\n".join(["", *table(results), "",
-                     f"`python -m viewer.bench.share {' '.join(args.scenes)} --threads {args.threads} --repeats "
+                     f"`python -m viewer.bench.share {' '.join(names + (['--rooms', str(args.rooms)] if args.rooms else []))} "
+                     f"--threads {args.threads} --repeats "
                      f"{args.repeats}`, {time.strftime('%Y-%m-%d')}, 1-minute load average {os.getloadavg()[0]:.1f} "
                      f"on {os.cpu_count()} cores."]))
     return 0

@@ -242,6 +242,9 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
         first = block * SH_BLOCK
         n = min(SH_BLOCK, count - first)
         b = np.empty((9, SH_BLOCK), np.float32)
+        pb = np.empty((9, SH_BLOCK), np.float32)   # the near probes' basis from the pieces
+        near = np.empty(SH_BLOCK, np.int64)
+        nx, ny, nz = np.empty(SH_BLOCK, np.float32), np.empty(SH_BLOCK, np.float32), np.empty(SH_BLOCK, np.float32)
         sums = np.zeros((channels, 9, SH_BLOCK), np.float32)
         px, py, pz = points[0, first:first + n], points[1, first:first + n], points[2, first:first + n]
         for e in range(source.shape[0]):
@@ -254,18 +257,28 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
                     b[k, i] = zero
                 _add_basis(b, i, weight, x, y, z)
             if start[e + 1] > start[e]:   # probes near the patch: its pieces instead
+                m = 0
                 for i in range(n):
                     x, y, z = sx - px[i], sy - py[i], sz - pz[i]
-                    if x * x + y * y + z * z >= near2:
-                        continue
-                    for k in range(9):
-                        b[k, i] = zero
-                    for s in range(start[e], start[e + 1]):
-                        omega, qx, qy, qz = solid_angle(piece_position[s, 0] - px[i], piece_position[s, 1] - py[i],
-                                                         piece_position[s, 2] - pz[i], piece_normal[s, 0],
-                                                         piece_normal[s, 1], piece_normal[s, 2], piece_area[s],
-                                                         piece_area[s] * near_field)
-                        _add_basis(b, i, omega * piece_gain[s], qx, qy, qz)
+                    if x * x + y * y + z * z < near2:
+                        near[m] = i
+                        m += 1
+                if m > 0:
+                    for j in range(m):
+                        nx[j], ny[j], nz[j] = px[near[j]], py[near[j]], pz[near[j]]
+                        for k in range(9):
+                            pb[k, j] = zero
+                    for s in range(start[e], start[e + 1]):   # the near probes gathered: this loop vectorizes
+                        qx0, qy0, qz0 = piece_position[s, 0], piece_position[s, 1], piece_position[s, 2]
+                        ax, ay, az = piece_normal[s, 0], piece_normal[s, 1], piece_normal[s, 2]
+                        flux, gain = piece_area[s], piece_gain[s]
+                        for j in range(m):
+                            omega, qx, qy, qz = solid_angle(qx0 - nx[j], qy0 - ny[j], qz0 - nz[j], ax, ay, az, flux,
+                                                             flux * near_field)
+                            _add_basis(pb, j, omega * gain, qx, qy, qz)
+                    for j in range(m):
+                        for k in range(9):
+                            b[k, near[j]] = pb[k, j]
             if shadowed:
                 seen = visible[e, first:first + n]
                 for k in range(9):
