@@ -147,3 +147,28 @@ def test_keyed_cells_name_the_voxels_the_listing_names(name):
     np.testing.assert_array_equal(keyed.bundle_hits(origins, directions), theirs)
     flat = np.repeat(origins, 64, axis=0), directions.reshape(-1, 3)
     np.testing.assert_array_equal(keyed.first_hits(*flat), listed.first_hits(*flat))
+
+
+@needs_embree
+def test_segments_whose_cells_hold_no_triangle_are_clear_untraced():
+    """`pairs_clear` answers a segment whose box of cells no triangle's box reaches without tracing it (a
+    probe in a room's open middle and a lamp): the same answers as every segment traced, and most of the
+    segments from a room's middle to its ceiling answered so."""
+    from viewer.neural import encoding
+    from viewer.rays import voxel_rays
+    from viewer.rays.voxels import voxelize
+    from scenes import lit_room
+
+    scene = lit_room(box(0.25, centre=(0.2, -0.75, 0.1), name="block"))
+    blockers = encoding.occluders(scene, voxelize(scene, 16))
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-0.95, 0.95, (400, 3))
+    ends = np.column_stack([rng.uniform(-0.3, 0.3, 12), np.full(12, 0.9), rng.uniform(-0.3, 0.3, 12)])
+    found = blockers.pairs_clear(points, ends)
+    a, b = np.repeat(points, len(ends), axis=0), np.tile(ends, (len(points), 1))
+    np.testing.assert_array_equal(found, blockers.segments_clear(a, b).reshape(found.shape))
+    assert 0 < found.mean() < 1   # the block shadows some
+    table, cells = blockers.occupied, blockers.cells
+    untraced = [voxel_rays._empty_box(table, cells.lo, cells.h, *p, *e) for p, e in zip(a, b)]
+    assert np.mean(untraced) > 0.3
+    assert not np.any(np.asarray(untraced) & (found.ravel() == 0))

@@ -15,6 +15,8 @@ minute of CPU on an empty cache), where the lookup below compiles in about a sec
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numba
 import numpy as np
 
@@ -30,6 +32,10 @@ STEP_BACK = 1e-4
 """The hit point is read this many voxels back along the ray before its cell is looked up, so that a
 hit on a cell's boundary is the first cell's (the one the ray crossed first, as the DDA reads it), and
 single precision (about 1e-6 voxels at the grid's far side) cannot move it across."""
+
+
+HELD_EVERYWHERE = np.zeros((0, 0, 0), np.int32)
+"""An `occupied` table of no cells: `_empty_box` finds no box empty, so every segment is traced."""
 
 
 class VoxelRays:
@@ -48,6 +54,18 @@ class VoxelRays:
                 scene, cells, self.backend, None if previous is None else previous.caster, quick)
         else:
             self.caster = None
+
+    @cached_property
+    def occupied(self) -> np.ndarray:
+        """(N+1, N+1, N+1) int32 [z, y, x]: how many of the grid's cells below and before each corner some
+        triangle's bounding box reaches into (a summed-volume table): a box of cells that none reaches, read
+        in eight lookups, is one no segment within it can meet."""
+        c = self.cells
+        held = np.zeros((c.n, c.n, c.n), np.uint8)
+        _held(c.v0, c.e1, c.e2, np.asarray(c.lo, np.float64), float(c.h), held)
+        out = np.zeros((c.n + 1, c.n + 1, c.n + 1), np.int32)
+        out[1:, 1:, 1:] = held.astype(np.int32).cumsum(0).cumsum(1).cumsum(2)
+        return out
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """(R,) int64: the voxel each ray o + t d (t > 0, unit d) meets first, dda.MISS or dda.BACKFACE."""
@@ -138,7 +156,10 @@ class VoxelRays:
             return dda.pairs_clear(self.cells, a, b)
         out = np.empty((len(a), len(b)), np.float32)
         if self.caster.direct is not None:
-            _pairs_clear(*self.caster.direct.occlusion, a, b, out)
+            # the boxes' table costs a pass over the triangles (12 ms for a million): worth it where the
+            # segments outnumber them
+            table = self.occupied if len(a) * len(b) > 4 * len(self.cells.v0) else HELD_EVERYWHERE
+            _pairs_clear(*self.caster.direct.occlusion, a, b, table, self.cells.lo, self.cells.h, out)
             return out
         rows = max(1, RAYS_PER_CALL // max(len(b), 1))
         for start in range(0, len(a), rows):
@@ -199,21 +220,59 @@ def _bundle_kept(o, d, kept, box_lo, box_hi, intersect, scene, faces, e1, e2, lo
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _pairs_clear(query, scene, a, b, out):
+def _pairs_clear(query, scene, a, b, occupied, lo, h, out):
     """`pairs_clear` through Embree, each segment made and cast in one compiled pass (repeating, tiling
-    and normalizing (A x B, 3) arrays in numpy first took a third of a moved lamp's shadow rays)."""
+    and normalizing (A x B, 3) arrays in numpy first took a third of a moved lamp's shadow rays). A
+    segment whose box of cells holds no triangle (`occupied`, `VoxelRays.occupied`) is clear untraced:
+    from a probe in a room's open middle to a lamp, most are."""
     for i in numba.prange(a.shape[0]):
         record = embree.record()
         for j in range(b.shape[0]):
             dx, dy, dz = b[j, 0] - a[i, 0], b[j, 1] - a[i, 1], b[j, 2] - a[i, 2]
             length = np.sqrt(dx * dx + dy * dy + dz * dz)
-            if length <= 0.0:
+            if length <= 0.0 or _empty_box(occupied, lo, h, a[i, 0], a[i, 1], a[i, 2], b[j, 0], b[j, 1], b[j, 2]):
                 out[i, j] = 1.0
                 continue
             inv = 1.0 / length
             blocked = embree.occluded(query, scene, record, a[i, 0], a[i, 1], a[i, 2], dx * inv, dy * inv, dz * inv,
                                       length)
             out[i, j] = 0.0 if blocked else 1.0
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _held(v0, e1, e2, lo, h, held):
+    """Mark in `held` (N, N, N) [z, y, x] every cell of each triangle's bounding box (a millionth of a cell
+    wider)."""
+    n = held.shape[0]
+    for t in numba.prange(v0.shape[0]):
+        low, high = np.empty(3, np.int64), np.empty(3, np.int64)
+        for axis in range(3):
+            a, b, c = v0[t, axis], v0[t, axis] + e1[t, axis], v0[t, axis] + e2[t, axis]
+            low[axis] = min(max(int(np.floor((min(a, b, c) - lo[axis]) / h - 1e-6)), 0), n - 1)
+            high[axis] = min(max(int(np.floor((max(a, b, c) - lo[axis]) / h + 1e-6)), 0), n - 1)
+        for z in range(low[2], high[2] + 1):
+            for y in range(low[1], high[1] + 1):
+                for x in range(low[0], high[0] + 1):
+                    held[z, y, x] = 1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _empty_box(occupied, lo, h, ax, ay, az, bx, by, bz):
+    """Whether no cell of the box around points a and b (widened by a millionth of a cell, so that a point on
+    a cell's face counts both cells) holds a triangle: eight lookups of the summed-volume table."""
+    n = occupied.shape[0] - 1
+    if n < 1:
+        return False
+    hair = 1e-6
+    x0 = min(max(int(np.floor((min(ax, bx) - lo[0]) / h - hair)), 0), n - 1)
+    y0 = min(max(int(np.floor((min(ay, by) - lo[1]) / h - hair)), 0), n - 1)
+    z0 = min(max(int(np.floor((min(az, bz) - lo[2]) / h - hair)), 0), n - 1)
+    x1 = min(max(int(np.floor((max(ax, bx) - lo[0]) / h + hair)), 0), n - 1) + 1
+    y1 = min(max(int(np.floor((max(ay, by) - lo[1]) / h + hair)), 0), n - 1) + 1
+    z1 = min(max(int(np.floor((max(az, bz) - lo[2]) / h + hair)), 0), n - 1) + 1
+    total = (occupied[z1, y1, x1] - occupied[z0, y1, x1] - occupied[z1, y0, x1] - occupied[z1, y1, x0]
+             + occupied[z0, y0, x1] + occupied[z0, y1, x0] + occupied[z1, y0, x0] - occupied[z0, y0, x0])
+    return total == 0
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
