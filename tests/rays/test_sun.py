@@ -44,8 +44,8 @@ def test_the_voxels_catch_the_sunlight_that_enters_a_window(monkeypatch, side, w
 def test_no_sunlight_reaches_inside_a_closed_room():
     """A closed room under a low sun: no voxel of its inside is reached, though the points across the
     floor's voxels beside the walls lie on the floor's plane beyond them (those start at the voxel)."""
-    scene = Scene.concatenate("closed", [box(inward=True, name="room"), ceiling_lamp(), box(0.2, centre=(0.1, -0.8, 0.2))],
-                              sun=DirectionalLight([0.3, 1.0, 0.2], [5.0, 5.0, 5.0]))
+    parts = [box(inward=True, name="room"), ceiling_lamp(), box(0.2, centre=(0.1, -0.8, 0.2))]
+    scene = Scene.concatenate("closed", parts, sun=DirectionalLight([0.3, 1.0, 0.2], [5.0, 5.0, 5.0]))
     grid = voxelize(scene, 24)
     direction = np.asarray(scene.sun.direction, np.float64)
     assert not np.any(sun.voxel_sun_cover(occluders(scene, grid), grid, direction))

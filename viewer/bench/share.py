@@ -130,9 +130,9 @@ def main(argv: list[str] | None = None) -> int:
         measure(scene, field, group, 1)   # compile and warm up first
         results[scene.name] = measure(scene, field, group, args.repeats)
         print("\n".join(table({scene.name: results[scene.name]})[2:]), flush=True)
+    command = " ".join(names + (["--rooms", str(args.rooms)] if args.rooms else []))
     print("\n".join(["", *table(results), "",
-                     f"`python -m viewer.bench.share {' '.join(names + (['--rooms', str(args.rooms)] if args.rooms else []))} "
-                     f"--threads {args.threads} --repeats "
+                     f"`python -m viewer.bench.share {command} --threads {args.threads} --repeats "
                      f"{args.repeats}`, {time.strftime('%Y-%m-%d')}, 1-minute load average {os.getloadavg()[0]:.1f} "
                      f"on {os.cpu_count()} cores."]))
     return 0
