@@ -192,30 +192,37 @@ def emitter_sh(lights, points: np.ndarray, visible: np.ndarray | None = None,
 
 
 def emitter_sh_rows(lights, points: np.ndarray, visible: np.ndarray | None = None,
-                    pieces: Pieces | None = None) -> np.ndarray:
+                    pieces: Pieces | None = None, rows: np.ndarray | None = None) -> np.ndarray:
     """`emitter_sh` as (C, 9, P) float32 for a radiance of C channels (lights[3] is (E, C)), with the
-    visibility as (E, P) rows: the layout the compiled loop works in (`viewer.neural.encoder` keeps one
-    channel per emitter, a radiance of 1 times its weights)."""
+    visibility as (E, P) rows, or as any (R, P) rows of which patch e reads row `rows[e]` (a cluster's
+    shared ray: no (E, P) copy to make): the layout the compiled loop works in (`viewer.neural.encoder`
+    keeps one channel per emitter, a radiance of 1 times its weights)."""
     out = np.zeros((np.shape(lights[3])[1], sh.SH_COUNT, len(points)), np.float32)
     if len(lights[2]) == 0:
         return out
-    _emitter_sh(np.ascontiguousarray(np.asarray(points).T, np.float32), *kernel_terms(lights, visible, pieces), out)
+    _emitter_sh(np.ascontiguousarray(np.asarray(points).T, np.float32), *kernel_terms(lights, visible, pieces, rows),
+                out)
     return out
 
 
-def kernel_terms(lights, visible: np.ndarray | None, pieces: Pieces | None) -> tuple:
+def kernel_terms(lights, visible: np.ndarray | None, pieces: Pieces | None, rows: np.ndarray | None = None) -> tuple:
     """The compiled loops' arguments after their points (`_emitter_sh`, `irradiance._emitter_irradiance`):
-    the patches' positions, normals, areas and radiance (E, C) as float32, their visibility rows (E, P)
-    or one row of ones, whether those shadow, the near-field clamp, and the pieces (their starts,
-    positions, normals, areas and gains, and the square of the distance within which they count)."""
+    the patches' positions, normals, areas and radiance (E, C) as float32, their visibility rows (R, P)
+    or one row of ones, each patch's row of them (E,) (`rows`, default patch e reads row e), whether
+    those shadow, the near-field clamp, and the pieces (their starts, positions, normals, areas and
+    gains, and the square of the distance within which they count). Rows shared by several patches are
+    read in place: copying them out per patch made a large lamp's (159, 13824) array, and on this kind of
+    virtual machine its fresh pages cost up to 70 ms of a moved object."""
     source, normal, area, radiance = lights
     f32 = [np.ascontiguousarray(a, np.float32) for a in (source, normal, area, radiance)]
     seen = np.ones((len(area), 1), np.float32) if visible is None else np.ascontiguousarray(visible, np.float32)
+    rows = np.arange(len(area)) if rows is None or visible is None else np.asarray(rows)
     if pieces is None or len(pieces.area) == 0:
         pieces = Pieces.none(len(area))
     near2 = np.float32(pieces.near * pieces.near if pieces.near > 0 else -1.0)
     parts = [np.ascontiguousarray(a, np.float32) for a in (pieces.position, pieces.normal, pieces.area, pieces.gain)]
-    return (*f32, seen, visible is not None, np.float32(NEAR_FIELD), pieces.start, *parts, near2)
+    return (*f32, seen, np.ascontiguousarray(rows, np.int64), visible is not None, np.float32(NEAR_FIELD),
+            pieces.start, *parts, near2)
 
 
 SH_BLOCK = 128
@@ -225,9 +232,10 @@ blocks, evenly over two)."""
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy", parallel=True)
-def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_field, start, piece_position,
+def _emitter_sh(points, source, normal, area, radiance, visible, rows, shadowed, near_field, start, piece_position,
                 piece_normal, piece_area, piece_gain, near2, out):
-    """The terms of `emitter_sh`: points (3, P), radiance (E, C), visible (E, P) when `shadowed`, the
+    """The terms of `emitter_sh`: points (3, P), radiance (E, C), visible (R, P) and each patch's row of it
+    `rows` (E,) when `shadowed`, the
     pieces of patch e [start[e], start[e + 1]) summed where the probe is nearer than sqrt(near2), out
     (C, 9, P).
 
@@ -280,7 +288,7 @@ def _emitter_sh(points, source, normal, area, radiance, visible, shadowed, near_
                         for k in range(9):
                             b[k, near[j]] = pb[k, j]
             if shadowed:
-                seen = visible[e, first:first + n]
+                seen = visible[rows[e], first:first + n]
                 for k in range(9):
                     row = b[k]
                     for i in range(n):

@@ -285,7 +285,7 @@ class Encoder:
 
         def received(members, weights, own):
             patches = (position[members], normal[members], area[members], weights[:, None])
-            return encoding.emitter_irradiance_rows(patches, *surface, on_voxels[voxel_row[cluster[members]]], own)[0]
+            return encoding.emitter_irradiance_rows(patches, *surface, on_voxels, own, voxel_row[cluster[members]])[0]
 
         for emitter, members, weights in stale:
             emitter.received = received(members, weights, pieces.of(members))
@@ -383,4 +383,4 @@ def emitter_basis(points: np.ndarray, position, normal, area, weights, visible: 
     radiance 1: `encoding.emitter_sh`'s terms (with the patches' `pieces` near them), each patch seen
     where row `ray[e]` of `visible` (C, P) says so, summed once per emitter instead of per edit."""
     lights = (position, normal, area, np.asarray(weights)[:, None])
-    return encoding.emitter_sh_rows(lights, points, np.asarray(visible)[np.asarray(ray, np.int64)], pieces)[0]
+    return encoding.emitter_sh_rows(lights, points, visible, pieces, np.asarray(ray, np.int64))[0]

@@ -39,9 +39,9 @@ def sun_irradiance(sun, visible: np.ndarray | None, normals: np.ndarray) -> np.n
 
 
 def emitter_irradiance_rows(lights, points: np.ndarray, normals: np.ndarray, visible: np.ndarray | None = None,
-                            pieces: Pieces | None = None) -> np.ndarray:
+                            pieces: Pieces | None = None, rows: np.ndarray | None = None) -> np.ndarray:
     """(C, K) float32 irradiance straight from the emitting patches at surface points (K, 3) facing
-    `normals` (K, 3): `emitter_sh_rows`' terms (the same solid angles, pieces and (E, K) visibility rows),
+    `normals` (K, 3): `emitter_sh_rows`' terms (the same solid angles, pieces and visibility rows),
     each times the receiver's cosine instead of projected on SH. Read from the probes' SH instead, a
     surface beside a lamp misses the light its cosine catches: L2 SH spread a small bright lamp over the
     sphere, and the lattice's interpolation blurs its 1 / r^2 over a cell."""
@@ -49,12 +49,12 @@ def emitter_irradiance_rows(lights, points: np.ndarray, normals: np.ndarray, vis
     if len(lights[2]) == 0 or len(points) == 0:
         return out
     f32 = [np.ascontiguousarray(np.asarray(a).T, np.float32) for a in (points, normals)]
-    _emitter_irradiance(*f32, *kernel_terms(lights, visible, pieces), out)
+    _emitter_irradiance(*f32, *kernel_terms(lights, visible, pieces, rows), out)
     return out
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy", parallel=True)
-def _emitter_irradiance(points, receiver, source, normal, area, radiance, visible, shadowed, near_field, start,
+def _emitter_irradiance(points, receiver, source, normal, area, radiance, visible, rows, shadowed, near_field, start,
                         piece_position, piece_normal, piece_area, piece_gain, near2, out):
     """The terms of `emitter_irradiance_rows`: points and receiver normals (3, K), out (C, K)."""
     count = points.shape[1]
@@ -72,14 +72,14 @@ def _emitter_irradiance(points, receiver, source, normal, area, radiance, visibl
                 omega, x, y, z = solid_angle(sx - points[0, p], sy - points[1, p], sz - points[2, p], mx, my, mz,
                                               flux, clamp)
                 cosine = max(x * receiver[0, p] + y * receiver[1, p] + z * receiver[2, p], zero)
-                w[i] = omega * cosine * (visible[e, p] if shadowed else np.float32(1.0))
+                w[i] = omega * cosine * (visible[rows[e], p] if shadowed else np.float32(1.0))
             if start[e + 1] > start[e]:   # points near the patch: its pieces instead
                 for i in range(n):
                     p = first + i
                     x, y, z = sx - points[0, p], sy - points[1, p], sz - points[2, p]
                     if x * x + y * y + z * z >= near2:
                         continue
-                    seen = visible[e, p] if shadowed else np.float32(1.0)
+                    seen = visible[rows[e], p] if shadowed else np.float32(1.0)
                     total = zero
                     if seen != zero:
                         for s in range(start[e], start[e + 1]):
