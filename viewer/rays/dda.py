@@ -41,6 +41,15 @@ def voxel_of(keys: np.ndarray, key: np.ndarray) -> np.ndarray:
     return np.where(keys[where] == key, where, -1)
 
 
+def key_table(keys: np.ndarray, n: int) -> np.ndarray:
+    """(n^3 x 6,) int64: the voxel of each key (flat cell x 6 + facing) of a grid's voxel `keys`, -1 for
+    none; the first voxel of a key, should two share it."""
+    keys = np.asarray(keys, np.int64)
+    table = np.full(n ** 3 * 6, -1, np.int64)
+    table[keys[::-1]] = np.arange(len(keys) - 1, -1, -1)
+    return table
+
+
 def _firsts(cell: np.ndarray, n: int) -> np.ndarray:
     """(n^3 + 1,) where each cell's entries start, for entries sorted by flat `cell`."""
     return np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=n ** 3))]).astype(np.int64)
@@ -106,9 +115,7 @@ class Cells:
             first = _firsts(xyz[:, 0] + n * (xyz[:, 1] + n * xyz[:, 2]), n)
         else:
             first, triangle = moved_listing(previous.first, previous.triangle, moved, scene, lo, h, n)
-        keys = np.asarray(voxelization.keys, np.int64)
-        table = np.full(n ** 3 * 6, -1, np.int64)
-        table[keys[::-1]] = np.arange(len(keys) - 1, -1, -1)   # the first voxel of a key, should two share it
+        table = key_table(voxelization.keys, n)
         voxel = np.empty(len(triangle), np.int64)
         entry_voxels(first, np.asarray(triangle, np.int64), face_facing(scene.face_normals), table, n, BACKFACE, voxel)
         return Cells(lo, h, n, first, np.asarray(triangle, np.int64), voxel, *scene.edges, largest)
@@ -178,7 +185,8 @@ def _axis_setup(o, d, lo, h, c):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _cell_of(x, lo, h, n):
+def cell_of(x, lo, h, n):
+    """The cell along one axis of the coordinate `x`, clipped to the grid."""
     return min(max(int(np.floor((x - lo) / h)), 0), n - 1)
 
 
@@ -195,7 +203,7 @@ def march(ox, oy, oz, dx, dy, dz, t_end, cells, cells_out):
     t, ok = _enter(ox, oy, oz, dx, dy, dz, lo, h, n)
     if not ok or t > t_end:
         return MISS, 0.0 if recording else np.inf
-    cx, cy, cz = _cell_of(ox + t * dx, lo[0], h, n), _cell_of(oy + t * dy, lo[1], h, n), _cell_of(oz + t * dz, lo[2], h, n)
+    cx, cy, cz = cell_of(ox + t * dx, lo[0], h, n), cell_of(oy + t * dy, lo[1], h, n), cell_of(oz + t * dz, lo[2], h, n)
     sx, nx, ddx = _axis_setup(ox, dx, lo[0], h, cx)
     sy, ny, ddy = _axis_setup(oy, dy, lo[1], h, cy)
     sz, nz, ddz = _axis_setup(oz, dz, lo[2], h, cz)

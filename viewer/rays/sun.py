@@ -24,17 +24,17 @@ SUN_SIDE = 3
 rooms only 0.5 points further."""
 
 
-def sun_starts(position: np.ndarray, normal: np.ndarray, cell_lo: np.ndarray, size: float,
+def sun_starts(base: np.ndarray, normal: np.ndarray, cell_lo: np.ndarray, size: float,
                offset: float) -> np.ndarray:
     """(S, K, 3) the points across each voxel where its sun rays start: a SUN_SIDE x SUN_SIDE grid on the
-    plane through `position` + `offset` `normal` (K, 3), spanning the voxel's `size`, kept within its cell
-    (`cell_lo` (K, 3)) and `offset` of it."""
+    plane through its surface point `base` (K, 3) across its `normal` (K, 3), spanning the voxel's `size`,
+    kept within its cell (`cell_lo` (K, 3)) and `offset` of it."""
     normal = np.asarray(normal, np.float64)
     helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     t = np.cross(normal, helper)
     t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
     b = np.cross(normal, t)
-    base = np.asarray(position, np.float64) + offset * normal
+    base = np.asarray(base, np.float64)
     steps = (np.arange(SUN_SIDE) + 0.5) / SUN_SIDE - 0.5
     lo, hi = np.asarray(cell_lo, np.float64) - offset, np.asarray(cell_lo, np.float64) + size + offset
     return np.stack([np.clip(base + size * (u * t + v * b), lo, hi) for u in steps for v in steps])
@@ -60,7 +60,6 @@ def sun_cover(blockers, base: np.ndarray, starts: np.ndarray, direction: np.ndar
     return seen.reshape(s, k).mean(axis=0)
 
 
-
 def voxel_sun_cover(blockers, voxels: VoxelGrid, direction: np.ndarray) -> np.ndarray:
     """(K,) `sun_cover` of the voxels that face the sun (0 for the others, which it does not light), their
     rays started SURFACE_OFFSET voxels in front of them as every ray from a voxel starts."""
@@ -69,7 +68,8 @@ def voxel_sun_cover(blockers, voxels: VoxelGrid, direction: np.ndarray) -> np.nd
     out = np.zeros(voxels.count)
     if len(rows):
         h = voxels.voxel_size
-        position, normal = voxels.position[rows], voxels.normal[rows]
-        starts = sun_starts(position, normal, voxels.lo + voxels.coords[rows] * h, h, SURFACE_OFFSET * h)
-        out[rows] = sun_cover(blockers, position + SURFACE_OFFSET * h * normal, starts, direction)
+        normal = voxels.normal[rows]
+        base = voxels.position[rows] + SURFACE_OFFSET * h * normal
+        starts = sun_starts(base, normal, voxels.lo + voxels.coords[rows] * h, h, SURFACE_OFFSET * h)
+        out[rows] = sun_cover(blockers, base, starts, direction)
     return out

@@ -34,6 +34,9 @@ hit on a cell's boundary is the first cell's (the one the ray crossed first, as 
 single precision (about 1e-6 voxels at the grid's far side) cannot move it across."""
 
 
+HAIR = 1e-6
+"""Cells by which `_held` widens each triangle's box and `_empty_box` each segment's, so that a point on a
+cell's face counts both cells."""
 HELD_EVERYWHERE = np.zeros((0, 0, 0), np.int32)
 """An `occupied` table of no cells: `_empty_box` finds no box empty, so every segment is traced."""
 
@@ -241,15 +244,14 @@ def _pairs_clear(query, scene, a, b, occupied, lo, h, out):
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _held(v0, e1, e2, lo, h, held):
-    """Mark in `held` (N, N, N) [z, y, x] every cell of each triangle's bounding box (a millionth of a cell
-    wider)."""
-    n = held.shape[0]
+    """Mark in `held` (N, N, N) [z, y, x] every cell of each triangle's bounding box (HAIR wider)."""
+    n, hair = held.shape[0], HAIR * h
     for t in numba.prange(v0.shape[0]):
         low, high = np.empty(3, np.int64), np.empty(3, np.int64)
         for axis in range(3):
             a, b, c = v0[t, axis], v0[t, axis] + e1[t, axis], v0[t, axis] + e2[t, axis]
-            low[axis] = min(max(int(np.floor((min(a, b, c) - lo[axis]) / h - 1e-6)), 0), n - 1)
-            high[axis] = min(max(int(np.floor((max(a, b, c) - lo[axis]) / h + 1e-6)), 0), n - 1)
+            low[axis] = dda.cell_of(min(a, b, c) - hair, lo[axis], h, n)
+            high[axis] = dda.cell_of(max(a, b, c) + hair, lo[axis], h, n)
         for z in range(low[2], high[2] + 1):
             for y in range(low[1], high[1] + 1):
                 for x in range(low[0], high[0] + 1):
@@ -258,18 +260,15 @@ def _held(v0, e1, e2, lo, h, held):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _empty_box(occupied, lo, h, ax, ay, az, bx, by, bz):
-    """Whether no cell of the box around points a and b (widened by a millionth of a cell, so that a point on
-    a cell's face counts both cells) holds a triangle: eight lookups of the summed-volume table."""
+    """Whether no cell of the box around points a and b (HAIR wider) holds a triangle: eight lookups of the
+    summed-volume table."""
     n = occupied.shape[0] - 1
     if n < 1:
         return False
-    hair = 1e-6
-    x0 = min(max(int(np.floor((min(ax, bx) - lo[0]) / h - hair)), 0), n - 1)
-    y0 = min(max(int(np.floor((min(ay, by) - lo[1]) / h - hair)), 0), n - 1)
-    z0 = min(max(int(np.floor((min(az, bz) - lo[2]) / h - hair)), 0), n - 1)
-    x1 = min(max(int(np.floor((max(ax, bx) - lo[0]) / h + hair)), 0), n - 1) + 1
-    y1 = min(max(int(np.floor((max(ay, by) - lo[1]) / h + hair)), 0), n - 1) + 1
-    z1 = min(max(int(np.floor((max(az, bz) - lo[2]) / h + hair)), 0), n - 1) + 1
+    hair = HAIR * h
+    x0, x1 = dda.cell_of(min(ax, bx) - hair, lo[0], h, n), dda.cell_of(max(ax, bx) + hair, lo[0], h, n) + 1
+    y0, y1 = dda.cell_of(min(ay, by) - hair, lo[1], h, n), dda.cell_of(max(ay, by) + hair, lo[1], h, n) + 1
+    z0, z1 = dda.cell_of(min(az, bz) - hair, lo[2], h, n), dda.cell_of(max(az, bz) + hair, lo[2], h, n) + 1
     total = (occupied[z1, y1, x1] - occupied[z0, y1, x1] - occupied[z1, y0, x1] - occupied[z1, y1, x0]
              + occupied[z0, y0, x1] + occupied[z0, y1, x0] + occupied[z1, y0, x0] - occupied[z0, y0, x0])
     return total == 0
@@ -329,9 +328,9 @@ def _keyed_voxel(ox, oy, oz, dx, dy, dz, t, lo, h, n, facing, table):
     voxel, -1 for none), else in the nearest neighbouring cell that has one, else BACKFACE: the voxel
     `dda.Cells.of` gives the face's entry there."""
     s = t - STEP_BACK * h
-    cx = min(max(int(np.floor((ox + s * dx - lo[0]) / h)), 0), n - 1)
-    cy = min(max(int(np.floor((oy + s * dy - lo[1]) / h)), 0), n - 1)
-    cz = min(max(int(np.floor((oz + s * dz - lo[2]) / h)), 0), n - 1)
+    cx = dda.cell_of(ox + s * dx, lo[0], h, n)
+    cy = dda.cell_of(oy + s * dy, lo[1], h, n)
+    cz = dda.cell_of(oz + s * dz, lo[2], h, n)
     for k in range(NEIGHBOUR_ORDER.shape[0]):
         x, y, z = cx + NEIGHBOUR_ORDER[k, 0], cy + NEIGHBOUR_ORDER[k, 1], cz + NEIGHBOUR_ORDER[k, 2]
         if 0 <= x < n and 0 <= y < n and 0 <= z < n:
@@ -350,9 +349,7 @@ def keyed_cells(grid, keys: np.ndarray, scene) -> dda.Cells:
     from viewer.rays.voxels import face_facing
 
     n = int(grid.resolution)
-    keys = np.asarray(keys, np.int64)
-    table = np.full(n ** 3 * 6, -1, np.int64)
-    table[keys[::-1]] = np.arange(len(keys) - 1, -1, -1)   # the first voxel of a key, should two share it
+    table = dda.key_table(keys, n)
     facing = face_facing(scene.face_normals).astype(np.int64)
     return dda.Cells(np.asarray(grid.lo, np.float64), float(grid.voxel_size), n, np.zeros(0, np.int64), facing,
                      table, *scene.edges)
