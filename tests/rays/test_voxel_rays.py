@@ -169,6 +169,6 @@ def test_segments_whose_cells_hold_no_triangle_are_clear_untraced():
     np.testing.assert_array_equal(found, blockers.segments_clear(a, b).reshape(found.shape))
     assert 0 < found.mean() < 1   # the block shadows some
     table, cells = blockers.occupied, blockers.cells
-    untraced = [voxel_rays._empty_box(table, cells.lo, cells.h, *p, *e) for p, e in zip(a, b)]
+    untraced = [voxel_rays.empty_box(table, cells.lo, cells.h, *p, *e) for p, e in zip(a, b)]
     assert np.mean(untraced) > 0.3
     assert not np.any(np.asarray(untraced) & (found.ravel() == 0))

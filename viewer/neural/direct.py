@@ -12,6 +12,7 @@ import numba
 import numpy as np
 
 from viewer.probes import sh
+from viewer.rays.lattice_sight import LatticeSight, sweeps
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import VoxelGrid, face_facing
 
@@ -158,6 +159,17 @@ def patch_visibility(blockers: VoxelRays, points: np.ndarray, position: np.ndarr
         return np.ones((len(points), 0), np.float32)
     target, cluster = shadow_targets(blockers, position, normal, lo, spacing)
     return blockers.pairs_clear(points, target)[:, cluster]
+
+
+def lattice_visibility(blockers: VoxelRays, points: np.ndarray, position: np.ndarray, normal: np.ndarray,
+                       lo: np.ndarray, spacing: np.ndarray) -> np.ndarray:
+    """`patch_visibility` from the probes of the lattice `points` (m^3, 3) over the scene's bounds: swept
+    over the lattice, rays traced at shadows' edges (`viewer.rays.lattice_sight`) where Embree traces
+    them; else every segment."""
+    if len(position) == 0 or not sweeps(blockers):
+        return patch_visibility(blockers, points, position, normal, lo, spacing)
+    target, cluster = shadow_targets(blockers, position, normal, lo, spacing)
+    return LatticeSight(blockers, points, lo, spacing).visibility(target)[0].T[:, cluster]
 
 
 def shadow_targets(blockers: VoxelRays, position: np.ndarray, normal: np.ndarray, lo: np.ndarray,

@@ -61,7 +61,8 @@ from viewer.neural.irradiance import (emitter_irradiance_rows, sun_irradiance, s
                                       voxel_direct)
 from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBILITY_CELLS,  # noqa: F401
                                   Pieces, emitter_sh, emitter_sh_rows, emitting_patches, facings, lattice_cells,
-                                  patch_pieces, patch_visibility, shadow_targets, splat, sun_sh, sun_visibility)
+                                  lattice_visibility, patch_pieces, patch_visibility, shadow_targets, splat, sun_sh,
+                                  sun_visibility)
 
 VERSION = 13
 """Bump when the features change: a model card records the version its network was trained on, and
@@ -318,7 +319,7 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
     lights = emitting_patches(flat, voxels)
     visible = None
     if blockers is not None:
-        visible = patch_visibility(blockers, points, lights[0], lights[1], lo, spacing)
+        visible = lattice_visibility(blockers, points, lights[0], lights[1], lo, spacing)
     pieces = patch_pieces(flat, voxels, lights[3], NEAR_PIECES * spacing.max())
     direct = emitter_sh(lights, points, visible, pieces)
     direct += sun_sh(sun, blockers, points)  # (P, 9, 3)

@@ -11,6 +11,7 @@ from scipy import sparse
 from viewer.neural import encoding
 from viewer.neural.encoding import CHANNELS
 from viewer.rays import moved_faces
+from viewer.rays.lattice_sight import LatticeSight, sweeps
 from viewer.rays.sun import voxel_sun_cover
 from viewer.rays.voxel_rays import VoxelRays, meets_box
 from viewer.rays.voxels import VoxelGrid
@@ -79,15 +80,23 @@ class LatticeShadows:
         self.blockers, self.points, self.lo, self.spacing = blockers, points, lo, spacing
         self.across = across
         self._sun: tuple[bytes, np.ndarray] | None = None
-        self._rows: dict[bytes, np.ndarray] = {}
-        """Each traced ray end's visibility (P,), for the shadows of the next move."""
+        self._rows: dict[bytes, tuple[np.ndarray, np.ndarray | None]] = {}
+        """Each ray end's visibility (P,) and which of its segments were traced (None: all), for the shadows
+        of the next move."""
+        self._block = None
+        """The ray ends of the last swept call, its rows and traced segments: the next move's, as they are,
+        where it asks the same ends (a dragged object: no copy of a large lamp's rows)."""
         self._before = None
-        """(box lo, box hi, the previous shadows' rows, their sun) when those answer every ray outside the
-        box."""
+        """(box lo, box hi, the previous shadows' rows, their sun, their last block) when those answer every
+        ray outside the box."""
         if previous is not None and np.array_equal(previous.points, points):
             box = moved_box(previous.blockers, blockers) if box is None else box
             if box is not None:
-                self._before = (*box, previous._rows, previous._sun)
+                self._before = (*box, previous._rows, previous._sun, previous._block)
+        self._sight: LatticeSight | None = None
+        """The lattice's edges, where the probes' visibility is swept (`viewer.rays.lattice_sight`): made
+        at the first ray end asked, from the previous shadows' where only the box's triangles moved."""
+        self._previous_sight = None if self._before is None else previous._sight
         self.retraced = 0
         """Rays traced again through the moved box (the others kept) by the last call."""
 
@@ -108,13 +117,20 @@ class LatticeShadows:
             return np.zeros((min(len(position), 1), 3)), np.zeros(len(position), np.int64)
         return encoding.shadow_targets(self.blockers, position, normal, self.lo, self.spacing)
 
+    @property
+    def swept(self) -> bool:
+        """Whether these shadows sweep the lattice (`lattice_sight`) rather than trace every segment: for
+        the probes' lattice (not `across` voxels), with Embree."""
+        return self.across is None and sweeps(self.blockers)
+
     def visibility(self, target: np.ndarray) -> np.ndarray:
-        """(C, P) float32: 1 where probe p sees the end of ray c, as `encoding.patch_visibility` traces
-        it (the same `VoxelRays.pairs_clear`, each pair on its own: any subset of the clusters gives their
-        columns of the whole)."""
+        """(C, P) float32: 1 where probe p sees the end of ray c, as `encoding.lattice_visibility` finds it
+        (each ray end on its own: any subset of the clusters gives their columns of the whole)."""
         if self.blockers is None:
             return np.ones((len(target), len(self.points)), np.float32)
         target = np.asarray(target, np.float64).reshape(-1, 3)
+        if self.swept:
+            return self._swept(target)
         out = np.empty((len(target), len(self.points)), np.float32)
         fresh, kept = [], []
         self.retraced = 0
@@ -123,7 +139,7 @@ class LatticeShadows:
             if row is None:
                 fresh.append(c)
             else:
-                out[c] = row
+                out[c] = row[0]
                 kept.append(c)
         if kept:   # the kept rows' rays through the moved box, traced again in one call
             near = _segments_meet_box(self.points, target[kept], self._before[0], self._before[1])
@@ -136,7 +152,33 @@ class LatticeShadows:
             out[fresh] = self.blockers.pairs_clear(self.points, target[fresh]).T
             self.retraced += len(fresh) * len(self.points)
         for c, end in enumerate(target):
-            self._rows[end.tobytes()] = out[c].copy()
+            self._rows[end.tobytes()] = (out[c].copy(), None)
+        return out
+
+    def _swept(self, target: np.ndarray) -> np.ndarray:
+        """`visibility` swept over the lattice, the previous shadows' traced segments that miss the moved
+        box kept."""
+        if self._sight is None:
+            box = None if self._before is None else self._before[:2]
+            self._sight = LatticeSight(self.blockers, self.points, self.lo, self.spacing, self._previous_sight, box)
+            self._previous_sight = None
+        before = None
+        keys = [end.tobytes() for end in target]
+        if self._before is not None and self._before[4] is not None and self._before[4][0] == keys:
+            before = (*self._before[:2], *self._before[4][1:], np.ones(len(target), np.bool_))   # as they are
+        elif self._before is not None:
+            rows = np.zeros((len(target), len(self.points)), np.float32)
+            traced = np.zeros(rows.shape, np.bool_)
+            kept = np.zeros(len(target), np.bool_)
+            for c, end in enumerate(target):
+                row = self._before[2].get(end.tobytes())
+                if row is not None:
+                    rows[c], traced[c], kept[c] = row[0], True if row[1] is None else row[1], True
+            before = (*self._before[:2], rows, traced, kept)
+        out, traced, self.retraced = self._sight.visibility(target, before)
+        for c, key in enumerate(keys):
+            self._rows[key] = (out[c], traced[c])
+        self._block = (keys, out, traced)
         return out
 
     def sun_visibility(self, direction: np.ndarray) -> np.ndarray:

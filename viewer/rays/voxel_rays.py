@@ -35,10 +35,10 @@ single precision (about 1e-6 voxels at the grid's far side) cannot move it acros
 
 
 HAIR = 1e-6
-"""Cells by which `_held` widens each triangle's box and `_empty_box` each segment's, so that a point on a
+"""Cells by which `_held` widens each triangle's box and `empty_box` each segment's, so that a point on a
 cell's face counts both cells."""
 HELD_EVERYWHERE = np.zeros((0, 0, 0), np.int32)
-"""An `occupied` table of no cells: `_empty_box` finds no box empty, so every segment is traced."""
+"""An `occupied` table of no cells: `empty_box` finds no box empty, so every segment is traced."""
 
 
 class VoxelRays:
@@ -69,6 +69,11 @@ class VoxelRays:
         out = np.zeros((c.n + 1, c.n + 1, c.n + 1), np.int32)
         out[1:, 1:, 1:] = held.astype(np.int32).cumsum(0).cumsum(1).cumsum(2)
         return out
+
+    def box_table(self, segments: int) -> np.ndarray:
+        """The table `empty_box` reads for `segments` segments: `occupied` where they outnumber the
+        triangles, since it costs a pass over them (12 ms for a million), else HELD_EVERYWHERE."""
+        return self.occupied if segments > 4 * len(self.cells.v0) else HELD_EVERYWHERE
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """(R,) int64: the voxel each ray o + t d (t > 0, unit d) meets first, dda.MISS or dda.BACKFACE."""
@@ -159,10 +164,8 @@ class VoxelRays:
             return dda.pairs_clear(self.cells, a, b)
         out = np.empty((len(a), len(b)), np.float32)
         if self.caster.direct is not None:
-            # the boxes' table costs a pass over the triangles (12 ms for a million): worth it where the
-            # segments outnumber them
-            table = self.occupied if len(a) * len(b) > 4 * len(self.cells.v0) else HELD_EVERYWHERE
-            _pairs_clear(*self.caster.direct.occlusion, a, b, table, self.cells.lo, self.cells.h, out)
+            _pairs_clear(*self.caster.direct.occlusion, a, b, self.box_table(len(a) * len(b)), self.cells.lo,
+                         self.cells.h, out)
             return out
         rows = max(1, RAYS_PER_CALL // max(len(b), 1))
         for start in range(0, len(a), rows):
@@ -233,7 +236,7 @@ def _pairs_clear(query, scene, a, b, occupied, lo, h, out):
         for j in range(b.shape[0]):
             dx, dy, dz = b[j, 0] - a[i, 0], b[j, 1] - a[i, 1], b[j, 2] - a[i, 2]
             length = np.sqrt(dx * dx + dy * dy + dz * dz)
-            if length <= 0.0 or _empty_box(occupied, lo, h, a[i, 0], a[i, 1], a[i, 2], b[j, 0], b[j, 1], b[j, 2]):
+            if length <= 0.0 or empty_box(occupied, lo, h, a[i, 0], a[i, 1], a[i, 2], b[j, 0], b[j, 1], b[j, 2]):
                 out[i, j] = 1.0
                 continue
             inv = 1.0 / length
@@ -259,7 +262,7 @@ def _held(v0, e1, e2, lo, h, held):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _empty_box(occupied, lo, h, ax, ay, az, bx, by, bz):
+def empty_box(occupied, lo, h, ax, ay, az, bx, by, bz):
     """Whether no cell of the box around points a and b (HAIR wider) holds a triangle: eight lookups of the
     summed-volume table."""
     n = occupied.shape[0] - 1

@@ -59,7 +59,7 @@ def scene_rows(scene) -> dict:
     lights = encoding.emitting_patches(flat, grid)
     pieces = encoding.patch_pieces(flat, grid, lights[3], encoding.NEAR_PIECES * spacing.max())
     probes = ProbeGrid.positions_for(lo, hi, m).reshape(-1, 3)
-    visible = encoding.patch_visibility(blockers, probes, lights[0], lights[1], lo, spacing)
+    visible = encoding.lattice_visibility(blockers, probes, lights[0], lights[1], lo, spacing)
     direct = encoding.emitter_sh(lights, probes, visible, pieces) + encoding.sun_sh(scene.sun, blockers, probes)
     once = encoding.Bounce(grid, lo, hi, m)
     once.sh(grid.albedo, direct)
