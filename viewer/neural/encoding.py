@@ -34,7 +34,8 @@ Layout: inputs (3, CHANNELS, M, M, M) float32, indexed [channel of colour, featu
 same lattice as the probes (`ProbeGrid.positions_for(lo, hi, M)`): cell (i, j, k) of the lattice holds
 probe (i, j, k) at its centre.
 
-The direct light's parts are viewer/neural/direct.py, the one bounce viewer/neural/bounce.py.
+The direct light's parts are viewer/neural/direct.py (its shadows viewer/neural/shadows.py), the one bounce
+viewer/neural/bounce.py.
 """
 
 from __future__ import annotations
@@ -59,10 +60,10 @@ from viewer.neural.seen import (INTERLEAVE, SEED, SEEN_BOUNCES, SEEN_RAYS, TAIL_
                                 seen_light)
 from viewer.neural.irradiance import (emitter_irradiance_rows, sun_irradiance, surface_points,  # noqa: F401
                                       voxel_direct)
-from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, SHADOW_OFFSET, VISIBILITY_CELLS,  # noqa: F401
-                                  Pieces, emitter_sh, emitter_sh_rows, emitting_patches, facings, lattice_cells,
-                                  lattice_visibility, patch_pieces, patch_visibility, shadow_targets, splat, sun_sh,
-                                  sun_visibility)
+from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, Pieces, emitter_sh,  # noqa: F401
+                                  emitter_sh_rows, emitting_patches, facings, lattice_cells, patch_pieces, splat)
+from viewer.neural.shadows import (SHADOW_OFFSET, VISIBILITY_CELLS, lattice_visibility,  # noqa: F401
+                                   patch_visibility, shadow_targets, sun_sh, sun_visibility)
 
 VERSION = 13
 """Bump when the features change: a model card records the version its network was trained on, and

@@ -15,7 +15,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from viewer.neural.direct import SH_BLOCK, Pieces, kernel_terms, patch_visibility, solid_angle
+from viewer.neural.direct import SH_BLOCK, Pieces, kernel_terms, solid_angle
+from viewer.neural.shadows import patch_visibility
 from viewer.rays.sun import voxel_sun_cover
 from viewer.rays.voxels import SURFACE_OFFSET, VoxelGrid
 
@@ -103,7 +104,7 @@ def voxel_direct(voxels: VoxelGrid, lights, pieces: Pieces, blockers, sun, lo: n
                  spacing: np.ndarray) -> np.ndarray:
     """(K, 3) the irradiance each voxel receives straight from the emitting patches `lights`
     (`encoding.emitting_patches`, with their `pieces`) and the sun, shadowed by `blockers` (None:
-    nothing casts a shadow): one ray per voxel and cluster of patches (`direct.shadow_targets`, as the
+    nothing casts a shadow): one ray per voxel and cluster of patches (`shadows.shadow_targets`, as the
     probes'), nine towards the sun from across the voxel (`voxel_sun_cover`)."""
     points = surface_points(voxels)
     visible = None
