@@ -1,6 +1,8 @@
 """The network's input encoding: the symmetries the design relies on, and the direct-light feature's
 physics."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -91,6 +93,31 @@ def test_a_probe_near_a_lamp_sums_its_pieces():
     # beyond `near` the lamp is one term again
     far = np.array([[0.0, -0.5, 0.0]])
     np.testing.assert_allclose(encoding.emitter_sh(lights, far, pieces=pieces), encoding.emitter_sh(lights, far))
+
+
+def test_between_near_all_and_near_a_probe_sums_the_lamps_quarters():
+    """A lamp one patch wide (0.4, `near` NEAR_PIECES patches), a probe 1.35 below it: past NEAR_ALL
+    patches, it sums the lamp's four quarters, within 1% of the pieces' sum, which one term misses by
+    more; the quarters keep the pieces' area and power."""
+    from viewer.neural.direct import NEAR_ALL, NEAR_PIECES, quartered
+
+    lamp = ceiling_lamp(half_size=0.2, height=0.95, radiance=10.0)
+    scene = Scene.concatenate("lamp-above-floor", [lamp, box(half_size=1.0, centre=(0, -2.0, 0), name="block")])
+    voxels = voxelize(scene, 32)
+    cell = np.zeros(voxels.count, np.int64)
+    lights = encoding.emitting_patches(cell, voxels)
+    pieces = encoding.patch_pieces(cell, voxels, lights[3], near=0.4 * NEAR_PIECES)
+    quarters = quartered(pieces, lights[0], lights[1])
+    assert quarters.start.tolist() == [0, 4]
+    assert quarters.area.sum() == pytest.approx(pieces.area.sum())
+    assert np.sum(quarters.area * quarters.gain) == pytest.approx(np.sum(pieces.area * pieces.gain))
+    probe = np.array([[0.05, -0.4, -0.03]])
+    assert 0.4 * NEAR_ALL < np.linalg.norm(probe - lights[0]) < 0.4 * NEAR_PIECES
+    summed = encoding.emitter_sh(lights, probe, pieces=pieces)[0, :, 0]
+    every = encoding.emitter_sh(lights, probe, pieces=replace(pieces, near=10.0))[0, :, 0]   # all pieces
+    whole = encoding.emitter_sh(lights, probe)[0, :, 0]
+    assert np.abs(summed - every).max() < 0.01 * every[0]
+    assert np.abs(whole - every).max() > 2 * np.abs(summed - every).max()
 
 
 def test_the_gather_sums_every_patch_at_every_probe_with_its_shadow():

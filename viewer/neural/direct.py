@@ -56,6 +56,14 @@ the light; paper-test, CornellBox-Original, a validation room, a dark room), the
 8.8 / 8.2 / 24 / 46% off as patches alone, 4.8 / 4.8 / 6.9 / 10.4% with pieces within 3 cells, 3.4 /
 3.5 / 6.4 / 9.9% within 6, where the solver's is 3.0 / 3.2 / 6.2 / 10.1%. It costs a new Cornell box's
 encoding 3-4 ms (512 pieces), and 50-180 ms in rooms lit by whole glowing walls (up to 15,000)."""
+NEAR_ALL = 3.0
+"""Distance, in lattice cells, within which a probe's SH sums every piece of a patch; between it and
+NEAR_PIECES, the patch's quarters (`quartered`): a quarter of a cell seen from 3-6 cells away is as
+small in the sky as a whole patch from 6-12, where one term serves. On val-00009 (a ceiling lamp of
+1.2 x 0.6 m, 10,496 pieces) the SH 25 -> 16 ms; all the light against Mitsuba moved by at most 0.1
+points in the 26 scenes of `viewer.training.evaluate`, the reflected light not at all. Within 2 cells
+instead: 12 ms, and up to 0.3 points."""
+
 
 
 @dataclass(frozen=True)
@@ -91,6 +99,37 @@ class Pieces:
         start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         take = np.arange(start[-1]) + np.repeat(self.start[patches] - start[:-1], counts)
         return Pieces(start, self.position[take], self.normal[take], self.area[take], self.gain[take], self.near)
+
+
+def quartered(pieces: Pieces, centre: np.ndarray, normal: np.ndarray) -> Pieces:
+    """Each patch's pieces merged by the quarter of the patch they lie in (either side of its centre
+    `centre` (E, 3) along the two axes across its facing, from `normal` (E, 3)): up to four pieces a patch,
+    each at its pieces' centre of power (area x gain), with their area, their mean normal and the gain
+    of their power over their area."""
+    counts = np.diff(pieces.start)
+    patch = np.repeat(np.arange(len(counts)), counts)
+    if len(patch) == 0:
+        return pieces
+    axis = np.argmax(np.abs(normal), axis=1)[patch]
+    offset = pieces.position - centre[patch]
+    rows = np.arange(len(patch))
+    across = (offset[rows, (axis + 1) % 3] > 0).astype(np.int64) * 2 + (offset[rows, (axis + 2) % 3] > 0)
+    key, group = np.unique(patch * 4 + across, return_inverse=True)
+    group = group.ravel()
+    count = len(key)
+    power = pieces.area * pieces.gain
+
+    def total(values):
+        return np.bincount(group, values, minlength=count)
+
+    area, flux = total(pieces.area), total(power)
+    position = np.stack([total(power * pieces.position[:, a]) for a in range(3)], 1) / np.where(flux > 0, flux, 1)[:, None]
+    position = np.where(flux[:, None] > 0, position,
+                        np.stack([total(pieces.area * pieces.position[:, a]) for a in range(3)], 1) / area[:, None])
+    mean_normal = np.stack([total(pieces.area * pieces.normal[:, a]) for a in range(3)], 1)
+    mean_normal /= np.maximum(np.linalg.norm(mean_normal, axis=1, keepdims=True), 1e-12)
+    start = np.concatenate([[0], np.cumsum(np.bincount(key // 4, minlength=len(counts)))]).astype(np.int64)
+    return Pieces(start, position, mean_normal, area, flux / area, pieces.near)
 
 
 def _patch_groups(cell: np.ndarray, voxels: VoxelGrid) -> tuple[np.ndarray, np.ndarray, int]:
@@ -145,9 +184,9 @@ def emitter_sh(lights, points: np.ndarray, visible: np.ndarray | None = None,
                pieces: Pieces | None = None) -> np.ndarray:
     """(P, 9, 3) SH of the light arriving straight from the emitting patches: each patch is a solid
     angle cos_e A / (r^2 + A/pi), seen from the probe if its front faces it, times `visible` (P, E)
-    (`shadows.patch_visibility`; None: nothing in the way). With `pieces`, a probe within `pieces.near` of a
-    patch sums the solid angles of the patch's pieces instead, each from its own direction (the same
-    visibility)."""
+    (`shadows.patch_visibility`; None: nothing in the way). With `pieces`, a probe within `pieces.near` of
+    a patch sums the solid angles of the patch's quarters instead (`quartered`), and within NEAR_ALL /
+    NEAR_PIECES of that the patch's pieces, each from its own direction (the same visibility)."""
     rows = None if visible is None else np.asarray(visible).T
     return emitter_sh_rows(lights, points, rows, pieces).transpose(2, 1, 0).astype(np.float64)
 
@@ -161,8 +200,13 @@ def emitter_sh_rows(lights, points: np.ndarray, visible: np.ndarray | None = Non
     out = np.zeros((np.shape(lights[3])[1], sh.SH_COUNT, len(points)), np.float32)
     if len(lights[2]) == 0:
         return out
-    _emitter_sh(np.ascontiguousarray(np.asarray(points).T, np.float32), *kernel_terms(lights, visible, pieces, rows),
-                out)
+    terms = kernel_terms(lights, visible, pieces, rows)
+    quarters = Pieces.none(len(lights[2])) if pieces is None else quartered(pieces, lights[0], lights[1])
+    parts = [np.ascontiguousarray(a, np.float32) for a in (quarters.position, quarters.normal, quarters.area,
+                                                            quarters.gain)]
+    inner = -1.0 if pieces is None or pieces.near <= 0 else pieces.near * NEAR_ALL / NEAR_PIECES
+    _emitter_sh(np.ascontiguousarray(np.asarray(points).T, np.float32), *terms, quarters.start, *parts,
+                np.float32(inner * inner if inner > 0 else -1.0), out)
     return out
 
 
@@ -194,11 +238,12 @@ blocks, evenly over two)."""
 
 @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy", parallel=True)
 def _emitter_sh(points, source, normal, area, radiance, visible, rows, shadowed, near_field, start, piece_position,
-                piece_normal, piece_area, piece_gain, near2, out):
+                piece_normal, piece_area, piece_gain, near2, quarter_start, quarter_position, quarter_normal,
+                quarter_area, quarter_gain, inner2, out):
     """The terms of `emitter_sh`: points (3, P), radiance (E, C), visible (R, P) and each patch's row of it
-    `rows` (E,) when `shadowed`, the
-    pieces of patch e [start[e], start[e + 1]) summed where the probe is nearer than sqrt(near2), out
-    (C, 9, P).
+    `rows` (E,) when `shadowed`; where the probe is nearer than sqrt(near2) to patch e, the patch's
+    quarters [quarter_start[e], quarter_start[e + 1]) summed instead, and nearer than sqrt(inner2) its
+    pieces [start[e], start[e + 1]); out (C, 9, P).
 
     Each loop over a block's probes holds no branch, so that it vectorizes: the shadows multiply the basis
     in a loop of their own, and the sums gather in a block-local array added to `out` once (a Cornell box's
@@ -212,7 +257,7 @@ def _emitter_sh(points, source, normal, area, radiance, visible, rows, shadowed,
         n = min(SH_BLOCK, count - first)
         b = np.empty((9, SH_BLOCK), np.float32)
         pb = np.empty((9, SH_BLOCK), np.float32)   # the near probes' basis from the pieces
-        near = np.empty(SH_BLOCK, np.int64)
+        inner, outer = np.empty(SH_BLOCK, np.int64), np.empty(SH_BLOCK, np.int64)
         nx, ny, nz = np.empty(SH_BLOCK, np.float32), np.empty(SH_BLOCK, np.float32), np.empty(SH_BLOCK, np.float32)
         sums = np.zeros((channels, 9, SH_BLOCK), np.float32)
         px, py, pz = points[0, first:first + n], points[1, first:first + n], points[2, first:first + n]
@@ -225,29 +270,21 @@ def _emitter_sh(points, source, normal, area, radiance, visible, rows, shadowed,
                 for k in range(9):
                     b[k, i] = zero
                 _add_basis(b, i, weight, x, y, z)
-            if start[e + 1] > start[e]:   # probes near the patch: its pieces instead
-                m = 0
+            if start[e + 1] > start[e]:   # probes near the patch: its quarters, or nearer its pieces, instead
+                m_inner = m_outer = 0
                 for i in range(n):
                     x, y, z = sx - px[i], sy - py[i], sz - pz[i]
-                    if x * x + y * y + z * z < near2:
-                        near[m] = i
-                        m += 1
-                if m > 0:
-                    for j in range(m):
-                        nx[j], ny[j], nz[j] = px[near[j]], py[near[j]], pz[near[j]]
-                        for k in range(9):
-                            pb[k, j] = zero
-                    for s in range(start[e], start[e + 1]):   # the near probes gathered: this loop vectorizes
-                        qx0, qy0, qz0 = piece_position[s, 0], piece_position[s, 1], piece_position[s, 2]
-                        ax, ay, az = piece_normal[s, 0], piece_normal[s, 1], piece_normal[s, 2]
-                        flux, gain = piece_area[s], piece_gain[s]
-                        for j in range(m):
-                            omega, qx, qy, qz = solid_angle(qx0 - nx[j], qy0 - ny[j], qz0 - nz[j], ax, ay, az, flux,
-                                                             flux * near_field)
-                            _add_basis(pb, j, omega * gain, qx, qy, qz)
-                    for j in range(m):
-                        for k in range(9):
-                            b[k, near[j]] = pb[k, j]
+                    d2 = x * x + y * y + z * z
+                    if d2 < inner2:
+                        inner[m_inner] = i
+                        m_inner += 1
+                    elif d2 < near2:
+                        outer[m_outer] = i
+                        m_outer += 1
+                _near_basis(inner, m_inner, px, py, pz, nx, ny, nz, pb, b, start[e], start[e + 1], piece_position,
+                            piece_normal, piece_area, piece_gain, near_field)
+                _near_basis(outer, m_outer, px, py, pz, nx, ny, nz, pb, b, quarter_start[e], quarter_start[e + 1],
+                            quarter_position, quarter_normal, quarter_area, quarter_gain, near_field)
             if shadowed:
                 seen = visible[rows[e], first:first + n]
                 for k in range(9):
@@ -267,6 +304,29 @@ def _emitter_sh(points, source, normal, area, radiance, visible, rows, shadowed,
                 row, part = out[c, k, first:first + n], sums[c, k]
                 for i in range(n):
                     row[i] += part[i]
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy", inline="always")
+def _near_basis(near, m, px, py, pz, nx, ny, nz, pb, b, first, last, position, normal, area, gain, near_field):
+    """b[:, near[j]] for the m probes `near` (indices into px, py, pz): the sum of pieces [first, last),
+    the probes gathered first so that the loop over them vectorizes."""
+    if m == 0:
+        return
+    zero = np.float32(0.0)
+    for j in range(m):
+        nx[j], ny[j], nz[j] = px[near[j]], py[near[j]], pz[near[j]]
+        for k in range(9):
+            pb[k, j] = zero
+    for s in range(first, last):
+        qx0, qy0, qz0 = position[s, 0], position[s, 1], position[s, 2]
+        ax, ay, az = normal[s, 0], normal[s, 1], normal[s, 2]
+        flux, g = area[s], gain[s]
+        for j in range(m):
+            omega, qx, qy, qz = solid_angle(qx0 - nx[j], qy0 - ny[j], qz0 - nz[j], ax, ay, az, flux, flux * near_field)
+            _add_basis(pb, j, omega * g, qx, qy, qz)
+    for j in range(m):
+        for k in range(9):
+            b[k, near[j]] = pb[k, j]
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy", inline="always")
