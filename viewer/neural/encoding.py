@@ -49,6 +49,7 @@ import numpy as np
 
 from viewer.rays import dda
 from viewer.rays.cast import embree_available
+from viewer.rays.lattice_sight import SEED_CELLS, SOFT
 from viewer.rays.sun import SUN_SIDE
 from viewer.rays.voxel_rays import VoxelRays, keyed_cells
 from viewer.probes import sh
@@ -60,7 +61,7 @@ from viewer.neural.seen import (INTERLEAVE, SEED, SEEN_BOUNCES, SEEN_RAYS, TAIL_
                                 seen_light)
 from viewer.neural.irradiance import (emitter_irradiance_rows, sun_irradiance, surface_points,  # noqa: F401
                                       voxel_direct)
-from viewer.neural.direct import (NEAR_FIELD, NEAR_PIECES, Pieces, emitter_sh,  # noqa: F401
+from viewer.neural.direct import (NEAR_ALL, NEAR_FIELD, NEAR_PIECES, Pieces, emitter_sh,  # noqa: F401
                                   emitter_sh_rows, emitting_patches, facings, lattice_cells, patch_pieces, splat)
 from viewer.neural.shadows import (SHADOW_OFFSET, VISIBILITY_CELLS, lattice_visibility,  # noqa: F401
                                    patch_visibility, shadow_targets, sun_sh, sun_visibility)
@@ -102,7 +103,8 @@ CHANNELS = len(FEATURES)
 SETTINGS = {"seen_rays": SEEN_RAYS, "seen_bounces": SEEN_BOUNCES, "tail_ratio_max": TAIL_RATIO_MAX,
             "interleave": INTERLEAVE, "seed": SEED, "read_back": READ_BACK, "bounce_patch": BOUNCE_PATCH,
             "bounce_lattice": BOUNCE_LATTICE, "near_pieces": NEAR_PIECES, "shadow_offset": SHADOW_OFFSET,
-            "visibility_cells": VISIBILITY_CELLS, "sun_side": SUN_SIDE}
+            "visibility_cells": VISIBILITY_CELLS, "sun_side": SUN_SIDE, "near_all": NEAR_ALL,
+            "sight_seed_cells": SEED_CELLS, "sight_soft": SOFT}
 """The constants the features are made with besides their version: a training cache is keyed by them,
 so that features tuned without a version bump are made again rather than read stale."""
 VERSION_CHANNELS = {10: CHANNELS, 11: CHANNELS, 12: CHANNELS, 13: CHANNELS}
