@@ -245,6 +245,8 @@ class Encoder:
         radiances)."""
         position, normal, area, radiance = encoding.emitting_patches(self._geometry.cell, voxels)
         target, cluster = self._shadows.targets(position, normal)
+        if self._shadows.switched:   # the probes' visibility is found another way now: no basis holds
+            self.emitters = []
         keys = _patch_keys(position, normal, area, target[cluster])
         index = {key: e for e, key in enumerate(keys)}
         claimed = np.zeros(len(keys), bool)

@@ -11,7 +11,7 @@ from scipy import sparse
 from viewer.neural import encoding
 from viewer.neural.encoding import CHANNELS
 from viewer.rays import moved_faces
-from viewer.rays.lattice_sight import LatticeSight, sweeps
+from viewer.rays.lattice_sight import SWEEP_ENDS, LatticeSight, sweeps
 from viewer.rays.sun import voxel_sun_cover
 from viewer.rays.voxel_rays import VoxelRays, meets_box
 from viewer.rays.voxels import VoxelGrid
@@ -97,6 +97,14 @@ class LatticeShadows:
         """The lattice's edges, where the probes' visibility is swept (`viewer.rays.lattice_sight`): made
         at the first ray end asked, from the previous shadows' where only the box's triangles moved."""
         self._previous_sight = None if self._before is None else previous._sight
+        self.sweeping: bool | None = None
+        """Whether the probes' visibility is swept (`viewer.rays.lattice_sight`) rather than every segment
+        traced: with Embree, for the probes' lattice (not `across` voxels), where the scene's emitting
+        patches have SWEEP_ENDS ray ends or more (decided at `targets`, else at the first call)."""
+        self.switched = False
+        """Whether the last `targets` changed `sweeping` (an emission edit that changed the count of ray
+        ends): the rows kept so far are dropped, and every basis made from them is stale."""
+        self._previous_sweeping = None if self._before is None else previous.sweeping
         self.retraced = 0
         """Rays traced again through the moved box (the others kept) by the last call."""
 
@@ -115,13 +123,21 @@ class LatticeShadows:
         each patch's cluster (one cluster at the origin when nothing casts a shadow)."""
         if self.blockers is None:
             return np.zeros((min(len(position), 1), 3)), np.zeros(len(position), np.int64)
-        return encoding.shadow_targets(self.blockers, position, normal, self.lo, self.spacing)
+        target, cluster = encoding.shadow_targets(self.blockers, position, normal, self.lo, self.spacing)
+        self._decide(len(target))
+        return target, cluster
 
-    @property
-    def swept(self) -> bool:
-        """Whether these shadows sweep the lattice (`lattice_sight`) rather than trace every segment: for
-        the probes' lattice (not `across` voxels), with Embree."""
-        return self.across is None and sweeps(self.blockers)
+    def _decide(self, ends: int) -> None:
+        """Set `sweeping` for a scene of `ends` ray ends (`switched` where it changes)."""
+        sweeping = self.across is None and sweeps(self.blockers) and ends >= SWEEP_ENDS
+        self.switched = self.sweeping is not None and sweeping != self.sweeping
+        if self.switched:
+            self._rows, self._block = {}, None
+        self.sweeping = sweeping
+
+    def _kept(self):
+        """`_before` where the previous shadows found their rows the same way as these."""
+        return self._before if self._previous_sweeping == self.sweeping else None
 
     def visibility(self, target: np.ndarray) -> np.ndarray:
         """(C, P) float32: 1 where probe p sees the end of ray c, as `encoding.lattice_visibility` finds it
@@ -129,20 +145,23 @@ class LatticeShadows:
         if self.blockers is None:
             return np.ones((len(target), len(self.points)), np.float32)
         target = np.asarray(target, np.float64).reshape(-1, 3)
-        if self.swept:
+        if self.sweeping is None:
+            self._decide(len(target))
+        if self.sweeping:
             return self._swept(target)
+        before = self._kept()
         out = np.empty((len(target), len(self.points)), np.float32)
         fresh, kept = [], []
         self.retraced = 0
         for c, end in enumerate(target):
-            row = None if self._before is None else self._before[2].get(end.tobytes())
+            row = None if before is None else before[2].get(end.tobytes())
             if row is None:
                 fresh.append(c)
             else:
                 out[c] = row[0]
                 kept.append(c)
         if kept:   # the kept rows' rays through the moved box, traced again in one call
-            near = _segments_meet_box(self.points, target[kept], self._before[0], self._before[1])
+            near = _segments_meet_box(self.points, target[kept], before[0], before[1])
             row, probe = np.nonzero(near)
             if len(row):
                 ends = target[kept][row]
@@ -158,23 +177,24 @@ class LatticeShadows:
     def _swept(self, target: np.ndarray) -> np.ndarray:
         """`visibility` swept over the lattice, the previous shadows' traced segments that miss the moved
         box kept."""
+        kept = self._kept()
         if self._sight is None:
-            box = None if self._before is None else self._before[:2]
+            box = None if kept is None else kept[:2]
             self._sight = LatticeSight(self.blockers, self.points, self.lo, self.spacing, self._previous_sight, box)
             self._previous_sight = None
         before = None
         keys = [end.tobytes() for end in target]
-        if self._before is not None and self._before[4] is not None and self._before[4][0] == keys:
-            before = (*self._before[:2], *self._before[4][1:], np.ones(len(target), np.bool_))   # as they are
-        elif self._before is not None:
+        if kept is not None and kept[4] is not None and kept[4][0] == keys:
+            before = (*kept[:2], *kept[4][1:], np.ones(len(target), np.bool_))   # as they are
+        elif kept is not None:
             rows = np.zeros((len(target), len(self.points)), np.float32)
             traced = np.zeros(rows.shape, np.bool_)
-            kept = np.zeros(len(target), np.bool_)
+            reused = np.zeros(len(target), np.bool_)
             for c, end in enumerate(target):
-                row = self._before[2].get(end.tobytes())
+                row = kept[2].get(end.tobytes())
                 if row is not None:
-                    rows[c], traced[c], kept[c] = row[0], True if row[1] is None else row[1], True
-            before = (*self._before[:2], rows, traced, kept)
+                    rows[c], traced[c], reused[c] = row[0], True if row[1] is None else row[1], True
+            before = (*kept[:2], rows, traced, reused)
         out, traced, self.retraced = self._sight.visibility(target, before)
         for c, key in enumerate(keys):
             self._rows[key] = (out[c], traced[c])
