@@ -123,9 +123,10 @@ def quartered(pieces: Pieces, centre: np.ndarray, normal: np.ndarray) -> Pieces:
         return np.bincount(group, values, minlength=count)
 
     area, flux = total(pieces.area), total(power)
-    position = np.stack([total(power * pieces.position[:, a]) for a in range(3)], 1) / np.where(flux > 0, flux, 1)[:, None]
-    position = np.where(flux[:, None] > 0, position,
-                        np.stack([total(pieces.area * pieces.position[:, a]) for a in range(3)], 1) / area[:, None])
+    def centre(weight, of):   # the pieces' centre weighted by `weight`, where `of` (its sums) is not 0
+        return np.stack([total(weight * pieces.position[:, a]) for a in range(3)], 1) / np.where(of > 0, of, 1)[:, None]
+
+    position = np.where(flux[:, None] > 0, centre(power, flux), centre(pieces.area, area))
     mean_normal = np.stack([total(pieces.area * pieces.normal[:, a]) for a in range(3)], 1)
     mean_normal /= np.maximum(np.linalg.norm(mean_normal, axis=1, keepdims=True), 1e-12)
     start = np.concatenate([[0], np.cumsum(np.bincount(key // 4, minlength=len(counts)))]).astype(np.int64)

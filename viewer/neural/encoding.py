@@ -34,8 +34,8 @@ Layout: inputs (3, CHANNELS, M, M, M) float32, indexed [channel of colour, featu
 same lattice as the probes (`ProbeGrid.positions_for(lo, hi, M)`): cell (i, j, k) of the lattice holds
 probe (i, j, k) at its centre.
 
-The direct light's parts are viewer/neural/direct.py (its shadows viewer/neural/shadows.py), the one bounce
-viewer/neural/bounce.py.
+The direct light's parts are viewer/neural/direct.py (its shadows viewer/neural/shadows.py), the one
+bounce viewer/neural/bounce.py.
 """
 
 from __future__ import annotations

@@ -63,7 +63,8 @@ class LatticeSight:
         self.clear = previous.clear.copy() if kept else np.zeros((len(self.points), 27), np.bool_)
         """(P, 27) whether the segment from each probe to each neighbour (offset index (a + 1) x 9 + (b + 1)
         x 3 + (c + 1)) crosses no surface; False past the lattice's faces."""
-        box_lo, box_hi = (np.asarray(box[0], np.float64), np.asarray(box[1], np.float64)) if kept else (np.zeros(3),) * 2
+        box_lo, box_hi = ((np.asarray(box[0], np.float64), np.asarray(box[1], np.float64)) if kept
+                          else (np.zeros(3), np.zeros(3)))
         query, scene, table, cell_lo, h = self._trace
         _edges(query, scene, self.points, self.m, table, cell_lo, h, kept, box_lo, box_hi, self.clear)
 
