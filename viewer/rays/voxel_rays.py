@@ -151,6 +151,12 @@ class VoxelRays:
         a = np.ascontiguousarray(a, np.float64).reshape(-1, 3)
         if self.caster is None:
             return dda.segments_clear(self.cells, a, b)
+        if self.caster.direct is not None:   # one compiled pass, the segments in empty cells untraced
+            out = np.empty(len(a), np.bool_)
+            _segments_clear(*self.caster.direct.occlusion, a,
+                            np.ascontiguousarray(np.broadcast_to(np.asarray(b, np.float64).reshape(-1, 3), a.shape)),
+                            self.box_table(len(a)), self.cells.lo, self.cells.h, out)
+            return out
         d = np.asarray(b, np.float64).reshape(-1, 3) - a
         length = np.linalg.norm(d, axis=1)
         d /= np.maximum(length, 1e-300)[:, None]
@@ -223,6 +229,25 @@ def _bundle_kept(o, d, kept, box_lo, box_hi, intersect, scene, faces, e1, e2, lo
             out[p, k] = _voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, th, front, lo, h, n, first, triangle,
                                   voxel)
     return traced
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _segments_clear(query, scene, a, b, occupied, lo, h, out):
+    """`segments_clear` through Embree: a segment whose box of cells holds no triangle (`occupied`) is
+    clear untraced, the others cast as the caster's `blocked` casts them (the direction divided by the
+    length, in double precision)."""
+    count = a.shape[0]
+    for block in numba.prange((count + embree.BLOCK - 1) // embree.BLOCK):
+        record = embree.record()
+        for i in range(block * embree.BLOCK, min(count, (block + 1) * embree.BLOCK)):
+            dx, dy, dz = b[i, 0] - a[i, 0], b[i, 1] - a[i, 1], b[i, 2] - a[i, 2]
+            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            if length <= 0.0 or empty_box(occupied, lo, h, a[i, 0], a[i, 1], a[i, 2], b[i, 0], b[i, 1], b[i, 2]):
+                out[i] = True
+                continue
+            scale = max(length, 1e-300)
+            out[i] = not embree.occluded(query, scene, record, a[i, 0], a[i, 1], a[i, 2], dx / scale, dy / scale,
+                                         dz / scale, length)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
