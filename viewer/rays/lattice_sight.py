@@ -1,13 +1,13 @@
 """Which probes of a lattice see a point, swept outward from it, with rays traced only at shadows' edges.
 
 A lamp's visibility from every probe of an m^3 lattice is m^3 segments a ray end: 1.8 million for a
-ceiling lamp of 129 clusters on 24^3 probes, 55-140 ms of a new scene. Most of them say what their
+ceiling lamp of 129 clusters on 24^3 probes, 60 ms of a new scene. Most of them say what their
 neighbours say. So the probes are visited in shells of growing Chebyshev distance from the lattice point
-nearest the end (its origin), and each takes the visibility of the probes one step back towards the
-origin (up to eight, weighted by how the line to the origin passes between them), each through the
-lattice edge that joins them, traced once per geometry (`LatticeSight.clear`). Where that blend is 0 or 1
-the probe takes it; where the neighbours disagree, at a shadow's edge, its own segment is traced, so a
-blurred penumbra never spreads further out. The probes within SEED_CELLS of the origin are traced.
+nearest the end (its origin), and each takes the visibility of the probes one step back along its line to
+the end (up to eight, weighted by where the line passes between them), each through the lattice edge
+that joins them, traced once per geometry (`LatticeSight.clear`). Where that blend is 0 or 1 the probe
+takes it; where the neighbours disagree, at a shadow's edge, its own segment is traced, so a blurred
+penumbra never spreads further out. The probes within SEED_CELLS of the origin are traced.
 
 The answers are those of `VoxelRays.pairs_clear` where traced; the others are inferred from the lattice
 and differ from their own segments' in up to 3 pairs in 10,000 (a segment that grazes an object between
