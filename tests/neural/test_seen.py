@@ -3,8 +3,13 @@
 import numpy as np
 import pytest
 
-from viewer.neural.seen import INTERLEAVE, SEED, interleaved_lattices, lattice_rays
+from viewer.neural import encoding
+from viewer.neural.seen import INTERLEAVE, SEED, SEEN_RAYS, interleaved_lattices, lattice_packets, lattice_rays
 from viewer.probes import sh
+from viewer.probes.grid import ProbeGrid
+from viewer.rays.cast import embree_available
+from viewer.rays.voxels import voxelize
+from viewer.scene import load
 
 
 def block(directions: np.ndarray, side: int, corner) -> np.ndarray:
@@ -113,3 +118,40 @@ def test_the_rays_gather_each_probes_sum_of_basis_times_radiance():
         landed = padded[rays.voxel.reshape(len(points), 16)]                   # (P, R, C)
         expected = np.einsum("pbr,prc->pbc", basis[sets].astype(np.float64), landed)
         np.testing.assert_allclose(rays.gathered(radiance), expected, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("side", [24, 13])
+def test_the_packets_hold_every_ray_once_each_one_direction_from_nearby_probes(side):
+    """`lattice_packets`: every ray of the lattice in exactly one packet; a packet's rays share their
+    direction (one interleaved subset, one ray of it), and where the lattice holds whole 2x2x2 blocks of
+    each subset's stride-3 lattice (a side of 6n), they start within two strides of each other."""
+    count, rays = side ** 3, SEEN_RAYS
+    packets = lattice_packets(count, rays, SEED)
+    flat = packets[packets >= 0]
+    assert np.array_equal(np.sort(flat), np.arange(count * rays))
+    directions, _, _ = lattice_rays(count, rays, SEED)
+    d = directions.reshape(-1, 3)
+    probe = np.where(packets >= 0, packets // rays, -1)
+    for row, owners in zip(packets[::97], probe[::97]):
+        live = row[row >= 0]
+        assert np.allclose(d[live], d[live[0]])
+        ijk = np.stack(np.unravel_index(owners[owners >= 0], (side,) * 3), 1)
+        assert np.ptp(ijk, axis=0).max() <= 2 * INTERLEAVE or side % (2 * INTERLEAVE)
+
+
+@pytest.mark.skipif(not embree_available(), reason="packets are Embree's")
+@pytest.mark.parametrize("name", ["cornell", "paper-test"])
+def test_rays_traced_in_packets_meet_what_single_rays_meet(name):
+    """The seen rays of a 24^3 lattice, traced a packet of parallel rays at a time, meet the same face at
+    the same distance and land on the same voxel as traced one by one."""
+    scene = load(name)
+    lo, hi = scene.bounds
+    voxels = voxelize(scene, 24)
+    landing = encoding.occluders(scene, voxels).landing
+    points = ProbeGrid.positions_for(lo, hi, 24).reshape(-1, 3)
+    directions, _, _ = lattice_rays(len(points), SEEN_RAYS, SEED)
+    single = landing.kept_bundle(points, directions)
+    packed = landing.kept_bundle(points, directions, packets=lattice_packets(len(points), SEEN_RAYS, SEED))
+    for a, b in zip(single[:3], packed[:3]):
+        assert np.array_equal(a, b)
+    assert single[3] == packed[3] == directions.shape[0] * directions.shape[1]

@@ -13,7 +13,8 @@ from viewer.neural.encoding import CHANNELS
 from viewer.rays import moved_faces
 from viewer.rays.lattice_sight import SWEEP_ENDS, LatticeSight, sweeps
 from viewer.rays.sun import voxel_sun_cover
-from viewer.rays.voxel_rays import VoxelRays, meets_box
+from viewer.rays.landing import meets_box
+from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import VoxelGrid
 
 

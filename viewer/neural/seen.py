@@ -41,6 +41,7 @@ import numpy as np
 
 from viewer.probes import sh
 from viewer.rays.dda import BACKFACE
+from viewer.rays.embree import LANES
 from viewer.rays.voxel_rays import VoxelRays
 
 SEEN_RAYS = 32
@@ -84,7 +85,8 @@ class SeenRays:
                 and (previous.rays, previous.seed) == (self.rays, seed)
                 and (previous.points is points or np.array_equal(previous.points, points))):
             before = previous._faces
-        hits, face, t, self.traced = landing.kept_bundle(points, directions, before, box)
+        packets = None if before is not None else lattice_packets(len(points), self.rays, seed)
+        hits, face, t, self.traced = landing.kept_bundle(points, directions, before, box, packets)
         """`traced`: how many of the rays were traced (the others landed again)."""
         self._faces = None if face is None else (face, t)
         """(P, R) the face each ray met and its distance, for the rays after a move."""
@@ -179,6 +181,29 @@ def lattice_rays(count: int, rays: int, seed: int) -> tuple[np.ndarray, np.ndarr
     for array in (directions, basis, sets):
         array.flags.writeable = False
     return directions, basis, sets
+
+
+@lru_cache(maxsize=2)
+def lattice_packets(count: int, rays: int, seed: int) -> np.ndarray | None:
+    """(N, embree.LANES) the rays of `lattice_rays` in packets for `VoxelRays.kept_bundle` (flat indices
+    probe x rays + ray, -1 for none), or None off a cubic lattice: each packet is one direction from 8
+    probes of one interleaved subset (their directions are the same), a 2x2x2 block of its stride-3
+    lattice: parallel rays from nearby probes, which Embree traverses together (the seen rays of a
+    24^3 lattice 20.8 -> 15.8 ms, the same hits)."""
+    side = round(count ** (1.0 / 3.0))
+    if side ** 3 != count:
+        return None
+    sets = interleaved_sets(side)
+    index = np.arange(count)
+    block = np.stack([index // (side * side), (index // side) % side, index % side], 1) // (2 * INTERLEAVE)
+    order = np.lexsort((index, (block[:, 0] * side + block[:, 1]) * side + block[:, 2], sets))
+    chunks = []
+    for members in np.split(order, np.flatnonzero(np.diff(sets[order])) + 1):   # each subset, 8 probes a row
+        chunks.append(np.concatenate([members, np.full(-len(members) % LANES, -1)]).reshape(-1, LANES))
+    probes = np.concatenate(chunks)[:, None, :]
+    packets = np.where(probes >= 0, probes * rays + np.arange(rays)[None, :, None], -1).reshape(-1, LANES)
+    packets.flags.writeable = False
+    return packets
 
 
 INTERLEAVE = 3

@@ -21,7 +21,8 @@ import numba
 import numpy as np
 
 from viewer.rays import embree
-from viewer.rays.voxel_rays import VoxelRays, empty_box, meets_box
+from viewer.rays.landing import meets_box
+from viewer.rays.voxel_rays import VoxelRays, empty_box
 
 SEED_CELLS = 2
 """Probes within this Chebyshev distance (lattice cells) of a ray end's origin trace their own segment:

@@ -21,17 +21,13 @@ import numba
 import numpy as np
 
 from viewer.rays import dda, embree
-from viewer.rays.listing import NEIGHBOUR_ORDER
-from viewer.rays.cast import NO_FACE, TriangleCaster, embree_available, first_face, front_of
+from viewer.rays.cast import TriangleCaster, embree_available
+from viewer.rays.landing import FAR, bundle, bundle_kept, bundle_packed, landed
 
-FAR = 1e37
-"""The length of a ray that goes on until it meets something (Embree's own default)."""
+
 RAYS_PER_CALL = 1 << 18
 """Rays cast at a time: their hits take about 10 MB, however many rays a scene's bundle holds."""
-STEP_BACK = 1e-4
-"""The hit point is read this many voxels back along the ray before its cell is looked up, so that a
-hit on a cell's boundary is the first cell's (the one the ray crossed first, as the DDA reads it), and
-single precision (about 1e-6 voxels at the grid's far side) cannot move it across."""
+
 
 
 HAIR = 1e-6
@@ -86,7 +82,7 @@ class VoxelRays:
             part = slice(start, start + RAYS_PER_CALL)
             hits = self.caster.closest_hits(o[part], d[part])
             c = self.cells
-            out[part] = _landing(o[part], d[part], hits.face, hits.t, hits.front, c.lo, c.h, c.n, c.first, c.triangle,
+            out[part] = landed(o[part], d[part], hits.face, hits.t, hits.front, c.lo, c.h, c.n, c.first, c.triangle,
                                  c.voxel)
         return out
 
@@ -101,7 +97,7 @@ class VoxelRays:
         if self.caster.direct is not None:   # traced and looked up in one compiled loop
             out = np.empty((len(o), count), np.int32)
             c, caster = self.cells, self.caster
-            _bundle(o, np.ascontiguousarray(d[None] if d.ndim == 2 else d), *caster.direct.handle, caster.faces,
+            bundle(o, np.ascontiguousarray(d[None] if d.ndim == 2 else d), *caster.direct.handle, caster.faces,
                     caster.e1, caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out)
             return out
         d = np.broadcast_to(d[None] if d.ndim == 2 else d, (len(o), count, 3))
@@ -113,14 +109,16 @@ class VoxelRays:
             out[part] = self.first_hits(starts, d[part].reshape(-1, 3)).reshape(-1, count)
         return out
 
-    def kept_bundle(self, origins: np.ndarray, directions: np.ndarray, before=None, box=None):
+    def kept_bundle(self, origins: np.ndarray, directions: np.ndarray, before=None, box=None, packets=None):
         """`bundle_hits` for (P, D, 3) `directions`, with what a later call needs to keep them: (hits,
         faces, t, traced): the hits, each ray's face and distance (None, None where the rays are not
         traced through Embree from compiled code), and how many rays were traced. `before`: the (faces,
         t) of the same rays in a scene where only the triangles in `box` ((lo, hi): their old and new
         places, with room for a cell's neighbours) moved; a ray that does not pass through the box before
         its old hit meets the same face at the same t, and only its voxel is looked up again in this
-        listing; the others are traced again."""
+        listing; the others are traced again. `packets`: (N, embree.LANES) flat ray indices (origin x D +
+        ray, -1 for none) that cover every ray once, traced a packet at a time where all are traced
+        (`landing.bundle_packed`): parallel rays from nearby origins, the same hits."""
         o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
         d = np.ascontiguousarray(directions, np.float64)
         if self.caster is None or self.caster.direct is None:
@@ -129,12 +127,17 @@ class VoxelRays:
         out = np.empty(d.shape[:2], np.int32)
         face = np.empty(d.shape[:2], np.int32)
         t = np.empty(d.shape[:2], np.float64)
+        if before is None and packets is not None:
+            bundle_packed(o, d.reshape(-1, 3), d.shape[1], packets, *caster.direct.packets, caster.faces, caster.e1,
+                          caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out.reshape(-1),
+                          face.reshape(-1), t.reshape(-1))
+            return out, face, t, out.size
         if before is None:   # every ray traced: a box that holds everything
             lo, hi, kept = np.full(3, -np.inf), np.full(3, np.inf), False
         else:
             face[:], t[:] = before
             lo, hi, kept = np.asarray(box[0], np.float64), np.asarray(box[1], np.float64), True
-        traced = _bundle_kept(o, d, kept, lo, hi, *caster.direct.handle, caster.faces, caster.e1, caster.e2, c.lo,
+        traced = bundle_kept(o, d, kept, lo, hi, *caster.direct.handle, caster.faces, caster.e1, caster.e2, c.lo,
                               c.h, c.n, c.first, c.triangle, c.voxel, out, face, t)
         return out, face, t, int(traced.sum())
 
@@ -179,56 +182,6 @@ class VoxelRays:
             out[start:start + rows] = self.segments_clear(np.repeat(part, len(b), axis=0),
                                                           np.tile(b, (len(part), 1))).reshape(len(part), len(b))
         return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _landing(o, d, face, t, front, lo, h, n, first, triangle, voxel):
-    """`_voxel_of` each hit."""
-    out = np.empty(face.shape[0], np.int64)
-    for r in range(face.shape[0]):   # one thread: a few lookups a ray, beside Embree's traversal
-        out[r] = _voxel_of(o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2], face[r], t[r], front[r], lo, h, n,
-                           first, triangle, voxel)
-    return out
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _bundle(o, d, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, voxel, out):
-    """out[p, k]: the voxel that ray k of origin p meets first (d (P, D, 3), or (1, D, 3) shared), traced
-    through Embree as it is made (viewer.rays.embree) and looked up at once, on every core."""
-    step = 0 if d.shape[0] == 1 else 1
-    for p in numba.prange(o.shape[0]):
-        record, q = embree.record(), p * step
-        for k in range(d.shape[1]):
-            dx, dy, dz = d[q, k, 0], d[q, k, 1], d[q, k, 2]
-            f, t, _, _, front = first_face(intersect, scene, record, faces, e1, e2, o[p, 0], o[p, 1], o[p, 2], dx, dy,
-                                           dz, FAR)
-            out[p, k] = _voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel)
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _bundle_kept(o, d, kept, box_lo, box_hi, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, voxel,
-                 out, face, t):
-    """`_bundle` for (P, D, 3) directions, keeping each ray's face and t: with `kept`, a ray that does not
-    pass through the box [box_lo, box_hi] before its hit (`face`, `t` as they are) keeps them and only
-    looks its voxel up again; the others are traced. (P,) how many rays of each origin were traced (the
-    box test in the same pass: apart, it read every ray again, 2.8 ms of a box moved in the Cornell box)."""
-    traced = np.zeros(o.shape[0], np.int64)
-    for p in numba.prange(o.shape[0]):
-        record = embree.record()
-        for k in range(d.shape[1]):
-            dx, dy, dz = d[p, k, 0], d[p, k, 1], d[p, k, 2]
-            if not kept or meets_box(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz,
-                                     FAR if face[p, k] == NO_FACE else t[p, k], box_lo, box_hi):
-                traced[p] += 1
-                f, th, _, _, front = first_face(intersect, scene, record, faces, e1, e2, o[p, 0], o[p, 1], o[p, 2],
-                                                dx, dy, dz, FAR)
-                face[p, k], t[p, k] = f, th
-            else:
-                f, th = face[p, k], t[p, k]
-                front = f != NO_FACE and front_of(f, dx, dy, dz, e1, e2)
-            out[p, k] = _voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, th, front, lo, h, n, first, triangle,
-                                  voxel)
-    return traced
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -302,76 +255,10 @@ def empty_box(occupied, lo, h, ax, ay, az, bx, by, bz):
     return total == 0
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def meets_box(ox, oy, oz, dx, dy, dz, far, lo, hi):
-    """Whether o + s d for s in [0, far] passes through the box [lo, hi] (a slab test)."""
-    near = 0.0
-    for axis in range(3):
-        start = ox if axis == 0 else (oy if axis == 1 else oz)
-        step = dx if axis == 0 else (dy if axis == 1 else dz)
-        if step == 0.0:
-            if start < lo[axis] or start > hi[axis]:
-                return False
-        else:
-            a, b = (lo[axis] - start) / step, (hi[axis] - start) / step
-            near, far = max(near, min(a, b)), min(far, max(a, b))
-    return near <= far
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _voxel_of(ox, oy, oz, dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel):
-    """The voxel of a hit: the listing's entry for the hit's face in the cell a hair before the hit
-    point, else in the cell of the point itself or a neighbour (a hit on the listing's edge); a face met
-    from behind is BACKFACE, and one the listing lacks near the hit too (it cannot be lit)."""
-    if f == NO_FACE:
-        return dda.MISS
-    if not front:
-        return dda.BACKFACE
-    if first.shape[0] == 0:   # `keyed_cells`: the facing of each face, and the voxel of each key
-        return _keyed_voxel(ox, oy, oz, dx, dy, dz, t, lo, h, n, triangle[f], voxel)
-    found = dda.BACKFACE
-    back = STEP_BACK * h
-    cx = cy = cz = 0
-    for attempt in range(2):
-        s = t - back if attempt == 0 else t
-        cx = min(max(int(np.floor((ox + s * dx - lo[0]) / h)), 0), n - 1)
-        cy = min(max(int(np.floor((oy + s * dy - lo[1]) / h)), 0), n - 1)
-        cz = min(max(int(np.floor((oz + s * dz - lo[2]) / h)), 0), n - 1)
-        found = _entry(cx, cy, cz, f, n, first, triangle, voxel)
-        if found != dda.MISS:
-            break
-    if found == dda.MISS:
-        for k in range(27):
-            x, y, z = cx + k % 3 - 1, cy + (k // 3) % 3 - 1, cz + k // 9 - 1
-            if 0 <= x < n and 0 <= y < n and 0 <= z < n:
-                found = _entry(x, y, z, f, n, first, triangle, voxel)
-                if found != dda.MISS:
-                    break
-    return dda.BACKFACE if found == dda.MISS else found
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _keyed_voxel(ox, oy, oz, dx, dy, dz, t, lo, h, n, facing, table):
-    """The voxel of `facing` in the cell a hair before the hit point (`table`: flat cell x 6 + facing ->
-    voxel, -1 for none), else in the nearest neighbouring cell that has one, else BACKFACE: the voxel
-    `dda.Cells.of` gives the face's entry there."""
-    s = t - STEP_BACK * h
-    cx = dda.cell_of(ox + s * dx, lo[0], h, n)
-    cy = dda.cell_of(oy + s * dy, lo[1], h, n)
-    cz = dda.cell_of(oz + s * dz, lo[2], h, n)
-    for k in range(NEIGHBOUR_ORDER.shape[0]):
-        x, y, z = cx + NEIGHBOUR_ORDER[k, 0], cy + NEIGHBOUR_ORDER[k, 1], cz + NEIGHBOUR_ORDER[k, 2]
-        if 0 <= x < n and 0 <= y < n and 0 <= z < n:
-            found = table[(x + n * (y + n * z)) * 6 + facing]
-            if found >= 0:
-                return found
-    return dda.BACKFACE
-
-
 def keyed_cells(grid, keys: np.ndarray, scene) -> dda.Cells:
     """The cells of `grid` (a VoxelGrid, whose voxel k has the key `keys[k]`: flat cell x 6 + facing) for
     rays cast through Embree, without a listing: a hit's voxel is its face's facing's in the cell of the
-    hit (`_keyed_voxel`), the voxel `dda.Cells.of` would list for the face there, and no triangle is
+    hit (`landing._keyed_voxel`), the voxel `dda.Cells.of` would list for the face there, and no triangle is
     listed in any cell (a million-triangle scan's listing took 80 ms a move). Not for the DDA, which
     marches the listing."""
     from viewer.rays.voxels import face_facing
@@ -383,11 +270,3 @@ def keyed_cells(grid, keys: np.ndarray, scene) -> dda.Cells:
                      table, *scene.edges)
 
 
-@numba.njit(cache=True, nogil=True)
-def _entry(x, y, z, f, n, first, triangle, voxel):
-    """The voxel that the listing of cell (x, y, z) gives face f, dda.MISS where it does not list f."""
-    flat = x + n * (y + n * z)
-    for e in range(first[flat], first[flat + 1]):
-        if triangle[e] == f:
-            return voxel[e]
-    return dda.MISS

@@ -1,0 +1,169 @@
+"""Where rays land: the voxel of the surface a ray meets, from the face Embree names and the voxel listing
+(viewer/rays/voxel_rays.py), for bundles of rays cast from compiled loops.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from viewer.rays import dda, embree
+from viewer.rays.cast import NO_FACE, first_face, front_of
+from viewer.rays.listing import NEIGHBOUR_ORDER
+
+FAR = 1e37
+"""The length of a ray that goes on until it meets something (Embree's own default)."""
+STEP_BACK = 1e-4
+"""The hit point is read this many voxels back along the ray before its cell is looked up, so that a
+hit on a cell's boundary is the first cell's (the one the ray crossed first, as the DDA reads it), and
+single precision (about 1e-6 voxels at the grid's far side) cannot move it across."""
+
+
+@numba.njit(cache=True, nogil=True)
+def landed(o, d, face, t, front, lo, h, n, first, triangle, voxel):
+    """`voxel_of` each hit."""
+    out = np.empty(face.shape[0], np.int64)
+    for r in range(face.shape[0]):   # one thread: a few lookups a ray, beside Embree's traversal
+        out[r] = voxel_of(o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2], face[r], t[r], front[r], lo, h, n,
+                          first, triangle, voxel)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def bundle(o, d, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, voxel, out):
+    """out[p, k]: the voxel that ray k of origin p meets first (d (P, D, 3), or (1, D, 3) shared), traced
+    through Embree as it is made (viewer.rays.embree) and looked up at once, on every core."""
+    step = 0 if d.shape[0] == 1 else 1
+    for p in numba.prange(o.shape[0]):
+        record, q = embree.record(), p * step
+        for k in range(d.shape[1]):
+            dx, dy, dz = d[q, k, 0], d[q, k, 1], d[q, k, 2]
+            f, t, _, _, front = first_face(intersect, scene, record, faces, e1, e2, o[p, 0], o[p, 1], o[p, 2], dx, dy,
+                                           dz, FAR)
+            out[p, k] = voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def bundle_kept(o, d, kept, box_lo, box_hi, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, voxel,
+                 out, face, t):
+    """`_bundle` for (P, D, 3) directions, keeping each ray's face and t: with `kept`, a ray that does not
+    pass through the box [box_lo, box_hi] before its hit (`face`, `t` as they are) keeps them and only
+    looks its voxel up again; the others are traced. (P,) how many rays of each origin were traced (the
+    box test in the same pass: apart, it read every ray again, 2.8 ms of a box moved in the Cornell box)."""
+    traced = np.zeros(o.shape[0], np.int64)
+    for p in numba.prange(o.shape[0]):
+        record = embree.record()
+        for k in range(d.shape[1]):
+            dx, dy, dz = d[p, k, 0], d[p, k, 1], d[p, k, 2]
+            if not kept or meets_box(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz,
+                                     FAR if face[p, k] == NO_FACE else t[p, k], box_lo, box_hi):
+                traced[p] += 1
+                f, th, _, _, front = first_face(intersect, scene, record, faces, e1, e2, o[p, 0], o[p, 1], o[p, 2],
+                                                dx, dy, dz, FAR)
+                face[p, k], t[p, k] = f, th
+            else:
+                f, th = face[p, k], t[p, k]
+                front = f != NO_FACE and front_of(f, dx, dy, dz, e1, e2)
+            out[p, k] = voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, th, front, lo, h, n, first, triangle,
+                                 voxel)
+    return traced
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def meets_box(ox, oy, oz, dx, dy, dz, far, lo, hi):
+    """Whether o + s d for s in [0, far] passes through the box [lo, hi] (a slab test)."""
+    near = 0.0
+    for axis in range(3):
+        start = ox if axis == 0 else (oy if axis == 1 else oz)
+        step = dx if axis == 0 else (dy if axis == 1 else dz)
+        if step == 0.0:
+            if start < lo[axis] or start > hi[axis]:
+                return False
+        else:
+            a, b = (lo[axis] - start) / step, (hi[axis] - start) / step
+            near, far = max(near, min(a, b)), min(far, max(a, b))
+    return near <= far
+
+
+PACKETS_A_TASK = 64
+"""Packets of rays a thread takes at a time (`bundle_packed`)."""
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def bundle_packed(o, d, per_origin, packets, intersect8, scene, faces, e1, e2, lo, h, n, first, triangle, voxel,
+                  out, face, t):
+    """`bundle_kept` with every ray traced, embree.LANES at a time: `packets` (N, LANES) flat ray indices
+    (origin x per_origin + ray, -1 for none), each once; d (R, 3) and out, face, t (R,) flat."""
+    for block in numba.prange((packets.shape[0] + PACKETS_A_TASK - 1) // PACKETS_A_TASK):
+        record = embree.packet()
+        for row in range(block * PACKETS_A_TASK, min(packets.shape[0], (block + 1) * PACKETS_A_TASK)):
+            rays = packets[row]
+            embree.closest8(intersect8, scene, record, o, d, rays, per_origin, FAR, face, t)
+            for lane in range(embree.LANES):
+                r = rays[lane]
+                if r < 0:
+                    continue
+                q, dx, dy, dz = r // per_origin, d[r, 0], d[r, 1], d[r, 2]
+                f = NO_FACE if face[r] < 0 else faces[face[r]]
+                face[r] = f
+                front = f != NO_FACE and front_of(f, dx, dy, dz, e1, e2)
+                out[r] = voxel_of(o[q, 0], o[q, 1], o[q, 2], dx, dy, dz, f, t[r], front, lo, h, n, first, triangle,
+                                  voxel)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def voxel_of(ox, oy, oz, dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel):
+    """The voxel of a hit: the listing's entry for the hit's face in the cell a hair before the hit
+    point, else in the cell of the point itself or a neighbour (a hit on the listing's edge); a face met
+    from behind is BACKFACE, and one the listing lacks near the hit too (it cannot be lit)."""
+    if f == NO_FACE:
+        return dda.MISS
+    if not front:
+        return dda.BACKFACE
+    if first.shape[0] == 0:   # `keyed_cells`: the facing of each face, and the voxel of each key
+        return _keyed_voxel(ox, oy, oz, dx, dy, dz, t, lo, h, n, triangle[f], voxel)
+    found = dda.BACKFACE
+    back = STEP_BACK * h
+    cx = cy = cz = 0
+    for attempt in range(2):
+        s = t - back if attempt == 0 else t
+        cx = min(max(int(np.floor((ox + s * dx - lo[0]) / h)), 0), n - 1)
+        cy = min(max(int(np.floor((oy + s * dy - lo[1]) / h)), 0), n - 1)
+        cz = min(max(int(np.floor((oz + s * dz - lo[2]) / h)), 0), n - 1)
+        found = _entry(cx, cy, cz, f, n, first, triangle, voxel)
+        if found != dda.MISS:
+            break
+    if found == dda.MISS:
+        for k in range(27):
+            x, y, z = cx + k % 3 - 1, cy + (k // 3) % 3 - 1, cz + k // 9 - 1
+            if 0 <= x < n and 0 <= y < n and 0 <= z < n:
+                found = _entry(x, y, z, f, n, first, triangle, voxel)
+                if found != dda.MISS:
+                    break
+    return dda.BACKFACE if found == dda.MISS else found
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _keyed_voxel(ox, oy, oz, dx, dy, dz, t, lo, h, n, facing, table):
+    """The voxel of `facing` in the cell a hair before the hit point (`table`: flat cell x 6 + facing ->
+    voxel, -1 for none), else in the nearest neighbouring cell that has one, else BACKFACE: the voxel
+    `dda.Cells.of` gives the face's entry there."""
+    s = t - STEP_BACK * h
+    cx = dda.cell_of(ox + s * dx, lo[0], h, n)
+    cy = dda.cell_of(oy + s * dy, lo[1], h, n)
+    cz = dda.cell_of(oz + s * dz, lo[2], h, n)
+    for k in range(NEIGHBOUR_ORDER.shape[0]):
+        x, y, z = cx + NEIGHBOUR_ORDER[k, 0], cy + NEIGHBOUR_ORDER[k, 1], cz + NEIGHBOUR_ORDER[k, 2]
+        if 0 <= x < n and 0 <= y < n and 0 <= z < n:
+            found = table[(x + n * (y + n * z)) * 6 + facing]
+            if found >= 0:
+                return found
+    return dda.BACKFACE
+
+@numba.njit(cache=True, nogil=True)
+def _entry(x, y, z, f, n, first, triangle, voxel):
+    """The voxel that the listing of cell (x, y, z) gives face f, dda.MISS where it does not list f."""
+    flat = x + n * (y + n * z)
+    for e in range(first[flat], first[flat + 1]):
+        if triangle[e] == f:
+            return voxel[e]
+    return dda.MISS
