@@ -48,7 +48,8 @@ from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
 from viewer.neural.encoding import CHANNELS, Encoding
-from viewer.neural.lattice import LatticeGeometry, LatticeShadows, assemble, moved_box
+from viewer.neural.lattice import (LatticeGeometry, LatticeShadows, assemble, moved_box, proportional_channels,
+                                   same_columns, same_direction, same_sun, sun_parts)
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
 
@@ -72,6 +73,9 @@ class Emitter:
     """(K,) float32: the same for the voxels' irradiance (`irradiance.voxel_direct`)."""
     radiance: np.ndarray
     """(3,) the current radiance per unit weight."""
+    shadows: tuple | None = None
+    """(visibility rows (R, P), each patch's row of them (E,)) the basis was made with: after a move, only
+    the probes whose rows changed are summed again (a probe's basis depends on its own rows alone)."""
 
 
 class Encoder:
@@ -106,6 +110,7 @@ class Encoder:
         self._bounce: encoding.Bounce | None = None   # the bounce's patches and their last light
         self._seen: encoding.SeenRays | None = None   # the seen rays of this geometry and occluders
         self._last: Encoding | None = None
+        self._moved = False   # the last occluders were the ones before with some triangles moved
         self._last_voxels: VoxelGrid | None = None
 
     @property
@@ -122,10 +127,10 @@ class Encoder:
         scene; None: nothing casts a shadow): `encoding.encode`'s numbers (to float32 round-off). Pass
         the same occluders object while the scene's triangles stay the same: an equal new one is found
         equal, at the cost of comparing its arrays."""
-        direction, irradiance = _sun_parts(sun)
+        direction, irradiance = sun_parts(sun)
         shadows_changed = self._shadows is None or not self._shadows.fits(blockers)
         if (voxels is self._last_voxels and not shadows_changed
-                and _same_sun((direction, irradiance), self._sun) and self._last is not None):
+                and same_sun((direction, irradiance), self._sun) and self._last is not None):
             self.recomputed = []
             return self._last
         self.recomputed = []
@@ -144,14 +149,18 @@ class Encoder:
         if shadows_changed:
             self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing,
                                            None if box is None else self._shadows, box)
-            self.emitters = []   # every basis holds the old shadows
+            if box is None:   # other occluders: every basis holds the old shadows
+                self.emitters = []
             self.recomputed.append("shadows")
+        self._moved = shadows_changed and box is not None
+        """Whether the occluders are the previous ones with some triangles moved: a kept emitter's basis is
+        summed again only at the probes whose visibility rows changed."""
         if shadows_changed or geometry_changed:
             self._voxel_shadows = LatticeShadows(blockers, encoding.surface_points(voxels), self.lo,
                                                  self._geometry.spacing, across=voxels)
         g = self._geometry
         albedo_changed = (np.ones(3, bool) if geometry_changed
-                          else ~_same_columns(self._albedo, voxels.albedo))
+                          else ~same_columns(self._albedo, voxels.albedo))
         if albedo_changed.any():
             self._albedo_feature = np.asarray((g.gather(voxels.albedo) / g.safe[:, None]).T, np.float32)
             self.recomputed.append("albedo")
@@ -161,14 +170,14 @@ class Encoder:
             self._emitted = g.gather(voxels.emission)
             emitters_changed = self._update_emitters(voxels, geometry_changed)
             self.recomputed.append("emission")
-        sun_moved = not _same_direction(direction, self._sun[0])
+        sun_moved = not same_direction(direction, self._sun[0])
         if (sun_moved or shadows_changed) and direction is not None:
             self.recomputed.append("sun")
         unchanged = ~albedo_changed
         if geometry_changed or shadows_changed or emitters_changed or sun_moved:
             unchanged[:] = False
         elif light_changed or not np.array_equal(irradiance, self._sun[1]):
-            unchanged &= _proportional_channels((self._emission, self._sun[1]), (voxels.emission, irradiance))
+            unchanged &= proportional_channels((self._emission, self._sun[1]), (voxels.emission, irradiance))
         self._albedo, self._emission, self._sun = voxels.albedo, voxels.emission, (direction, irradiance)
         direct = self._direct(direction, irradiance)  # (3, 9, P) float32
         scale = np.maximum(direct[:, 0, :], 0.0).mean(axis=1)
@@ -250,7 +259,7 @@ class Encoder:
         keys = _patch_keys(position, normal, area, target[cluster])
         index = {key: e for e, key in enumerate(keys)}
         claimed = np.zeros(len(keys), bool)
-        kept, stale = [], []
+        kept, matched = [], []
         for emitter in self.emitters:
             members = [index.get(key) for key in emitter.weights]
             if any(e is None for e in members) or claimed[members].any():
@@ -263,22 +272,31 @@ class Encoder:
                 emitter.radiance = per_weight
                 claimed[members] = True
                 kept.append(emitter)
-                if new_voxels:
-                    stale.append((emitter, np.array(members), weights))
+                matched.append((emitter, np.array(members), weights))
+        stale = matched if new_voxels else []
+        resum = matched if self._moved else []
         fresh = np.flatnonzero(~claimed)
         changed = len(kept) != len(self.emitters) or len(fresh) > 0
         lamps = self._lamps(fresh, position, radiance, voxels.voxel_size)
-        if not lamps and not stale:   # a colour or intensity edit keeps every emitter and needs no pieces
+        if not lamps and not stale and not resum:   # a colour or intensity edit keeps every emitter, needs no pieces
             self.emitters = kept
             return changed
         pieces = encoding.patch_pieces(self._geometry.cell, voxels, radiance,
                                        encoding.NEAR_PIECES * self._geometry.spacing.max())
         row, visible = np.full(len(target), -1), None   # each traced cluster's row of `visible`
+        traced = np.unique(np.concatenate([cluster[fresh]] + [cluster[m] for _, m, _ in resum]))
         if len(fresh):
             self.recomputed.append("emitters")
-            traced = np.unique(cluster[fresh])
+        if len(traced):
             row[traced] = np.arange(len(traced))
             visible = self._shadows.visibility(target[traced])
+        for emitter, members, weights in resum:
+            own = row[cluster[members]]
+            basis = self._summed_again(emitter, own, visible, (position[members], normal[members], area[members],
+                                                                weights), pieces.of(members))
+            if basis is not emitter.basis:
+                self.recomputed.append("emitters")
+            emitter.basis, emitter.shadows = basis, (visible, own)
         voxel_row = np.full(len(target), -1)   # the same for the voxels' rays, which the stale need too
         traced = np.unique(np.concatenate([cluster[fresh]] + [cluster[m] for _, m, _ in stale]))
         voxel_row[traced] = np.arange(len(traced))
@@ -296,9 +314,27 @@ class Encoder:
             basis = emitter_basis(self.points, position[members], normal[members], area[members], weights,
                                   visible, row[cluster[members]], own)
             kept.append(Emitter({keys[e]: float(w) for e, w in zip(members, weights)}, basis,
-                                received(members, weights, own), radiance[members[0]] / weights[0]))
+                                received(members, weights, own), radiance[members[0]] / weights[0],
+                                (visible, row[cluster[members]])))
         self.emitters = kept
         return changed
+
+    def _summed_again(self, emitter: Emitter, own: np.ndarray, visible: np.ndarray, patches, pieces) -> np.ndarray:
+        """The emitter's basis with the new visibility rows `visible` (its patches reading rows `own`),
+        summed again only at the probes whose rows differ from those it was made with."""
+        if emitter.shadows is None:
+            changed = np.ones(len(self.points), bool)
+        else:
+            before, rows = emitter.shadows
+            changed = np.zeros(len(self.points), bool)
+            for old, new in set(zip(rows.tolist(), own.tolist())):
+                changed |= before[old] != visible[new]
+        probes = np.flatnonzero(changed)
+        if len(probes) == 0:
+            return emitter.basis
+        basis = emitter.basis.copy()
+        basis[:, probes] = emitter_basis(self.points[probes], *patches, visible[:, probes], own, pieces)
+        return basis
 
     def _lamps(self, patches: np.ndarray, position: np.ndarray, radiance: np.ndarray,
                voxel_size: float) -> list[np.ndarray]:
@@ -335,48 +371,6 @@ def _patch_keys(position, normal, area, target) -> list[bytes]:
             seen[key] = seen.get(key, -1) + 1
             keys[e] = key + bytes([seen[key] % 256]) * (seen[key] > 0)
     return keys
-
-
-def _sun_parts(sun) -> tuple[np.ndarray | None, np.ndarray]:
-    if sun is None:
-        return None, np.zeros(3)
-    return np.asarray(sun.direction, np.float64), np.asarray(sun.irradiance, np.float64)
-
-
-def _same_direction(a, b) -> bool:
-    if a is None or b is None:
-        return a is None and b is None
-    return bool(np.array_equal(a, b))
-
-
-def _same_sun(a, b) -> bool:
-    return _same_direction(a[0], b[0]) and np.array_equal(a[1], b[1])
-
-
-def _same_columns(a: np.ndarray | None, b: np.ndarray) -> np.ndarray:
-    """(3,) whether each colour column of two (K, 3) arrays is equal."""
-    if a is None or a.shape != b.shape:
-        return np.zeros(3, bool)
-    return np.array([np.array_equal(a[:, c], b[:, c]) for c in range(3)])
-
-
-def _proportional_channels(before, after) -> np.ndarray:
-    """(3,) per colour channel: whether all the light of `after` (voxel emission (K, 3), sun irradiance
-    (3,)) is that of `before` times one positive factor, or both are dark: then the scale-out leaves
-    the pass's inputs as they were."""
-    out = np.zeros(3, bool)
-    if before[0] is None or before[0].shape != after[0].shape:
-        return out
-    for c in range(3):
-        old = np.append(before[0][:, c], before[1][c])
-        new = np.append(after[0][:, c], after[1][c])
-        top_old, top_new = np.abs(old).max(), np.abs(new).max()
-        if top_old == 0 or top_new == 0:
-            out[c] = top_old == top_new
-            continue
-        factor = top_new / top_old
-        out[c] = np.abs(new - factor * old).max() <= 1e-12 * top_new
-    return out
 
 
 def emitter_basis(points: np.ndarray, position, normal, area, weights, visible: np.ndarray,

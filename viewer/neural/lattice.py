@@ -311,3 +311,47 @@ def _assemble(features, geometric, albedo, emitted, direct, bounce, seen, opened
                 target[p] = seen[p, f - seen_row, c] * inv[c]
         elif f == open_row:
             target[:] = opened
+
+
+# ---- what an encoding compares between calls ----------------------------------------------------------
+
+def sun_parts(sun) -> tuple[np.ndarray | None, np.ndarray]:
+    if sun is None:
+        return None, np.zeros(3)
+    return np.asarray(sun.direction, np.float64), np.asarray(sun.irradiance, np.float64)
+
+
+def same_direction(a, b) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(a, b))
+
+
+def same_sun(a, b) -> bool:
+    return same_direction(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def same_columns(a: np.ndarray | None, b: np.ndarray) -> np.ndarray:
+    """(3,) whether each colour column of two (K, 3) arrays is equal."""
+    if a is None or a.shape != b.shape:
+        return np.zeros(3, bool)
+    return np.array([np.array_equal(a[:, c], b[:, c]) for c in range(3)])
+
+
+def proportional_channels(before, after) -> np.ndarray:
+    """(3,) per colour channel: whether all the light of `after` (voxel emission (K, 3), sun irradiance
+    (3,)) is that of `before` times one positive factor, or both are dark: then the scale-out leaves
+    the pass's inputs as they were."""
+    out = np.zeros(3, bool)
+    if before[0] is None or before[0].shape != after[0].shape:
+        return out
+    for c in range(3):
+        old = np.append(before[0][:, c], before[1][c])
+        new = np.append(after[0][:, c], after[1][c])
+        top_old, top_new = np.abs(old).max(), np.abs(new).max()
+        if top_old == 0 or top_new == 0:
+            out[c] = top_old == top_new
+            continue
+        factor = top_new / top_old
+        out[c] = np.abs(new - factor * old).max() <= 1e-12 * top_new
+    return out
