@@ -11,7 +11,7 @@ from scipy import sparse
 from viewer.neural import encoding
 from viewer.neural.encoding import CHANNELS
 from viewer.rays import moved_faces
-from viewer.rays.lattice_sight import SWEEP_ENDS, LatticeSight, sweeps
+from viewer.rays.lattice_sight import LatticeSight, sweeps
 from viewer.rays.sun import voxel_sun_cover
 from viewer.rays.landing import meets_box
 from viewer.rays.voxel_rays import VoxelRays
@@ -101,7 +101,7 @@ class LatticeShadows:
         self.sweeping: bool | None = None
         """Whether the probes' visibility is swept (`viewer.rays.lattice_sight`) rather than every segment
         traced: with Embree, for the probes' lattice (not `across` voxels), where the scene's emitting
-        patches have SWEEP_ENDS ray ends or more (decided at `targets`, else at the first call)."""
+        patches have enough ray ends (`lattice_sight.sweeps`; decided at `targets`, else at the first call)."""
         self.switched = False
         """Whether the last `targets` changed `sweeping` (an emission edit that changed the count of ray
         ends): the rows kept so far are dropped, and every basis made from them is stale."""
@@ -130,7 +130,7 @@ class LatticeShadows:
 
     def _decide(self, ends: int) -> None:
         """Set `sweeping` for a scene of `ends` ray ends (`switched` where it changes)."""
-        sweeping = self.across is None and sweeps(self.blockers) and ends >= SWEEP_ENDS
+        sweeping = self.across is None and sweeps(self.blockers, ends)
         self.switched = self.sweeping is not None and sweeping != self.sweeping
         if self.switched:
             self._rows, self._block = {}, None

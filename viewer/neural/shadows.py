@@ -8,7 +8,7 @@ import numpy as np
 
 from viewer.neural.direct import facings
 from viewer.probes import sh
-from viewer.rays.lattice_sight import SWEEP_ENDS, LatticeSight, sweeps
+from viewer.rays.lattice_sight import LatticeSight, sweeps
 from viewer.rays.voxel_rays import VoxelRays
 
 VISIBILITY_CELLS = 2
@@ -33,14 +33,14 @@ def patch_visibility(blockers: VoxelRays, points: np.ndarray, position: np.ndarr
 def lattice_visibility(blockers: VoxelRays, points: np.ndarray, position: np.ndarray, normal: np.ndarray,
                        lo: np.ndarray, spacing: np.ndarray) -> np.ndarray:
     """`patch_visibility` from the probes of the lattice `points` (m^3, 3) over the scene's bounds: swept
-    over the lattice, rays traced at shadows' edges (`viewer.rays.lattice_sight`) where Embree traces
-    them and the patches' clusters have SWEEP_ENDS ray ends or more; else every segment."""
-    if len(position) == 0 or not sweeps(blockers):
-        return patch_visibility(blockers, points, position, normal, lo, spacing)
+    over the lattice, rays traced at shadows' edges (`viewer.rays.lattice_sight`) where the patches'
+    clusters have enough ray ends and Embree traces them (`sweeps`); else every segment."""
+    if len(position) == 0:
+        return np.ones((len(points), 0), np.float32)
     target, cluster = shadow_targets(blockers, position, normal, lo, spacing)
-    if len(target) < SWEEP_ENDS:
-        return blockers.pairs_clear(points, target)[:, cluster]
-    return LatticeSight(blockers, points, lo, spacing).visibility(target)[0].T[:, cluster]
+    if sweeps(blockers, len(target)):
+        return LatticeSight(blockers, points, lo, spacing).visibility(target)[0].T[:, cluster]
+    return blockers.pairs_clear(points, target)[:, cluster]
 
 
 def shadow_targets(blockers: VoxelRays, position: np.ndarray, normal: np.ndarray, lo: np.ndarray,

@@ -22,7 +22,7 @@ import numpy as np
 
 from viewer.rays import embree
 from viewer.rays.landing import meets_box
-from viewer.rays.voxel_rays import VoxelRays, empty_box
+from viewer.rays.voxel_rays import VoxelRays, segment_clear
 
 SEED_CELLS = 2
 """Probes within this Chebyshev distance (lattice cells) of a ray end's origin trace their own segment:
@@ -38,9 +38,11 @@ SELF = 13
 """The index of the zero offset among the 27 neighbour offsets ((a + 1) x 9 + (b + 1) x 3 + (c + 1))."""
 
 
-def sweeps(blockers: VoxelRays | None) -> bool:
-    """Whether `LatticeSight` can sweep with these occluders: it traces through Embree's compiled queries."""
-    return blockers is not None and blockers.caster is not None and blockers.caster.direct is not None
+def sweeps(blockers: VoxelRays | None, ends: int) -> bool:
+    """Whether a scene of `ends` ray ends has its probes' visibility swept (`LatticeSight`): SWEEP_ENDS of
+    them or more, and occluders that Embree's compiled queries trace."""
+    return (ends >= SWEEP_ENDS and blockers is not None and blockers.caster is not None
+            and blockers.caster.direct is not None)
 
 
 class LatticeSight:
@@ -94,17 +96,6 @@ class LatticeSight:
         return out, traced, int(count.sum())
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _segment_clear(query, scene, record, table, lo, h, ax, ay, az, bx, by, bz):
-    """Whether the segment a -> b crosses no surface, as `VoxelRays.pairs_clear` answers it."""
-    dx, dy, dz = bx - ax, by - ay, bz - az
-    length = np.sqrt(dx * dx + dy * dy + dz * dz)
-    if length <= 0.0 or empty_box(table, lo, h, ax, ay, az, bx, by, bz):
-        return True
-    inv = 1.0 / length
-    return not embree.occluded(query, scene, record, ax, ay, az, dx * inv, dy * inv, dz * inv, length)
-
-
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _edges(query, scene, points, m, table, lo, h, kept, box_lo, box_hi, out):
     """out[p, o]: the segment from probe p to its neighbour at offset o is clear (each edge traced once,
@@ -123,7 +114,7 @@ def _edges(query, scene, points, m, table, lo, h, kept, box_lo, box_hi, out):
             if kept and not meets_box(points[p, 0], points[p, 1], points[p, 2], points[q, 0] - points[p, 0],
                                       points[q, 1] - points[p, 1], points[q, 2] - points[p, 2], 1.0, box_lo, box_hi):
                 continue
-            clear = _segment_clear(query, scene, record, table, lo, h, points[p, 0], points[p, 1], points[p, 2],
+            clear = segment_clear(query, scene, record, table, lo, h, points[p, 0], points[p, 1], points[p, 2],
                                    points[q, 0], points[q, 1], points[q, 2])
             out[p, o] = clear
             out[q, 26 - o] = clear
@@ -179,7 +170,7 @@ def _settle(query, scene, record, points, m, end, t, i, j, k, clear, table, lo, 
     if kept and old_traced[p] and not meets_box(px, py, pz, tx - px, ty - py, tz - pz, 1.0, box_lo, box_hi):
         row[p] = old[p]
         return 0
-    row[p] = 1.0 if _segment_clear(query, scene, record, table, lo, h, px, py, pz, tx, ty, tz) else 0.0
+    row[p] = 1.0 if segment_clear(query, scene, record, table, lo, h, px, py, pz, tx, ty, tz) else 0.0
     return 1
 
 

@@ -27,9 +27,6 @@ from viewer.rays.landing import FAR, bundle, bundle_kept, bundle_packed, landed
 
 RAYS_PER_CALL = 1 << 18
 """Rays cast at a time: their hits take about 10 MB, however many rays a scene's bundle holds."""
-
-
-
 HAIR = 1e-6
 """Cells by which `_held` widens each triangle's box and `empty_box` each segment's, so that a point on a
 cell's face counts both cells."""
@@ -83,7 +80,7 @@ class VoxelRays:
             hits = self.caster.closest_hits(o[part], d[part])
             c = self.cells
             out[part] = landed(o[part], d[part], hits.face, hits.t, hits.front, c.lo, c.h, c.n, c.first, c.triangle,
-                                 c.voxel)
+                               c.voxel)
         return out
 
     def bundle_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -98,7 +95,7 @@ class VoxelRays:
             out = np.empty((len(o), count), np.int32)
             c, caster = self.cells, self.caster
             bundle(o, np.ascontiguousarray(d[None] if d.ndim == 2 else d), *caster.direct.handle, caster.faces,
-                    caster.e1, caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out)
+                   caster.e1, caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out)
             return out
         d = np.broadcast_to(d[None] if d.ndim == 2 else d, (len(o), count, 3))
         out = np.empty((len(o), count), np.int32)
@@ -138,7 +135,7 @@ class VoxelRays:
             face[:], t[:] = before
             lo, hi, kept = np.asarray(box[0], np.float64), np.asarray(box[1], np.float64), True
         traced = bundle_kept(o, d, kept, lo, hi, *caster.direct.handle, caster.faces, caster.e1, caster.e2, c.lo,
-                              c.h, c.n, c.first, c.triangle, c.voxel, out, face, t)
+                             c.h, c.n, c.first, c.triangle, c.voxel, out, face, t)
         return out, face, t, int(traced.sum())
 
     def escapes(self, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -212,15 +209,21 @@ def _pairs_clear(query, scene, a, b, occupied, lo, h, out):
     for i in numba.prange(a.shape[0]):
         record = embree.record()
         for j in range(b.shape[0]):
-            dx, dy, dz = b[j, 0] - a[i, 0], b[j, 1] - a[i, 1], b[j, 2] - a[i, 2]
-            length = np.sqrt(dx * dx + dy * dy + dz * dz)
-            if length <= 0.0 or empty_box(occupied, lo, h, a[i, 0], a[i, 1], a[i, 2], b[j, 0], b[j, 1], b[j, 2]):
-                out[i, j] = 1.0
-                continue
-            inv = 1.0 / length
-            blocked = embree.occluded(query, scene, record, a[i, 0], a[i, 1], a[i, 2], dx * inv, dy * inv, dz * inv,
-                                      length)
-            out[i, j] = 0.0 if blocked else 1.0
+            clear = segment_clear(query, scene, record, occupied, lo, h, a[i, 0], a[i, 1], a[i, 2], b[j, 0], b[j, 1],
+                                  b[j, 2])
+            out[i, j] = 1.0 if clear else 0.0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def segment_clear(query, scene, record, occupied, lo, h, ax, ay, az, bx, by, bz):
+    """Whether the segment a -> b crosses no surface, through Embree's occlusion query and an `embree.record`:
+    clear untraced where its box of cells holds no triangle (`empty_box`)."""
+    dx, dy, dz = bx - ax, by - ay, bz - az
+    length = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if length <= 0.0 or empty_box(occupied, lo, h, ax, ay, az, bx, by, bz):
+        return True
+    inv = 1.0 / length
+    return not embree.occluded(query, scene, record, ax, ay, az, dx * inv, dy * inv, dz * inv, length)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
