@@ -1,6 +1,8 @@
 """The incremental encoder (viewer.neural.encoder): the numbers of `encoding.encode` on every scene and after
 every kind of edit, shadows included, while recomputing only what the edit changed."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -269,6 +271,56 @@ def test_a_moved_object_retraces_only_the_shadow_rays_through_its_old_and_new_pl
     assert np.array_equal(after.visibility(new_end), fresh.visibility(new_end))
     assert after.retraced == fresh.retraced   # new ends: every segment a fresh sweep traces (all, without one)
     assert (after.retraced < 0.2 * visible.size) == (count >= SWEEP_ENDS)
+
+
+@pytest.mark.parametrize("name, group", [("cornell", "small-box"), ("paper-test", "large-box")])
+def test_a_moved_object_keeps_the_voxels_shadow_rays_that_miss_its_box(name, group):
+    """The shadows of the voxels' surfaces after a move, made from the previous voxels' ones: a voxel with
+    the same surface in the same cell keeps its rays' answers (lamp and sun) where they miss the box
+    around the moved triangles, the others are traced; every answer is that of shadows traced afresh."""
+    from viewer.neural.lattice import LatticeShadows, same_voxels
+
+    scene = load(name)
+    lo, hi = scene.bounds
+    spacing = (hi - lo) / 16
+    ends = np.array([[0.0, 0.54, 0.0], [0.1, 0.54, -0.1], [-0.2, 0.3, 0.25]])
+    sun = np.array([-0.3, 0.4, 1.0])
+
+    def shadows(scene, previous=None):
+        voxels = voxelize(scene, 32)
+        return LatticeShadows(encoding.Occluders(scene, voxels, "embree"), encoding.surface_points(voxels), lo,
+                              spacing, previous, across=voxels)
+
+    before = shadows(scene)
+    before.visibility(ends)
+    before.sun_visibility(sun)
+    after = shadows(moved(scene, group, (0.1, 0.0, 0.1)), before)
+    fresh = shadows(moved(scene, group, (0.1, 0.0, 0.1)))
+    match = same_voxels(before.across, after.across)
+    kept = match >= 0
+    assert 0.5 < kept.mean() < 1.0      # the moved object's voxels and those it covers or uncovers are new
+    assert np.array_equal(after.points[kept], before.points[match[kept]])
+    visible = after.visibility(ends)
+    assert np.array_equal(visible, fresh.visibility(ends))
+    assert 0 < after.retraced < 0.5 * fresh.retraced
+    assert np.array_equal(after.sun_visibility(sun), fresh.sun_visibility(sun))
+    assert np.any(after.sun_visibility(sun) > 0)
+
+
+def test_voxels_are_matched_within_a_cell_by_their_surface():
+    """A cell holds a voxel for each way its surfaces face, all under one hash id: each is matched to the
+    one of the same surface, whatever their order within the cell."""
+    from viewer.neural.lattice import same_voxels
+
+    voxels = voxelize(load("cornell"), 16)
+    ids = voxels.hash_id
+    assert np.any(ids[1:] == ids[:-1])          # cells of several voxels (the room's edges)
+    assert np.array_equal(same_voxels(voxels, voxels), np.arange(voxels.count))
+    order = np.lexsort((-np.arange(voxels.count), ids))   # reversed within each cell
+    shuffled = SimpleNamespace(hash_id=ids[order], position=voxels.position[order], normal=voxels.normal[order])
+    assert np.array_equal(order[same_voxels(shuffled, voxels)], np.arange(voxels.count))
+    changed = SimpleNamespace(hash_id=ids, position=voxels.position + [[0.0, 0.0, 1e-9]], normal=voxels.normal)
+    assert np.all(same_voxels(changed, voxels) == -1)
 
 
 @pytest.mark.parametrize("name, group, offset", [("cornell", "small-box", (0.1, 0.0, 0.1)),

@@ -157,7 +157,8 @@ class Encoder:
         summed again only at the probes whose visibility rows changed."""
         if shadows_changed or geometry_changed:
             self._voxel_shadows = LatticeShadows(blockers, encoding.surface_points(voxels), self.lo,
-                                                 self._geometry.spacing, across=voxels)
+                                                 self._geometry.spacing, self._voxel_shadows if box is not None
+                                                 else None, box, across=voxels)
         g = self._geometry
         albedo_changed = (np.ones(3, bool) if geometry_changed
                           else ~same_columns(self._albedo, voxels.albedo))

@@ -15,7 +15,7 @@ from viewer.rays.lattice_sight import LatticeSight, sweeps
 from viewer.rays.sun import voxel_sun_cover
 from viewer.rays.landing import meets_box
 from viewer.rays.voxel_rays import VoxelRays
-from viewer.rays.voxels import VoxelGrid
+from viewer.rays.voxels import SURFACE_OFFSET, VoxelGrid
 
 
 GEOMETRY = slice(0, encoding.FEATURES.index("albedo"))
@@ -90,10 +90,17 @@ class LatticeShadows:
         self._before = None
         """(box lo, box hi, the previous shadows' rows, their sun, their last block) when those answer every
         ray outside the box."""
-        if previous is not None and np.array_equal(previous.points, points):
+        self._match = None
+        """(P,) for shadows made `across` voxels after a move: the row of the previous shadows' voxel with
+        the same surface in the same cell, -1 where none was (a voxel the moved object entered or left):
+        the answers are kept there for the rays that miss the box."""
+        same_points = previous is not None and np.array_equal(previous.points, points)
+        if previous is not None and (same_points or (across is not None and previous.across is not None)):
             box = moved_box(previous.blockers, blockers) if box is None else box
             if box is not None:
                 self._before = (*box, previous._rows, previous._sun, previous._block)
+                if not same_points:
+                    self._match = same_voxels(previous.across, across)
         self._sight: LatticeSight | None = None
         """The lattice's edges, where the probes' visibility is swept (`viewer.rays.lattice_sight`): made
         at the first ray end asked, from the previous shadows' where only the box's triangles moved."""
@@ -154,15 +161,18 @@ class LatticeShadows:
         out = np.empty((len(target), len(self.points)), np.float32)
         fresh, kept = [], []
         self.retraced = 0
+        match = self._match
         for c, end in enumerate(target):
             row = None if before is None else before[2].get(end.tobytes())
             if row is None:
                 fresh.append(c)
             else:
-                out[c] = row[0]
+                out[c] = row[0] if match is None else np.where(match >= 0, row[0][match], 0.0)
                 kept.append(c)
-        if kept:   # the kept rows' rays through the moved box, traced again in one call
+        if kept:   # the kept rows' rays through the moved box (and from points new here), traced again in one call
             near = _segments_meet_box(self.points, target[kept], before[0], before[1])
+            if match is not None:
+                near |= (match < 0)[None, :]
             row, probe = np.nonzero(near)
             if len(row):
                 ends = target[kept][row]
@@ -210,7 +220,7 @@ class LatticeShadows:
         if self._sun is None or self._sun[0] != key:
             before = None if self._before is None else self._before[3]
             if self.across is not None:
-                visible = voxel_sun_cover(self.blockers, self.across, direction)
+                visible = self._voxel_sun(direction, None if before is None or before[0] != key else before[1])
             elif before is not None and before[0] == key and self.blockers is not None:
                 visible = before[1].copy()
                 unit = np.asarray(direction, np.float64) / np.linalg.norm(direction)
@@ -220,6 +230,27 @@ class LatticeShadows:
                 visible = encoding.sun_visibility(self.blockers, self.points, direction)
             self._sun = (key, visible)
         return self._sun[1]
+
+    def _voxel_sun(self, direction: np.ndarray, before: np.ndarray | None) -> np.ndarray:
+        """`voxel_sun_cover` of the `across` voxels; after a move (`before`: the previous voxels' cover for
+        the same direction) kept for each voxel at the same place whose nine rays and their starts miss the
+        moved box: where every ray from its surface point misses the box widened by the starts' reach
+        (a voxel and twice its surface offset), so do theirs."""
+        if before is None or self._before is None or self.blockers is None:
+            return voxel_sun_cover(self.blockers, self.across, direction)
+        voxels, match = self.across, self._match
+        if match is None:
+            match = np.arange(len(self.points))
+        reach = voxels.voxel_size * (1.0 + 2.0 * SURFACE_OFFSET)
+        lo, hi = self._before[0] - reach, self._before[1] + reach
+        unit = np.asarray(direction, np.float64) / np.linalg.norm(direction)
+        cell = voxels.lo + voxels.coords * voxels.voxel_size
+        redo = ((match < 0) | _rays_meet_box(self.points, unit, lo, hi)
+                | np.all((cell < hi) & (cell + voxels.voxel_size > lo), axis=1))
+        visible = np.where(match >= 0, before[np.maximum(match, 0)], 0.0)
+        rows = np.flatnonzero(redo)
+        visible[rows] = voxel_sun_cover(self.blockers, voxels, direction, rows)[rows]
+        return visible
 
 
 MOVED_SHARE = 1.0
@@ -239,6 +270,26 @@ def moved_box(before: VoxelRays | None, after: VoxelRays | None) -> tuple[np.nda
     if found is None or found[1] is None:
         return None
     return found[1][0], found[1][1]
+
+
+def same_voxels(old: VoxelGrid, new: VoxelGrid) -> np.ndarray:
+    """(K_new,) the row of `old`'s voxel at the same grid cell as each of `new`'s with the same surface in
+    it (its position and normal), -1 elsewhere. A cell holds a voxel for each way its surfaces face, under
+    one hash id; both lists are in hash id order, as voxelizing lays them out (sorted here where not)."""
+    old_id, new_id = old.hash_id, new.hash_id
+    out = np.full(len(new_id), -1)
+    order = None if np.all(old_id[1:] >= old_id[:-1]) else np.argsort(old_id, kind="stable")
+    first = np.searchsorted(old_id, new_id, "left", sorter=order)
+    runs = np.searchsorted(old_id, new_id, "right", sorter=order) - first
+    for step in range(int(runs.max(initial=0))):
+        open_ = np.flatnonzero((out < 0) & (runs > step))
+        at = first[open_] + step
+        if order is not None:
+            at = order[at]
+        same = (np.all(old.position[at] == new.position[open_], axis=1)
+                & np.all(old.normal[at] == new.normal[open_], axis=1))
+        out[open_[same]] = at[same]
+    return out
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

@@ -60,11 +60,14 @@ def sun_cover(blockers, base: np.ndarray, starts: np.ndarray, direction: np.ndar
     return seen.reshape(s, k).mean(axis=0)
 
 
-def voxel_sun_cover(blockers, voxels: VoxelGrid, direction: np.ndarray) -> np.ndarray:
+def voxel_sun_cover(blockers, voxels: VoxelGrid, direction: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
     """(K,) `sun_cover` of the voxels that face the sun (0 for the others, which it does not light), their
-    rays started SURFACE_OFFSET voxels in front of them as every ray from a voxel starts."""
+    rays started SURFACE_OFFSET voxels in front of them as every ray from a voxel starts. `among`: the
+    rows to compute (the others 0), all where None."""
     direction = np.asarray(direction, np.float64)
     rows = np.flatnonzero(voxels.normal @ direction > 0)
+    if among is not None:
+        rows = np.intersect1d(rows, among, assume_unique=True)
     out = np.zeros(voxels.count)
     if len(rows):
         h = voxels.voxel_size
