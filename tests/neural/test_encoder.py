@@ -278,7 +278,8 @@ def test_a_moved_object_keeps_the_voxels_shadow_rays_that_miss_its_box(name, gro
     """The shadows of the voxels' surfaces after a move, made from the previous voxels' ones: a voxel with
     the same surface in the same cell keeps its rays' answers (lamp and sun) where they miss the box
     around the moved triangles, the others are traced; every answer is that of shadows traced afresh."""
-    from viewer.neural.lattice import LatticeShadows, same_voxels
+    from viewer.neural.changes import same_voxels
+    from viewer.neural.lattice import LatticeShadows
 
     scene = load(name)
     lo, hi = scene.bounds
@@ -310,7 +311,7 @@ def test_a_moved_object_keeps_the_voxels_shadow_rays_that_miss_its_box(name, gro
 def test_voxels_are_matched_within_a_cell_by_their_surface():
     """A cell holds a voxel for each way its surfaces face, all under one hash id: each is matched to the
     one of the same surface, whatever their order within the cell."""
-    from viewer.neural.lattice import same_voxels
+    from viewer.neural.changes import same_voxels
 
     voxels = voxelize(load("cornell"), 16)
     ids = voxels.hash_id

@@ -48,8 +48,8 @@ from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
 from viewer.neural.encoding import CHANNELS, Encoding
-from viewer.neural.lattice import (LatticeGeometry, LatticeShadows, assemble, moved_box, proportional_channels,
-                                   same_columns, same_direction, same_sun, sun_parts)
+from viewer.neural.changes import proportional_channels, same_columns, same_direction, same_sun, sun_parts
+from viewer.neural.lattice import LatticeGeometry, LatticeShadows, assemble, moved_box
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
 

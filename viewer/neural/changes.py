@@ -1,0 +1,71 @@
+"""What an `Encoder` (viewer/neural/encoder.py) compares between two calls to find what an edit changed:
+the sun, the colour columns of the voxels' albedo and emission, the voxels that kept their surface.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from viewer.rays.voxels import VoxelGrid
+
+
+def sun_parts(sun) -> tuple[np.ndarray | None, np.ndarray]:
+    if sun is None:
+        return None, np.zeros(3)
+    return np.asarray(sun.direction, np.float64), np.asarray(sun.irradiance, np.float64)
+
+
+def same_direction(a, b) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(a, b))
+
+
+def same_sun(a, b) -> bool:
+    return same_direction(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def same_columns(a: np.ndarray | None, b: np.ndarray) -> np.ndarray:
+    """(3,) whether each colour column of two (K, 3) arrays is equal."""
+    if a is None or a.shape != b.shape:
+        return np.zeros(3, bool)
+    return np.array([np.array_equal(a[:, c], b[:, c]) for c in range(3)])
+
+
+def proportional_channels(before, after) -> np.ndarray:
+    """(3,) per colour channel: whether all the light of `after` (voxel emission (K, 3), sun irradiance
+    (3,)) is that of `before` times one positive factor, or both are dark: then the scale-out leaves
+    the pass's inputs as they were."""
+    out = np.zeros(3, bool)
+    if before[0] is None or before[0].shape != after[0].shape:
+        return out
+    for c in range(3):
+        old = np.append(before[0][:, c], before[1][c])
+        new = np.append(after[0][:, c], after[1][c])
+        top_old, top_new = np.abs(old).max(), np.abs(new).max()
+        if top_old == 0 or top_new == 0:
+            out[c] = top_old == top_new
+            continue
+        factor = top_new / top_old
+        out[c] = np.abs(new - factor * old).max() <= 1e-12 * top_new
+    return out
+
+
+def same_voxels(old: VoxelGrid, new: VoxelGrid) -> np.ndarray:
+    """(K_new,) the row of `old`'s voxel at the same grid cell as each of `new`'s with the same surface in
+    it (its position and normal), -1 elsewhere. A cell holds a voxel for each way its surfaces face, under
+    one hash id; both lists are in hash id order, as voxelizing lays them out (sorted here where not)."""
+    old_id, new_id = old.hash_id, new.hash_id
+    out = np.full(len(new_id), -1)
+    order = None if np.all(old_id[1:] >= old_id[:-1]) else np.argsort(old_id, kind="stable")
+    first = np.searchsorted(old_id, new_id, "left", sorter=order)
+    runs = np.searchsorted(old_id, new_id, "right", sorter=order) - first
+    for step in range(int(runs.max(initial=0))):
+        open_ = np.flatnonzero((out < 0) & (runs > step))
+        at = first[open_] + step
+        if order is not None:
+            at = order[at]
+        same = (np.all(old.position[at] == new.position[open_], axis=1)
+                & np.all(old.normal[at] == new.normal[open_], axis=1))
+        out[open_[same]] = at[same]
+    return out
