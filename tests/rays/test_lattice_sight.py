@@ -103,3 +103,7 @@ def test_after_a_move_the_kept_edges_and_segments_give_the_fresh_sweep():
     assert np.array_equal(kept[0], again[0]) and np.array_equal(kept[1], again[1])
     assert 0 < kept[2] < 0.5 * again[2]
     assert not np.array_equal(kept[0], rows)
+    some = np.arange(len(ends)) % 3 == 0     # the others swept afresh, in among the kept ones
+    mixed = after.visibility(ends, (*box, rows, traced, some))
+    assert np.array_equal(mixed[0], again[0]) and np.array_equal(mixed[1], again[1])
+    assert kept[2] < mixed[2] < again[2]
