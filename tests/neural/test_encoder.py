@@ -349,7 +349,7 @@ def test_after_a_move_the_seen_rays_land_where_rays_cast_afresh_do(name, group, 
     after = encoding.seen_rays(after_blockers, voxels, points, before, moved_box(blockers, after_blockers))
     fresh = encoding.seen_rays(after_blockers, voxels, points)
     assert 0 < after.traced < len(fresh.voxel) and fresh.traced == len(fresh.voxel)
-    (face, t), (fresh_face, fresh_t) = after._faces, fresh._faces
+    (face, t, _), (fresh_face, fresh_t, _) = after._faces, fresh._faces
     assert np.array_equal(t, fresh_t)
     # Where two coplanar faces meet a ray at the same distance (a box's base on the floor), Embree's
     # choice between them follows its hierarchy, which the move rebuilt: either face is right there.
@@ -358,3 +358,9 @@ def test_after_a_move_the_seen_rays_land_where_rays_cast_afresh_do(name, group, 
     assert np.array_equal(after.voxel[same], fresh.voxel[same])
     assert not np.array_equal(before.voxel, fresh.voxel)
     assert np.array_equal(after.links, fresh.links)   # the filter's links tested again only near the move
+    # the kept rays' voxels taken from their old ones through the voxels that kept their surface: the ones
+    # the lookup in the new listing finds
+    from viewer.neural.seen import SeenRays
+    looked_up = SeenRays(after_blockers.landing, voxels.count, points, previous=before,
+                         box=moved_box(blockers, after_blockers))
+    assert np.array_equal(after.voxel, looked_up.voxel) and np.array_equal(after.open, looked_up.open)

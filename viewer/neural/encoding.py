@@ -262,7 +262,7 @@ def seen_rays(blockers: VoxelRays | None, voxels: VoxelGrid, points: np.ndarray,
     (nothing is seen then: the seen features are zero). `previous`, `box`: see `SeenRays`."""
     if not isinstance(blockers, Occluders):
         return None
-    return SeenRays(blockers.landing, voxels.count, points, previous=previous, box=box)
+    return SeenRays(blockers.landing, voxels.count, points, previous=previous, box=box, voxels=voxels)
 
 
 def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None) -> Encoding:

@@ -44,13 +44,16 @@ def bundle(o, d, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, vox
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def bundle_kept(o, d, kept, box_lo, box_hi, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, voxel,
-                 out, face, t):
+def bundle_kept(o, d, kept, box_lo, box_hi, old_hits, remap, intersect, scene, faces, e1, e2, lo, h, n, first,
+                triangle, voxel, out, face, t):
     """`_bundle` for (P, D, 3) directions, keeping each ray's face and t: with `kept`, a ray that does not
-    pass through the box [box_lo, box_hi] before its hit (`face`, `t` as they are) keeps them and only
-    looks its voxel up again; the others are traced. (P,) how many rays of each origin were traced (the
-    box test in the same pass: apart, it read every ray again, 2.8 ms of a box moved in the Cornell box)."""
+    pass through the box [box_lo, box_hi] before its hit (`face`, `t` as they are) keeps them, and its
+    voxel is the one it landed on before (`old_hits` (P, D), empty: looked up again) under its new index
+    (`remap`: each old voxel's, -1 where the voxel changed: looked up again); the others are traced. (P,)
+    how many rays of each origin were traced (the box test in the same pass: apart, it read every ray
+    again, 2.8 ms of a box moved in the Cornell box)."""
     traced = np.zeros(o.shape[0], np.int64)
+    known = old_hits.shape[0] == o.shape[0]
     for p in numba.prange(o.shape[0]):
         record = embree.record()
         for k in range(d.shape[1]):
@@ -62,11 +65,18 @@ def bundle_kept(o, d, kept, box_lo, box_hi, intersect, scene, faces, e1, e2, lo,
                                                 dx, dy, dz, FAR)
                 face[p, k], t[p, k] = f, th
             else:
+                if known:   # a miss or a back face stays one: the same face, met from the same side
+                    was = old_hits[p, k]
+                    now = was if was < 0 else remap[was]
+                    if was < 0 or now >= 0:
+                        out[p, k] = now
+                        continue
                 f, th = face[p, k], t[p, k]
                 front = f != NO_FACE and front_of(f, dx, dy, dz, e1, e2)
             out[p, k] = voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, th, front, lo, h, n, first, triangle,
                                  voxel)
     return traced
+
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def meets_box(ox, oy, oz, dx, dy, dz, far, lo, hi):

@@ -113,7 +113,10 @@ class VoxelRays:
         t) of the same rays in a scene where only the triangles in `box` ((lo, hi): their old and new
         places, with room for a cell's neighbours) moved; a ray that does not pass through the box before
         its old hit meets the same face at the same t, and only its voxel is looked up again in this
-        listing; the others are traced again. `packets`: (N, embree.LANES) flat ray indices (origin x D +
+        listing; the others are traced again. `before` may add (hits, remap): the voxel each ray landed on
+        then and the new index of each old voxel (-1 where it changed), so that a kept ray takes its old
+        voxel's new index without a lookup (the same voxel: its face did not move, nor did its cell's
+        surface). `packets`: (N, embree.LANES) flat ray indices (origin x D +
         ray, -1 for none) that cover every ray once, traced a packet at a time where all are traced
         (`landing.bundle_packed`): parallel rays from nearby origins, the same hits."""
         o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
@@ -132,10 +135,13 @@ class VoxelRays:
         if before is None:   # every ray traced: a box that holds everything
             lo, hi, kept = np.full(3, -np.inf), np.full(3, np.inf), False
         else:
-            face[:], t[:] = before
+            face[:], t[:] = before[:2]
             lo, hi, kept = np.asarray(box[0], np.float64), np.asarray(box[1], np.float64), True
-        traced = bundle_kept(o, d, kept, lo, hi, *caster.direct.handle, caster.faces, caster.e1, caster.e2, c.lo,
-                             c.h, c.n, c.first, c.triangle, c.voxel, out, face, t)
+        old_hits, remap = (before[2:] if before is not None and len(before) == 4
+                           else (np.zeros((0, 0), np.int32), np.zeros(0, np.int32)))
+        traced = bundle_kept(o, d, kept, lo, hi, np.ascontiguousarray(old_hits, np.int32),
+                             np.ascontiguousarray(remap, np.int32), *caster.direct.handle, caster.faces, caster.e1,
+                             caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out, face, t)
         return out, face, t, int(traced.sum())
 
     def escapes(self, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
