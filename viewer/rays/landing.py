@@ -44,20 +44,21 @@ def bundle(o, d, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, vox
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def bundle_kept(o, d, kept, box_lo, box_hi, old_hits, remap, intersect, scene, faces, e1, e2, lo, h, n, first,
-                triangle, voxel, out, face, t):
-    """`_bundle` for (P, D, 3) directions, keeping each ray's face and t: with `kept`, a ray that does not
-    pass through the box [box_lo, box_hi] before its hit (`face`, `t` as they are) keeps them, and its
-    voxel is the one it landed on before (`old_hits` (P, D), empty: looked up again) under its new index
-    (`remap`: each old voxel's, -1 where the voxel changed: looked up again); the others are traced. (P,)
-    how many rays of each origin were traced (the box test in the same pass: apart, it read every ray
-    again, 2.8 ms of a box moved in the Cornell box)."""
+def bundle_kept(o, d, which, kept, box_lo, box_hi, old_hits, remap, intersect, scene, faces, e1, e2, lo, h, n,
+                first, triangle, voxel, out, face, t):
+    """`_bundle` for directions d[which[p]] from origin p (d (S, D, 3)), keeping each ray's face and t:
+    with `kept`, a ray that does not pass through the box [box_lo, box_hi] before its hit (`face`, `t` as
+    they are) keeps them, and its voxel is the one it landed on before (`old_hits` (P, D), empty: looked
+    up again) under its new index (`remap`: each old voxel's, -1 where the voxel changed: looked up
+    again); the others are traced. (P,) how many rays of each origin were traced (the box test in the same
+    pass: apart, it read every ray again, 2.8 ms of a box moved in the Cornell box)."""
     traced = np.zeros(o.shape[0], np.int64)
     known = old_hits.shape[0] == o.shape[0]
     for p in numba.prange(o.shape[0]):
         record = embree.record()
+        row = d[which[p]]
         for k in range(d.shape[1]):
-            dx, dy, dz = d[p, k, 0], d[p, k, 1], d[p, k, 2]
+            dx, dy, dz = row[k, 0], row[k, 1], row[k, 2]
             if not kept or meets_box(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz,
                                      FAR if face[p, k] == NO_FACE else t[p, k], box_lo, box_hi):
                 traced[p] += 1

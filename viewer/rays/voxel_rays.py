@@ -106,7 +106,8 @@ class VoxelRays:
             out[part] = self.first_hits(starts, d[part].reshape(-1, 3)).reshape(-1, count)
         return out
 
-    def kept_bundle(self, origins: np.ndarray, directions: np.ndarray, before=None, box=None, packets=None):
+    def kept_bundle(self, origins: np.ndarray, directions: np.ndarray, before=None, box=None, packets=None,
+                    which: np.ndarray | None = None):
         """`bundle_hits` for (P, D, 3) `directions`, with what a later call needs to keep them: (hits,
         faces, t, traced): the hits, each ray's face and distance (None, None where the rays are not
         traced through Embree from compiled code), and how many rays were traced. `before`: the (faces,
@@ -118,16 +119,22 @@ class VoxelRays:
         voxel's new index without a lookup (the same voxel: its face did not move, nor did its cell's
         surface). `packets`: (N, embree.LANES) flat ray indices (origin x D +
         ray, -1 for none) that cover every ray once, traced a packet at a time where all are traced
-        (`landing.bundle_packed`): parallel rays from nearby origins, the same hits."""
+        (`landing.bundle_packed`): parallel rays from nearby origins, the same hits. `which`: (P,) the
+        row of `directions` (S, D, 3) each origin casts (None: one row each)."""
         o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
         d = np.ascontiguousarray(directions, np.float64)
+        which = (np.arange(len(o), dtype=np.int32) if which is None
+                 else np.ascontiguousarray(which, np.int32))
+        shape = (len(o), d.shape[1])
         if self.caster is None or self.caster.direct is None:
-            return self.bundle_hits(o, d), None, None, d.shape[0] * d.shape[1]
+            return self.bundle_hits(o, d[which]), None, None, shape[0] * shape[1]
         c, caster = self.cells, self.caster
-        out = np.empty(d.shape[:2], np.int32)
-        face = np.empty(d.shape[:2], np.int32)
-        t = np.empty(d.shape[:2], np.float64)
+        out = np.empty(shape, np.int32)
+        face = np.empty(shape, np.int32)
+        t = np.empty(shape, np.float64)
         if before is None and packets is not None:
+            if len(d) != len(o):
+                raise ValueError("rays in packets take a row of directions for each origin")
             bundle_packed(o, d.reshape(-1, 3), d.shape[1], packets, *caster.direct.packets, caster.faces, caster.e1,
                           caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out.reshape(-1),
                           face.reshape(-1), t.reshape(-1))
@@ -139,7 +146,7 @@ class VoxelRays:
             lo, hi, kept = np.asarray(box[0], np.float64), np.asarray(box[1], np.float64), True
         old_hits, remap = (before[2:] if before is not None and len(before) == 4
                            else (np.zeros((0, 0), np.int32), np.zeros(0, np.int32)))
-        traced = bundle_kept(o, d, kept, lo, hi, np.ascontiguousarray(old_hits, np.int32),
+        traced = bundle_kept(o, d, which, kept, lo, hi, np.ascontiguousarray(old_hits, np.int32),
                              np.ascontiguousarray(remap, np.int32), *caster.direct.handle, caster.faces, caster.e1,
                              caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out, face, t)
         return out, face, t, int(traced.sum())
