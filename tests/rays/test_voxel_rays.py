@@ -162,7 +162,7 @@ def test_segments_whose_cells_hold_no_triangle_are_clear_untraced():
     scene = lit_room(box(0.25, centre=(0.2, -0.75, 0.1), name="block"))
     blockers = encoding.occluders(scene, voxelize(scene, 16))
     rng = np.random.default_rng(3)
-    points = rng.uniform(-0.95, 0.95, (400, 3))
+    points = rng.uniform(-0.95, 0.95, (403, 3))   # a last packet of three
     ends = np.column_stack([rng.uniform(-0.3, 0.3, 12), np.full(12, 0.9), rng.uniform(-0.3, 0.3, 12)])
     found = blockers.pairs_clear(points, ends)
     a, b = np.repeat(points, len(ends), axis=0), np.tile(ends, (len(points), 1))
@@ -172,3 +172,23 @@ def test_segments_whose_cells_hold_no_triangle_are_clear_untraced():
     untraced = [voxel_rays.empty_box(table, cells.lo, cells.h, *p, *e) for p, e in zip(a, b)]
     assert np.mean(untraced) > 0.3
     assert not np.any(np.asarray(untraced) & (found.ravel() == 0))
+
+
+def test_pairs_traced_eight_at_a_time_answer_as_one_by_one():
+    """`pairs_clear` traces the segments of eight consecutive points to one end in a packet
+    (rtcOccluded8): the Cornell box's probe lattice to points on and under its lamp answers as every
+    segment traced alone does."""
+    pytest.importorskip("embreex")
+    from viewer.neural import encoding
+    from viewer.probes.grid import ProbeGrid
+    from viewer.rays.voxels import voxelize
+
+    scene = load("cornell")
+    blockers = encoding.occluders(scene, voxelize(scene, 24))
+    points = ProbeGrid.positions_for(*scene.bounds, 13).reshape(-1, 3)     # 2,197: not a whole packet
+    u = np.linspace(-0.2, 0.2, 4)
+    ends = np.stack(np.meshgrid(u, [0.54, 0.3], u), -1).reshape(-1, 3)
+    found = blockers.pairs_clear(points, ends)
+    a, b = np.repeat(points, len(ends), axis=0), np.tile(ends, (len(points), 1))
+    np.testing.assert_array_equal(found.ravel(), blockers.segments_clear(a, b))   # rtcOccluded1, a segment a call
+    assert 0.05 < 1 - found.mean() < 0.95     # the boxes shadow some

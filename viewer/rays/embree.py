@@ -105,7 +105,8 @@ def _load():
                 raise OSError("rtcNewDevice failed")
             address = ctypes.c_void_p
             _library = (lib, device, ctypes.cast(lib.rtcIntersect1, address).value,
-                        ctypes.cast(lib.rtcOccluded1, address).value, ctypes.cast(lib.rtcIntersect8, address).value)
+                        ctypes.cast(lib.rtcOccluded1, address).value, ctypes.cast(lib.rtcIntersect8, address).value,
+                        ctypes.cast(lib.rtcOccluded8, address).value)
         except (OSError, AttributeError) as exc:
             _failed = str(exc)
         return _library
@@ -186,7 +187,7 @@ class Scene:
         library = _load()
         if library is None:
             raise OSError(f"Embree cannot be called directly: {_failed}")
-        lib, device, intersect, occluded, intersect8 = library
+        lib, device, intersect, occluded, intersect8, occluded8 = library
         self.parts = [part if isinstance(part, Hierarchy) else Hierarchy(part, quick) for part in parts]
         offsets = np.cumsum([0] + [part.count for part in self.parts])[:-1]
         shifts = [None] * len(self.parts) if shifts is None else list(shifts)
@@ -216,6 +217,8 @@ class Scene:
         """(rtcOccluded1's address, `scene`): what a compiled loop passes to `occluded`."""
         self.packets = (intersect8, self.scene)
         """(rtcIntersect8's address, `scene`): what a compiled loop passes to `closest8`."""
+        self.occlusion8 = (occluded8, self.scene)
+        """(rtcOccluded8's address, `scene`): what a compiled loop passes to `occluded8`."""
 
     def closest(self, origins: np.ndarray, directions: np.ndarray, far: float):
         """(primitive, t, u, v) of the first face each ray o + t d, 0 <= t <= far, meets: primitive -1 (and t
@@ -358,6 +361,27 @@ def closest8(intersect8, scene, record, o, d, rays, per_origin, far, primitive, 
             instance = bits[at + 19 * w + lane]
             offset = 0 if instance == INVALID else scene[1 + instance]
             primitive[r], t[r] = offset + np.int64(bits[at + 17 * w + lane]), np.float64(ray[at + 8 * w + lane])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def occluded8(occluded8_query, scene, record, o, d, length, lanes, blocked):
+    """`occluded` for up to LANES segments in one packet: lane l (where lanes[l]) from o[l] along unit
+    d[l] (each (LANES, 3)) for length[l]; blocked[l] whether it meets a face, through a `packet` record
+    (RTCRay8 is RTCRayHit8's first twelve fields)."""
+    ray, bits, at, address, valid, first, valid_address = record
+    w = LANES
+    for lane in range(w):
+        valid[first + lane] = -1 if lanes[lane] else 0
+        if not lanes[lane]:
+            continue
+        ray[at + lane], ray[at + w + lane], ray[at + 2 * w + lane] = o[lane, 0], o[lane, 1], o[lane, 2]
+        ray[at + 4 * w + lane], ray[at + 5 * w + lane], ray[at + 6 * w + lane] = d[lane, 0], d[lane, 1], d[lane, 2]
+        ray[at + 3 * w + lane], ray[at + 7 * w + lane] = 0.0, 0.0   # tnear, time
+        ray[at + 8 * w + lane] = np.float32(length[lane])           # tfar
+        bits[at + 9 * w + lane], bits[at + 10 * w + lane], bits[at + 11 * w + lane] = INVALID, 0, 0
+    _call4(occluded8_query, valid_address, scene[0], address, 0)
+    for lane in range(w):
+        blocked[lane] = lanes[lane] and ray[at + 8 * w + lane] < 0.0   # Embree sets tfar to -inf there
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

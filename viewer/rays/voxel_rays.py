@@ -183,8 +183,8 @@ class VoxelRays:
             return dda.pairs_clear(self.cells, a, b)
         out = np.empty((len(a), len(b)), np.float32)
         if self.caster.direct is not None:
-            _pairs_clear(*self.caster.direct.occlusion, a, b, self.box_table(len(a) * len(b)), self.cells.lo,
-                         self.cells.h, out)
+            _pairs_clear(*self.caster.direct.occlusion8, a, b, self.box_table(len(a) * len(b)), self.cells.lo,
+                                self.cells.h, out)
             return out
         rows = max(1, RAYS_PER_CALL // max(len(b), 1))
         for start in range(0, len(a), rows):
@@ -214,17 +214,42 @@ def _segments_clear(query, scene, a, b, occupied, lo, h, out):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _pairs_clear(query, scene, a, b, occupied, lo, h, out):
+def _pairs_clear(query8, scene, a, b, occupied, lo, h, out):
     """`pairs_clear` through Embree, each segment made and cast in one compiled pass (repeating, tiling
     and normalizing (A x B, 3) arrays in numpy first took a third of a moved lamp's shadow rays). A
     segment whose box of cells holds no triangle (`occupied`, `VoxelRays.occupied`) is clear untraced:
-    from a probe in a room's open middle to a lamp, most are."""
-    for i in numba.prange(a.shape[0]):
-        record = embree.record()
+    from a probe in a room's open middle to a lamp, most are. The others go LANES at a time, the
+    segments of consecutive points a (a lattice's row, voxels in hash id order: near each other) to one
+    point b, nearly parallel, through rtcOccluded8: the same answers as one by one, in 0.6-0.75 of the
+    time (the Cornell box's probes to its lamp's 16 ray ends 5.7 -> 3.6 ms, a validation room's 2,454
+    voxels to 129 ends 12.9 -> 7.8)."""
+    lanes = embree.LANES
+    for block in numba.prange((a.shape[0] + lanes - 1) // lanes):
+        record = embree.packet()
+        o, d = np.empty((lanes, 3)), np.empty((lanes, 3))
+        length, traced, blocked = np.empty(lanes), np.empty(lanes, np.bool_), np.empty(lanes, np.bool_)
+        start = block * lanes
         for j in range(b.shape[0]):
-            clear = segment_clear(query, scene, record, occupied, lo, h, a[i, 0], a[i, 1], a[i, 2], b[j, 0], b[j, 1],
-                                  b[j, 2])
-            out[i, j] = 1.0 if clear else 0.0
+            some = False
+            for lane in range(lanes):
+                i = start + lane
+                traced[lane] = False
+                if i >= a.shape[0]:
+                    continue
+                dx, dy, dz = b[j, 0] - a[i, 0], b[j, 1] - a[i, 1], b[j, 2] - a[i, 2]
+                size = np.sqrt(dx * dx + dy * dy + dz * dz)
+                if size <= 0.0 or empty_box(occupied, lo, h, a[i, 0], a[i, 1], a[i, 2], b[j, 0], b[j, 1], b[j, 2]):
+                    out[i, j] = 1.0
+                    continue
+                inv = 1.0 / size
+                o[lane, 0], o[lane, 1], o[lane, 2] = a[i, 0], a[i, 1], a[i, 2]
+                d[lane, 0], d[lane, 1], d[lane, 2] = dx * inv, dy * inv, dz * inv
+                length[lane], traced[lane], some = size, True, True
+            if some:
+                embree.occluded8(query8, scene, record, o, d, length, traced, blocked)
+                for lane in range(lanes):
+                    if traced[lane]:
+                        out[start + lane, j] = 0.0 if blocked[lane] else 1.0
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
