@@ -28,7 +28,7 @@ import numpy as np
 
 from viewer.rays import embree
 from viewer.rays.landing import meets_box
-from viewer.rays.voxel_rays import VoxelRays, segment_clear
+from viewer.rays.voxel_rays import VoxelRays, empty_box, segment_clear
 
 SEED_CELLS = 2
 """Probes within this Chebyshev distance (lattice cells) of a ray end's origin trace their own segment:
@@ -102,9 +102,10 @@ class LatticeSight:
         box_lo, box_hi, rows, marks, kept = before
         query, scene, table, cell_lo, h = self._trace
         coords = (targets - self.lo) / self.spacing - 0.5
-        _sweep(query, scene, self.points, self.m, targets, coords, self.origins(targets), self.clear, table, cell_lo, h,
-               SEED_CELLS, SOFT, np.asarray(box_lo, np.float64), np.asarray(box_hi, np.float64), rows, marks,
-               np.asarray(kept, np.bool_), self.changed_edges, _spread(kept), out, traced, count)
+        _sweep(query, scene, self.blockers.caster.direct.occlusion8[0], self.points, self.m, targets, coords,
+               self.origins(targets), self.clear, table, cell_lo, h, SEED_CELLS, SOFT, np.asarray(box_lo, np.float64),
+               np.asarray(box_hi, np.float64), rows, marks, np.asarray(kept, np.bool_), self.changed_edges,
+               _spread(kept), out, traced, count)
         return out, traced, int(count.sum())
 
 
@@ -206,6 +207,40 @@ def _settle(query, scene, record, points, m, end, t, i, j, k, clear, table, lo, 
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _traced_together(query8, scene, packet, points, end, pending, count, table, lo, h, row, mark):
+    """Trace the segments from the probes pending[:count] to `end` into row (1: clear) and mark them
+    traced, embree.LANES at a time (rtcOccluded8; a segment in cells no triangle reaches is clear
+    untraced, as `segment_clear` takes it). Returns count."""
+    lanes = embree.LANES
+    o, d = np.empty((lanes, 3)), np.empty((lanes, 3))
+    length, asked, blocked = np.empty(lanes), np.empty(lanes, np.bool_), np.empty(lanes, np.bool_)
+    for first in range(0, count, lanes):
+        some = False
+        for lane in range(lanes):
+            asked[lane] = False
+            if first + lane >= count:
+                continue
+            p = pending[first + lane]
+            mark[p] = True
+            px, py, pz = points[p, 0], points[p, 1], points[p, 2]
+            dx, dy, dz = end[0] - px, end[1] - py, end[2] - pz
+            size = np.sqrt(dx * dx + dy * dy + dz * dz)
+            if size <= 0.0 or empty_box(table, lo, h, px, py, pz, end[0], end[1], end[2]):
+                row[p] = 1.0
+                continue
+            inv = 1.0 / size
+            o[lane, 0], o[lane, 1], o[lane, 2] = px, py, pz
+            d[lane, 0], d[lane, 1], d[lane, 2] = dx * inv, dy * inv, dz * inv
+            length[lane], asked[lane], some = size, True, True
+        if some:
+            embree.occluded8(query8, scene, packet, o, d, length, asked, blocked)
+            for lane in range(lanes):
+                if asked[lane]:
+                    row[pending[first + lane]] = 0.0 if blocked[lane] else 1.0
+    return count
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _order(i, j, k, oi, oj, ok):
     """The sweep's order of probe (i, j, k) about the origin (oi, oj, ok): 3 r + the count of the shell's
     faces it lies on, r its Chebyshev distance (the origin 3, then shell 1's faces, edges, corners...)."""
@@ -262,17 +297,19 @@ def _settle_again(query, scene, record, points, m, end, t, origin, clear, table,
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _sweep(query, scene, points, m, targets, coords, origins, clear, table, lo, h, seed, soft, box_lo, box_hi,
-           old_rows, old_traced, kept, changed_edges, order, out, traced, count):
+def _sweep(query, scene, query8, points, m, targets, coords, origins, clear, table, lo, h, seed, soft, box_lo,
+           box_hi, old_rows, old_traced, kept, changed_edges, order, out, traced, count):
     """`LatticeSight.visibility`, one ray end a task: the shells around its origin in order of Chebyshev
     distance r, and in each shell first the probes on one of its faces alone, then those on two (its
     edges), then its corners, so that every probe a blend reads is settled before it (a probe's step
     back leaves it on the shell only along an axis where it is on the shell's face, and then on fewer of
-    them). A kept ray end starts from its previous answers and settles again only the probes whose
-    answer can have changed (`_settle_again`): after a small object moved, one to three in a hundred."""
+    them). A fresh ray end's probes of one such class of a shell read none of each other, so those whose
+    blend leaves them undecided are traced together after it, eight at a time (`_traced_together`). A
+    kept ray end starts from its previous answers and settles again only the probes whose answer can
+    have changed (`_settle_again`): after a small object moved, one to three in a hundred."""
     for task in numba.prange(targets.shape[0]):
         c = order[task]
-        record = embree.record()
+        record, packet = embree.record(), embree.packet()
         end, t = targets[c], coords[c]
         oi, oj, ok = origins[c, 0], origins[c, 1], origins[c, 2]
         row, mark = out[c], traced[c]
@@ -283,11 +320,13 @@ def _sweep(query, scene, points, m, targets, coords, origins, clear, table, lo, 
                                      soft, box_lo, box_hi, old_rows[c], old_traced[c], changed_edges, row, mark)
             continue
         top = max(oi, m - 1 - oi, oj, m - 1 - oj, ok, m - 1 - ok)
-        n = _settle(query, scene, record, points, m, end, t, oi, oj, ok, clear, table, lo, h, soft, box_lo, box_hi,
-                    row, mark, False, True, row, mark)
+        pending = np.empty(points.shape[0], np.int64)
+        pending[0] = (oi * m + oj) * m + ok
+        n = _traced_together(query8, scene, packet, points, end, pending, 1, table, lo, h, row, mark)
         for r in range(1, top + 1):
             near = r <= seed
             for faces in range(1, 4):
+                waiting = 0
                 for i in range(max(0, oi - r), min(m, oi + r + 1)):
                     for j in range(max(0, oj - r), min(m, oj + r + 1)):
                         on = (abs(i - oi) == r) + (abs(j - oj) == r)
@@ -299,6 +338,13 @@ def _sweep(query, scene, points, m, targets, coords, origins, clear, table, lo, 
                             continue
                         for k in range(k0, k1 + 1, step):
                             if 0 <= k < m:
-                                n += _settle(query, scene, record, points, m, end, t, i, j, k, clear, table, lo, h,
-                                             soft, box_lo, box_hi, row, mark, False, near, row, mark)
+                                p = (i * m + j) * m + k
+                                if not near:
+                                    v = _blend(row, clear, m, p, t[0] - i, t[1] - j, t[2] - k)
+                                    if v <= soft or v >= 1.0 - soft:
+                                        row[p], mark[p] = (0.0 if v <= soft else 1.0), False
+                                        continue
+                                pending[waiting] = p
+                                waiting += 1
+                n += _traced_together(query8, scene, packet, points, end, pending, waiting, table, lo, h, row, mark)
         count[c] = n
