@@ -42,7 +42,7 @@ import numpy as np
 from viewer.neural.changes import same_voxels
 from viewer.probes import sh
 from viewer.rays.dda import BACKFACE
-from viewer.rays.embree import LANES
+from viewer.rays.packets import LANES
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import VoxelGrid
 
@@ -207,7 +207,7 @@ def lattice_directions(count: int, rays: int, seed: int) -> tuple[np.ndarray, np
 
 @lru_cache(maxsize=2)
 def lattice_packets(count: int, rays: int, seed: int) -> np.ndarray | None:
-    """(N, embree.LANES) the rays of `lattice_rays` in packets for `VoxelRays.kept_bundle` (flat indices
+    """(N, packets.LANES) the rays of `lattice_rays` in packets for `VoxelRays.kept_bundle` (flat indices
     probe x rays + ray, -1 for none), or None off a cubic lattice: each packet is one direction from 8
     probes of one interleaved subset (their directions are the same), a 2x2x2 block of its stride-3
     lattice: parallel rays from nearby probes, which Embree traverses together (the seen rays of a

@@ -9,6 +9,7 @@
     cast.py         closest hits (face, distance, barycentrics, side) of many rays: Embree, or the DDA without it
     embree.py       Embree called from compiled loops, on every core and without Python's lock; the order
                     parallel loops take their items in, so that the cores' shares cost alike (`spread`)
+    packets.py      Embree's eight-ray packet queries from compiled loops (nearly parallel rays together)
     voxel_rays.py   rays that land on the voxel of the surface they meet (the solver's, the neural source's)
     raymarch.py     distance-field marching through the voxel occupancy (the paper kernel's visibility)
 """

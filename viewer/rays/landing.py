@@ -8,6 +8,7 @@ import numba
 import numpy as np
 
 from viewer.rays import dda, embree
+from viewer.rays.packets import LANES, closest8, packet
 from viewer.rays.cast import NO_FACE, first_face, front_of
 from viewer.rays.listing import NEIGHBOUR_ORDER
 
@@ -102,14 +103,14 @@ PACKETS_A_TASK = 64
 @numba.njit(cache=True, nogil=True, parallel=True)
 def bundle_packed(o, d, per_origin, packets, intersect8, scene, faces, e1, e2, lo, h, n, first, triangle, voxel,
                   out, face, t):
-    """`bundle_kept` with every ray traced, embree.LANES at a time: `packets` (N, LANES) flat ray indices
+    """`bundle_kept` with every ray traced, LANES at a time: `packets` (N, LANES) flat ray indices
     (origin x per_origin + ray, -1 for none), each once; d (R, 3) and out, face, t (R,) flat."""
     for block in numba.prange((packets.shape[0] + PACKETS_A_TASK - 1) // PACKETS_A_TASK):
-        record = embree.packet()
+        record = packet()
         for row in range(block * PACKETS_A_TASK, min(packets.shape[0], (block + 1) * PACKETS_A_TASK)):
             rays = packets[row]
-            embree.closest8(intersect8, scene, record, o, d, rays, per_origin, FAR, face, t)
-            for lane in range(embree.LANES):
+            closest8(intersect8, scene, record, o, d, rays, per_origin, FAR, face, t)
+            for lane in range(LANES):
                 r = rays[lane]
                 if r < 0:
                     continue

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from viewer.rays import embree
+from viewer.rays import embree, packets
 from viewer.rays.landing import meets_box
 from viewer.rays.voxel_rays import VoxelRays, empty_box, segment_clear
 
@@ -209,9 +209,9 @@ def _settle(query, scene, record, points, m, end, t, i, j, k, clear, table, lo, 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _traced_together(query8, scene, packet, points, end, pending, count, table, lo, h, row, mark):
     """Trace the segments from the probes pending[:count] to `end` into row (1: clear) and mark them
-    traced, embree.LANES at a time (rtcOccluded8; a segment in cells no triangle reaches is clear
+    traced, packets.LANES at a time (rtcOccluded8; a segment in cells no triangle reaches is clear
     untraced, as `segment_clear` takes it). Returns count."""
-    lanes = embree.LANES
+    lanes = packets.LANES
     o, d = np.empty((lanes, 3)), np.empty((lanes, 3))
     length, asked, blocked = np.empty(lanes), np.empty(lanes, np.bool_), np.empty(lanes, np.bool_)
     for first in range(0, count, lanes):
@@ -233,7 +233,7 @@ def _traced_together(query8, scene, packet, points, end, pending, count, table, 
             d[lane, 0], d[lane, 1], d[lane, 2] = dx * inv, dy * inv, dz * inv
             length[lane], asked[lane], some = size, True, True
         if some:
-            embree.occluded8(query8, scene, packet, o, d, length, asked, blocked)
+            packets.occluded8(query8, scene, packet, o, d, length, asked, blocked)
             for lane in range(lanes):
                 if asked[lane]:
                     row[pending[first + lane]] = 0.0 if blocked[lane] else 1.0
@@ -309,7 +309,7 @@ def _sweep(query, scene, query8, points, m, targets, coords, origins, clear, tab
     have changed (`_settle_again`): after a small object moved, one to three in a hundred."""
     for task in numba.prange(targets.shape[0]):
         c = order[task]
-        record, packet = embree.record(), embree.packet()
+        record, packet = embree.record(), packets.packet()
         end, t = targets[c], coords[c]
         oi, oj, ok = origins[c, 0], origins[c, 1], origins[c, 2]
         row, mark = out[c], traced[c]
