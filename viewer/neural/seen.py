@@ -81,7 +81,8 @@ class SeenRays:
         a small box moved in the Cornell box traces 26k of its 221k rays again (64k with the box widened
         by three cells, which the rays beside it do not need). `voxels`: the voxels `landing` lists; given
         here and to `previous`, a kept ray takes the new index of the voxel it landed on before where that
-        voxel kept its surface (`changes.same_voxels`), without looking it up (the box: 4.6 -> 1.4 ms)."""
+        voxel kept its surface (`changes.same_voxels`), without looking it up (the Cornell box's moved box:
+        these rays 16.6 -> 12.4 ms)."""
         self.count, self.rays, self.probes, self.points, self.seed = int(count), int(rays), len(points), points, seed
         directions, self._basis, self._sets = lattice_rays(len(points), self.rays, seed)
         before = None

@@ -28,7 +28,7 @@ import numpy as np
 
 from viewer.rays import embree, packets
 from viewer.rays.landing import meets_box
-from viewer.rays.voxel_rays import VoxelRays, empty_box, segment_clear
+from viewer.rays.voxel_rays import VoxelRays, segment_clear, segment_lane
 
 SEED_CELLS = 2
 """Probes within this Chebyshev distance (lattice cells) of a ray end's origin trace their own segment:
@@ -222,16 +222,11 @@ def _traced_together(query8, scene, packet, points, end, pending, count, table, 
                 continue
             p = pending[first + lane]
             mark[p] = True
-            px, py, pz = points[p, 0], points[p, 1], points[p, 2]
-            dx, dy, dz = end[0] - px, end[1] - py, end[2] - pz
-            size = np.sqrt(dx * dx + dy * dy + dz * dz)
-            if size <= 0.0 or empty_box(table, lo, h, px, py, pz, end[0], end[1], end[2]):
+            asked[lane] = segment_lane(o, d, length, lane, table, lo, h, points[p, 0], points[p, 1], points[p, 2],
+                                       end[0], end[1], end[2])
+            if not asked[lane]:
                 row[p] = 1.0
-                continue
-            inv = 1.0 / size
-            o[lane, 0], o[lane, 1], o[lane, 2] = px, py, pz
-            d[lane, 0], d[lane, 1], d[lane, 2] = dx * inv, dy * inv, dz * inv
-            length[lane], asked[lane], some = size, True, True
+            some |= asked[lane]
         if some:
             packets.occluded8(query8, scene, packet, o, d, length, asked, blocked)
             for lane in range(lanes):

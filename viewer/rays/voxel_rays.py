@@ -184,7 +184,7 @@ class VoxelRays:
         out = np.empty((len(a), len(b)), np.float32)
         if self.caster.direct is not None:
             _pairs_clear(*self.caster.direct.occlusion8, a, b, self.box_table(len(a) * len(b)), self.cells.lo,
-                                self.cells.h, out)
+                         self.cells.h, out)
             return out
         rows = max(1, RAYS_PER_CALL // max(len(b), 1))
         for start in range(0, len(a), rows):
@@ -233,23 +233,32 @@ def _pairs_clear(query8, scene, a, b, occupied, lo, h, out):
             some = False
             for lane in range(lanes):
                 i = start + lane
-                traced[lane] = False
-                if i >= a.shape[0]:
-                    continue
-                dx, dy, dz = b[j, 0] - a[i, 0], b[j, 1] - a[i, 1], b[j, 2] - a[i, 2]
-                size = np.sqrt(dx * dx + dy * dy + dz * dz)
-                if size <= 0.0 or empty_box(occupied, lo, h, a[i, 0], a[i, 1], a[i, 2], b[j, 0], b[j, 1], b[j, 2]):
+                traced[lane] = i < a.shape[0] and segment_lane(o, d, length, lane, occupied, lo, h, a[i, 0], a[i, 1],
+                                                               a[i, 2], b[j, 0], b[j, 1], b[j, 2])
+                if i < a.shape[0] and not traced[lane]:
                     out[i, j] = 1.0
-                    continue
-                inv = 1.0 / size
-                o[lane, 0], o[lane, 1], o[lane, 2] = a[i, 0], a[i, 1], a[i, 2]
-                d[lane, 0], d[lane, 1], d[lane, 2] = dx * inv, dy * inv, dz * inv
-                length[lane], traced[lane], some = size, True, True
+                some |= traced[lane]
             if some:
                 packets.occluded8(query8, scene, record, o, d, length, traced, blocked)
                 for lane in range(lanes):
                     if traced[lane]:
                         out[start + lane, j] = 0.0 if blocked[lane] else 1.0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def segment_lane(o, d, length, lane, occupied, lo, h, ax, ay, az, bx, by, bz):
+    """Put the segment a -> b into lane `lane` of a packet's origins, unit directions and lengths (each
+    (LANES, ...)); False, and nothing put, where it is clear untraced: no length, or a box of cells no
+    triangle reaches (`empty_box`), as `segment_clear` takes it."""
+    dx, dy, dz = bx - ax, by - ay, bz - az
+    size = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if size <= 0.0 or empty_box(occupied, lo, h, ax, ay, az, bx, by, bz):
+        return False
+    inv = 1.0 / size
+    o[lane, 0], o[lane, 1], o[lane, 2] = ax, ay, az
+    d[lane, 0], d[lane, 1], d[lane, 2] = dx * inv, dy * inv, dz * inv
+    length[lane] = size
+    return True
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
