@@ -4,6 +4,8 @@ the sun, the colour columns of the voxels' albedo and emission, the voxels that 
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from viewer.rays.voxels import VoxelGrid
@@ -51,10 +53,30 @@ def proportional_channels(before, after) -> np.ndarray:
     return out
 
 
+_last_match: tuple = (None, None, None)
+"""(weak references to the last two voxel lists matched, the answer): a move matches them for the seen
+rays and again for the voxels' shadows."""
+
+
 def same_voxels(old: VoxelGrid, new: VoxelGrid) -> np.ndarray:
     """(K_new,) the row of `old`'s voxel at the same grid cell as each of `new`'s with the same surface in
-    it (its position and normal), -1 elsewhere. A cell holds a voxel for each way its surfaces face, under
-    one hash id; both lists are in hash id order, as voxelizing lays them out (sorted here where not)."""
+    it (its position and normal), -1 elsewhere (read-only; the last answer kept). A cell holds a voxel for
+    each way its surfaces face, under one hash id; both lists are in hash id order, as voxelizing lays
+    them out (sorted here where not)."""
+    global _last_match
+    kept_old, kept_new, answer = _last_match
+    if kept_old is not None and kept_old() is old and kept_new() is new:
+        return answer
+    answer = _matched(old, new)
+    answer.flags.writeable = False
+    try:
+        _last_match = (weakref.ref(old), weakref.ref(new), answer)
+    except TypeError:   # lists that cannot be referred to weakly are matched each time
+        pass
+    return answer
+
+
+def _matched(old: VoxelGrid, new: VoxelGrid) -> np.ndarray:
     old_id, new_id = old.hash_id, new.hash_id
     out = np.full(len(new_id), -1)
     order = None if np.all(old_id[1:] >= old_id[:-1]) else np.argsort(old_id, kind="stable")
