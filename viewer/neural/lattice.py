@@ -72,7 +72,9 @@ class LatticeShadows:
     Made from the `previous` occluders' shadows when only some of the triangles moved (an object or a
     lamp dragged): a ray that meets neither where the moved triangles were nor where they are now meets
     the same triangles as before, so it keeps its answer, and only the rays through the box around the
-    moved triangles' old and new places are traced again (`moved_box`)."""
+    moved triangles' old and new places are traced again (`moved_box`). Shadows made `across` voxels
+    keep the answers of the voxels that kept their surface in their cell (`changes.same_voxels`): the
+    voxels the object left or entered, and the rays through the box, are traced again."""
 
     def __init__(self, blockers: VoxelRays | None, points: np.ndarray, lo: np.ndarray, spacing: np.ndarray,
                  previous: "LatticeShadows | None" = None, box=None, across: VoxelGrid | None = None):
