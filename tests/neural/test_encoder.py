@@ -216,6 +216,32 @@ def test_a_room_lit_by_a_large_lamp_sweeps_its_lattice_and_an_emission_edit_may_
     assert spots[2] is not spots[1] and spots[3] is not spots[2]   # the spot's shadows found the other way
 
 
+def test_a_drag_in_steps_through_a_swept_sunlit_room_gives_encode_s_numbers_at_every_step():
+    """A block dragged in four steps and back under a large panel (its probes' shadows swept), the sun
+    coming in through the room's open side: each step is made from the one before (the voxels' shadows
+    and sun kept where they miss the box, the sweep settled again where it can change, the seen rays'
+    voxels renumbered), and each gives `encoding.encode`'s numbers, however many steps the kept answers
+    came through. (The block floats: where two coplanar faces meet a ray at one distance, a box's base
+    on a floor, Embree's choice between them follows the hierarchy the drag's history built.)"""
+    pytest.importorskip("embreex")
+    room = box(inward=True, name="room")
+    closed = ~np.all(room.vertices[room.faces][:, :, 2] > 0.99, axis=1)   # the +z wall left open
+    room = Scene("room", room.vertices, room.faces[closed], 0.5, 0.0, 0, ("room",))
+    scene = Scene.concatenate("sunlit", [room, lamp("panel", 0.0, 0.0, (3.0, 3.0, 2.5), 0.7),
+                                         box(0.25, (0.0, -0.5, 0.0), name="block")])
+    scene = scene.with_sun(DirectionalLight((0.2, 0.5, 1.0), (2.0, 1.8, 1.5)))
+    lo, hi = scene.bounds
+    encoder = Encoder(lo, hi, 16)
+    steps = [scene] + [moved(scene, "block", (0.06 * k, 0.0, -0.05 * k)) for k in (1, 2, 3, 4)] + [scene]
+    for k, step in enumerate(steps):
+        voxels, blockers, reference = encoded(step)
+        assert_same_encoding(encoder.encode(voxels, step.sun, blockers), reference)
+        assert encoder._shadows.sweeping
+        assert np.any(encoder._voxel_shadows.sun_visibility(np.asarray(step.sun.direction, np.float64)) > 0)
+        if k:
+            assert encoder._voxel_shadows._match is not None and encoder._seen.traced < encoder._seen.voxel.size
+
+
 def test_the_encoder_is_a_cache_not_a_state():
     """Whatever came before, an encoding depends only on the voxels, the sun and the occluders it is
     given: new geometry, a moved lamp, or the shadows switched off and on."""
