@@ -1,7 +1,7 @@
 """The incremental encoder (viewer.neural.encoder): the numbers of `encoding.encode` on every scene and after
 every kind of edit, shadows included, while recomputing only what the edit changed."""
 
-from types import SimpleNamespace
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -344,9 +344,10 @@ def test_voxels_are_matched_within_a_cell_by_their_surface():
     assert np.any(ids[1:] == ids[:-1])          # cells of several voxels (the room's edges)
     assert np.array_equal(same_voxels(voxels, voxels), np.arange(voxels.count))
     order = np.lexsort((-np.arange(voxels.count), ids))   # reversed within each cell
-    shuffled = SimpleNamespace(hash_id=ids[order], position=voxels.position[order], normal=voxels.normal[order])
+    shuffled = replace(voxels, coords=voxels.coords[order], position=voxels.position[order],
+                       normal=voxels.normal[order])
     assert np.array_equal(order[same_voxels(shuffled, voxels)], np.arange(voxels.count))
-    changed = SimpleNamespace(hash_id=ids, position=voxels.position + [[0.0, 0.0, 1e-9]], normal=voxels.normal)
+    changed = replace(voxels, position=voxels.position + [[0.0, 0.0, 1e-9]])
     assert np.all(same_voxels(changed, voxels) == -1)
 
 

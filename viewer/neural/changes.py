@@ -69,10 +69,7 @@ def same_voxels(old: VoxelGrid, new: VoxelGrid) -> np.ndarray:
         return answer
     answer = _matched(old, new)
     answer.flags.writeable = False
-    try:
-        _last_match = (weakref.ref(old), weakref.ref(new), answer)
-    except TypeError:   # lists that cannot be referred to weakly are matched each time
-        pass
+    _last_match = (weakref.ref(old), weakref.ref(new), answer)
     return answer
 
 

@@ -95,9 +95,9 @@ class SeenRays:
                 remap = np.full(previous._voxels.count, -1, np.int32)
                 remap[match[match >= 0]] = np.flatnonzero(match >= 0)
                 before = (*before, previous._faces[2], remap)
-        packets = None if before is not None else lattice_packets(len(points), self.rays, seed)
         if before is None:
-            hits, face, t, self.traced = landing.kept_bundle(points, directions, None, None, packets)
+            hits, face, t, self.traced = landing.kept_bundle(points, directions, None, None,
+                                                             lattice_packets(len(points), self.rays, seed))
         else:   # the directions a subset of probes shares, read without a copy a probe
             distinct, sets = lattice_directions(len(points), self.rays, seed)
             hits, face, t, self.traced = landing.kept_bundle(points, distinct, before, box, None, sets)
@@ -185,7 +185,7 @@ def lattice_rays(count: int, rays: int, seed: int) -> tuple[np.ndarray, np.ndarr
     cache while a gather reads them for every probe (a turned lattice has one a probe). Made once per
     lattice (read-only): 20 ms of a new Cornell box's 120."""
     distinct, sets = lattice_directions(count, rays, seed)
-    directions = distinct[sets] if len(distinct) < count else distinct
+    directions = distinct[sets]
     basis = np.ascontiguousarray((sh.basis(distinct) * (4.0 * np.pi / rays)).transpose(0, 2, 1), np.float32)
     for array in (directions, basis):
         array.flags.writeable = False
@@ -208,7 +208,7 @@ def lattice_directions(count: int, rays: int, seed: int) -> tuple[np.ndarray, np
 
 @lru_cache(maxsize=2)
 def lattice_packets(count: int, rays: int, seed: int) -> np.ndarray | None:
-    """(N, packets.LANES) the rays of `lattice_rays` in packets for `VoxelRays.kept_bundle` (flat indices
+    """(N, LANES) the rays of `lattice_rays` in packets for `VoxelRays.kept_bundle` (flat indices
     probe x rays + ray, -1 for none), or None off a cubic lattice: each packet is one direction from 8
     probes of one interleaved subset (their directions are the same), a 2x2x2 block of its stride-3
     lattice: parallel rays from nearby probes, which Embree traverses together (the seen rays of a

@@ -171,6 +171,7 @@ def _keyed_voxel(ox, oy, oz, dx, dy, dz, t, lo, h, n, facing, table):
                 return found
     return dda.BACKFACE
 
+
 @numba.njit(cache=True, nogil=True)
 def _entry(x, y, z, f, n, first, triangle, voxel):
     """The voxel that the listing of cell (x, y, z) gives face f, dda.MISS where it does not list f."""

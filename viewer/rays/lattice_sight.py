@@ -182,24 +182,30 @@ def _blend(row, clear, m, p, ui, uj, uk):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _blended(row, mark, clear, m, p, t, i, j, k, soft):
+    """Settle probe p = (i, j, k) from the blend of the probes one step back towards the ray end (at
+    lattice coordinates `t`) where that is within `soft` of 0 or 1; False, nothing settled, where they
+    disagree (its own segment is to be traced)."""
+    v = _blend(row, clear, m, p, t[0] - i, t[1] - j, t[2] - k)
+    if v <= soft or v >= 1.0 - soft:
+        row[p], mark[p] = (0.0 if v <= soft else 1.0), False
+        return True
+    return False
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _settle(query, scene, record, points, m, end, t, i, j, k, clear, table, lo, h, soft, box_lo, box_hi, old,
-            old_traced, kept, traced_near, row, mark):
-    """Probe (i, j, k)'s visibility of ray end `end` (world) at lattice coordinates `t`, into row:
-    traced where `traced_near` or the blend is neither 0 nor 1 (the answer of `old` reused where that
-    traced it and the segment misses the moved box). Returns 1 where a segment was traced."""
+            old_traced, traced_near, row, mark):
+    """Probe (i, j, k)'s visibility of ray end `end` (world) at lattice coordinates `t` again after a move,
+    into row: traced where `traced_near` or the blend is neither 0 nor 1, the answer of `old` reused where
+    that traced it and the segment misses the moved box. Returns 1 where a segment was traced."""
     p = (i * m + j) * m + k
-    if not traced_near:
-        v = _blend(row, clear, m, p, t[0] - i, t[1] - j, t[2] - k)
-        if v <= soft:
-            row[p], mark[p] = 0.0, False
-            return 0
-        if v >= 1.0 - soft:
-            row[p], mark[p] = 1.0, False
-            return 0
+    if not traced_near and _blended(row, mark, clear, m, p, t, i, j, k, soft):
+        return 0
     mark[p] = True
     px, py, pz = points[p, 0], points[p, 1], points[p, 2]
     tx, ty, tz = end[0], end[1], end[2]
-    if kept and old_traced[p] and not meets_box(px, py, pz, tx - px, ty - py, tz - pz, 1.0, box_lo, box_hi):
+    if old_traced[p] and not meets_box(px, py, pz, tx - px, ty - py, tz - pz, 1.0, box_lo, box_hi):
         row[p] = old[p]
         return 0
     row[p] = 1.0 if segment_clear(query, scene, record, table, lo, h, px, py, pz, tx, ty, tz) else 0.0
@@ -281,7 +287,7 @@ def _settle_again(query, scene, record, points, m, end, t, origin, clear, table,
             near = max(abs(i - oi), abs(j - oj), abs(k - ok)) <= seed
             was = row[p]
             n += _settle(query, scene, record, points, m, end, t, i, j, k, clear, table, lo, h, soft, box_lo, box_hi,
-                         old, old_traced, True, near, row, mark)
+                         old, old_traced, near, row, mark)
             if row[p] != was:
                 for a in range(max(i - 1, 0), min(i + 2, m)):
                     for b in range(max(j - 1, 0), min(j + 2, m)):
@@ -334,12 +340,8 @@ def _sweep(query, scene, query8, points, m, targets, coords, origins, clear, tab
                         for k in range(k0, k1 + 1, step):
                             if 0 <= k < m:
                                 p = (i * m + j) * m + k
-                                if not near:
-                                    v = _blend(row, clear, m, p, t[0] - i, t[1] - j, t[2] - k)
-                                    if v <= soft or v >= 1.0 - soft:
-                                        row[p], mark[p] = (0.0 if v <= soft else 1.0), False
-                                        continue
-                                pending[waiting] = p
-                                waiting += 1
+                                if near or not _blended(row, mark, clear, m, p, t, i, j, k, soft):
+                                    pending[waiting] = p
+                                    waiting += 1
                 n += _traced_together(query8, scene, packet, points, end, pending, waiting, table, lo, h, row, mark)
         count[c] = n

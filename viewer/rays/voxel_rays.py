@@ -20,9 +20,10 @@ from functools import cached_property
 import numba
 import numpy as np
 
-from viewer.rays import dda, embree, packets
+from viewer.rays import dda, embree
 from viewer.rays.cast import TriangleCaster, embree_available
 from viewer.rays.landing import FAR, bundle, bundle_kept, bundle_packed, landed
+from viewer.rays.packets import LANES, occluded8, packet
 
 
 RAYS_PER_CALL = 1 << 18
@@ -117,7 +118,7 @@ class VoxelRays:
         listing; the others are traced again. `before` may add (hits, remap): the voxel each ray landed on
         then and the new index of each old voxel (-1 where it changed), so that a kept ray takes its old
         voxel's new index without a lookup (the same voxel: its face did not move, nor did its cell's
-        surface). `packets`: (N, packets.LANES) flat ray indices (origin x D +
+        surface). `packets`: (N, LANES) flat ray indices (origin x D +
         ray, -1 for none) that cover every ray once, traced a packet at a time where all are traced
         (`landing.bundle_packed`): parallel rays from nearby origins, the same hits. `which`: (P,) the
         row of `directions` (S, D, 3) each origin casts (None: one row each)."""
@@ -223,9 +224,9 @@ def _pairs_clear(query8, scene, a, b, occupied, lo, h, out):
     point b, nearly parallel, through rtcOccluded8: the same answers as one by one, in 0.6-0.75 of the
     time (the Cornell box's probes to its lamp's 16 ray ends 5.7 -> 3.6 ms, a validation room's 2,454
     voxels to 129 ends 12.9 -> 7.8)."""
-    lanes = packets.LANES
+    lanes = LANES
     for block in numba.prange((a.shape[0] + lanes - 1) // lanes):
-        record = packets.packet()
+        record = packet()
         o, d = np.empty((lanes, 3)), np.empty((lanes, 3))
         length, traced, blocked = np.empty(lanes), np.empty(lanes, np.bool_), np.empty(lanes, np.bool_)
         start = block * lanes
@@ -239,7 +240,7 @@ def _pairs_clear(query8, scene, a, b, occupied, lo, h, out):
                     out[i, j] = 1.0
                 some |= traced[lane]
             if some:
-                packets.occluded8(query8, scene, record, o, d, length, traced, blocked)
+                occluded8(query8, scene, record, o, d, length, traced, blocked)
                 for lane in range(lanes):
                     if traced[lane]:
                         out[start + lane, j] = 0.0 if blocked[lane] else 1.0
