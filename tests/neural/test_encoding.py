@@ -325,3 +325,26 @@ def test_the_compressed_light_is_asinh_of_it():
     again = encoding.compressed(edited, (inputs, marked))
     assert np.all(again[0, encoding.DIRECT.start] == -1.0)
     np.testing.assert_array_equal(encoding.compressed(edited, (inputs[:2], out[:2])), encoding.compressed(edited))
+
+
+def test_the_compressed_light_holds_across_the_floats_range():
+    """The hand-taken logarithm of `compressed` against numpy's asinh at every power of two a float holds
+    and on either side of each (where the mantissa wraps, and where it is halved past sqrt 2), to the
+    largest float, with infinities and NaN kept."""
+    powers = 2.0 ** np.arange(-7, 128)
+    values = np.concatenate([powers, powers * np.sqrt(2.0), np.geomspace(5e-3, 3e38, 5000)]).astype(np.float32)
+    values = np.concatenate([values, np.nextafter(values, np.float32(0)), np.nextafter(values, np.float32(np.inf))])
+    values = values[np.isfinite(values)]
+    cells = 216 * int(np.ceil((len(values) + 3) / 216))
+    inputs = np.zeros((1, encoding.CHANNELS, cells), np.float32)
+    row = np.zeros(cells, np.float32)
+    row[:len(values)] = values
+    row[len(values):len(values) + 3] = [np.inf, -np.inf, np.nan]
+    inputs[0, encoding.SEEN.start] = row
+    out = encoding.compressed(inputs.reshape(1, encoding.CHANNELS, -1, 6, 6)).reshape(inputs.shape)
+    got = out[0, encoding.SEEN.start]
+    expected = np.arcsinh(values.astype(np.float64))
+    np.testing.assert_allclose(got[:len(values)], expected, rtol=3e-5, atol=0)
+    past_one = values >= 1.0   # where the sum does not round: two ulps
+    np.testing.assert_allclose(got[:len(values)][past_one], expected[past_one], rtol=2.5e-7, atol=0)
+    assert got[len(values)] == np.inf and got[len(values) + 1] == -np.inf and np.isnan(got[len(values) + 2])
