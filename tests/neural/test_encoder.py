@@ -334,6 +334,33 @@ def test_a_moved_object_keeps_the_voxels_shadow_rays_that_miss_its_box(name, gro
     assert np.any(after.sun_visibility(sun) > 0)
 
 
+@pytest.mark.parametrize("name, group", [("cornell", "small-box"), ("paper-test", "large-box")])
+def test_a_moved_object_keeps_each_voxels_light_from_a_lamp_where_its_shadow_rays_kept_their_answer(
+        name, group, monkeypatch):
+    """A lamp's light at the voxels after a move: a voxel that kept its surface and its shadow rays'
+    answers keeps its value, the others are summed again (the moved object's voxels, those it shades or
+    no longer shades); every value is the one a fresh encoder sums."""
+    scene = load(name)
+    encoder = Encoder(*scene.bounds, 16)
+    voxels, blockers, _ = encoded(scene)
+    encoder.encode(voxels, None, blockers)
+    shifted = moved(scene, group, (0.1, 0.0, 0.1))
+    voxels, blockers, _ = encoded(shifted)
+    summed = []
+    original = encoding.emitter_irradiance_rows
+    monkeypatch.setattr(encoding, "emitter_irradiance_rows",
+                        lambda lights, points, *a: summed.append(len(points)) or original(lights, points, *a))
+    encoder.encode(voxels, None, blockers)
+    moved_sums, summed[:] = list(summed), []
+    fresh = Encoder(*scene.bounds, 16)
+    fresh.encode(voxels, None, blockers)
+    assert len(encoder.emitters) == len(fresh.emitters) > 0
+    for ours, theirs in zip(encoder.emitters, fresh.emitters):
+        np.testing.assert_array_equal(ours.received, theirs.received)
+    assert summed == [voxels.count] * len(fresh.emitters)
+    assert len(moved_sums) == len(fresh.emitters) and 0 < sum(moved_sums) < 0.5 * sum(summed)
+
+
 def test_voxels_are_matched_within_a_cell_by_their_surface():
     """A cell holds a voxel for each way its surfaces face, all under one hash id: each is matched to the
     one of the same surface, whatever their order within the cell."""

@@ -1,5 +1,6 @@
 """What an `Encoder` (viewer/neural/encoder.py) compares between two calls to find what an edit changed:
-the sun, the colour columns of the voxels' albedo and emission, the voxels that kept their surface.
+the sun, the colour columns of the voxels' albedo and emission, the voxels that kept their surface, a
+lamp's patches by their identity, and which voxels' light from a lamp holds through a move.
 """
 
 from __future__ import annotations
@@ -88,3 +89,36 @@ def _matched(old: VoxelGrid, new: VoxelGrid) -> np.ndarray:
                 & np.all(old.normal[at] == new.normal[open_], axis=1))
         out[open_[same]] = at[same]
     return out
+
+
+def patch_keys(position, normal, area, target) -> list[bytes]:
+    """A patch's identity across edits: its position, normal, area and the end of its visibility ray
+    (equal patches, should two ever coincide, are told apart by their order)."""
+    keys = [row.tobytes() for row in np.column_stack([position, normal, area, target])]
+    if len(set(keys)) < len(keys):
+        seen: dict[bytes, int] = {}
+        for e, key in enumerate(keys):
+            seen[key] = seen.get(key, -1) + 1
+            keys[e] = key + bytes([seen[key] % 256]) * (seen[key] > 0)
+    return keys
+
+
+def kept_received(before: tuple | None, received: np.ndarray, lit: tuple) -> tuple[np.ndarray, np.ndarray] | None:
+    """An emitter's light at the voxels (`received` (K,)) made with `before` and now to be made with `lit`
+    (`Emitter.lit`: the voxels, their visibility rows, each patch's row, the patches' pieces): the voxels
+    whose values must be summed again (those that lost their surface or whose rows changed), and the
+    kept values at the others; None where every value must be summed again (other pieces, another
+    voxel size, nothing before)."""
+    if before is None or before[0].count == 0:
+        return None
+    (old_voxels, old_visible, old_rows, old_pieces), (voxels, visible, rows, pieces) = before, lit
+    if old_voxels.voxel_size != voxels.voxel_size or not all(
+            np.array_equal(getattr(old_pieces, f), getattr(pieces, f)) for f in ("start", "position", "normal",
+                                                                                 "area", "gain", "near")):
+        return None
+    match = same_voxels(old_voxels, voxels)
+    redo = match < 0
+    at = np.where(redo, 0, match)
+    for old, new in set(zip(old_rows.tolist(), rows.tolist())):
+        redo |= old_visible[old, at] != visible[new]
+    return np.flatnonzero(redo), received[at]

@@ -48,7 +48,8 @@ from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
 from viewer.neural.encoding import CHANNELS, Encoding
-from viewer.neural.changes import proportional_channels, same_columns, same_direction, same_sun, sun_parts
+from viewer.neural.changes import (kept_received, patch_keys, proportional_channels, same_columns, same_direction,
+                                   same_sun, sun_parts)
 from viewer.neural.lattice import LatticeGeometry, LatticeShadows, assemble, moved_box
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
@@ -76,6 +77,10 @@ class Emitter:
     shadows: tuple | None = None
     """(visibility rows (R, P), each patch's row of them (E,)) the basis was made with: after a move, only
     the probes whose rows changed are summed again (a probe's basis depends on its own rows alone)."""
+    lit: tuple | None = None
+    """(voxels, their visibility rows (R, K), each patch's row of them (E,), the patches' pieces)
+    `received` was made with: after a move, a voxel that kept its surface (`changes.same_voxels`) and
+    its rows keeps its value, and the others are summed again."""
 
 
 class Encoder:
@@ -250,14 +255,14 @@ class Encoder:
         """Match the emitting patches to the emitters kept so far; patches of no kept emitter (a lamp
         moved or resized, a new light, a colour no longer shared, a patch whose cluster of visibility
         rays gained or lost a patch) form new ones, whose rays are traced and bases computed. With
-        `new_voxels` (the geometry changed, the occluders did not) the kept emitters' voxel bases are
-        computed again for the new voxels. Returns whether the emitters changed (beyond their
+        `new_voxels` (the geometry changed) or after a move, the kept emitters' values at the voxels
+        (`received`) are summed again where the voxels or their shadows changed. Returns whether the emitters changed (beyond their
         radiances)."""
         position, normal, area, radiance = encoding.emitting_patches(self._geometry.cell, voxels)
         target, cluster = self._shadows.targets(position, normal)
         if self._shadows.switched:   # the probes' visibility is found another way now: no basis holds
             self.emitters = []
-        keys = _patch_keys(position, normal, area, target[cluster])
+        keys = patch_keys(position, normal, area, target[cluster])
         index = {key: e for e, key in enumerate(keys)}
         claimed = np.zeros(len(keys), bool)
         kept, matched = [], []
@@ -274,7 +279,7 @@ class Encoder:
                 claimed[members] = True
                 kept.append(emitter)
                 matched.append((emitter, np.array(members), weights))
-        stale = matched if new_voxels else []
+        stale = matched if new_voxels or self._moved else []
         resum = matched if self._moved else []
         fresh = np.flatnonzero(~claimed)
         changed = len(kept) != len(self.emitters) or len(fresh) > 0
@@ -304,19 +309,27 @@ class Encoder:
         on_voxels = self._voxel_shadows.visibility(target[traced])
         surface = (encoding.surface_points(voxels), voxels.normal)
 
-        def received(members, weights, own):
+        def received(members, weights, own, before: Emitter | None = None):
             patches = (position[members], normal[members], area[members], weights[:, None])
-            return encoding.emitter_irradiance_rows(patches, *surface, on_voxels, own, voxel_row[cluster[members]])[0]
+            lit = (voxels, on_voxels, voxel_row[cluster[members]], own)
+            again = None if before is None else kept_received(before.lit, before.received, lit)
+            if again is None:
+                return encoding.emitter_irradiance_rows(patches, *surface, on_voxels, own, lit[2])[0], lit
+            redo, values = again
+            if len(redo):
+                values[redo] = encoding.emitter_irradiance_rows(patches, surface[0][redo], surface[1][redo],
+                                                                on_voxels[:, redo], own, lit[2])[0]
+            return values, lit
 
         for emitter, members, weights in stale:
-            emitter.received = received(members, weights, pieces.of(members))
+            emitter.received, emitter.lit = received(members, weights, pieces.of(members), emitter)
         for members in lamps:
             weights, own = radiance[members].max(axis=1), pieces.of(members)
             basis = emitter_basis(self.points, position[members], normal[members], area[members], weights,
                                   visible, row[cluster[members]], own)
-            kept.append(Emitter({keys[e]: float(w) for e, w in zip(members, weights)}, basis,
-                                received(members, weights, own), radiance[members[0]] / weights[0],
-                                (visible, row[cluster[members]])))
+            values, lit = received(members, weights, own)
+            kept.append(Emitter({keys[e]: float(w) for e, w in zip(members, weights)}, basis, values,
+                                radiance[members[0]] / weights[0], (visible, row[cluster[members]]), lit))
         self.emitters = kept
         return changed
 
@@ -360,18 +373,6 @@ class Encoder:
             part = labels[tuple(local.T)]
             out += [patches[mine[part == label]] for label in np.unique(part)]
         return out
-
-
-def _patch_keys(position, normal, area, target) -> list[bytes]:
-    """A patch's identity across edits: its position, normal, area and the end of its visibility ray
-    (equal patches, should two ever coincide, are told apart by their order)."""
-    keys = [row.tobytes() for row in np.column_stack([position, normal, area, target])]
-    if len(set(keys)) < len(keys):
-        seen: dict[bytes, int] = {}
-        for e, key in enumerate(keys):
-            seen[key] = seen.get(key, -1) + 1
-            keys[e] = key + bytes([seen[key] % 256]) * (seen[key] > 0)
-    return keys
 
 
 def emitter_basis(points: np.ndarray, position, normal, area, weights, visible: np.ndarray,
