@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from viewer.physical import geometry, lightpaths, relight
-from viewer.rays import cast, dda
+from viewer.rays import cast, dda, voxel_rays
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.scene import load
 from scenes import box
@@ -155,7 +155,6 @@ def test_segments_whose_cells_hold_no_triangle_are_clear_untraced():
     probe in a room's open middle and a lamp): the same answers as every segment traced, and most of the
     segments from a room's middle to its ceiling answered so."""
     from viewer.neural import encoding
-    from viewer.rays import voxel_rays
     from viewer.rays.voxels import voxelize
     from scenes import lit_room
 
@@ -172,6 +171,16 @@ def test_segments_whose_cells_hold_no_triangle_are_clear_untraced():
     untraced = [voxel_rays.empty_box(table, cells.lo, cells.h, *p, *e) for p, e in zip(a, b)]
     assert np.mean(untraced) > 0.3
     assert not np.any(np.asarray(untraced) & (found.ravel() == 0))
+
+
+@pytest.mark.parametrize("n", [1, 7, 48])
+def test_the_summed_volume_table_is_numpy_s_cumulative_sums(n):
+    held = (np.random.default_rng(n).random((n, n, n)) < 0.3).astype(np.uint8)
+    out = np.zeros((n + 1, n + 1, n + 1), np.int32)
+    voxel_rays._summed_volume(held, out)
+    expected = np.zeros_like(out)
+    expected[1:, 1:, 1:] = held.astype(np.int32).cumsum(0).cumsum(1).cumsum(2)
+    np.testing.assert_array_equal(out, expected)
 
 
 def test_pairs_traced_eight_at_a_time_answer_as_one_by_one():
