@@ -168,6 +168,25 @@ def test_a_kept_bounce_gathers_only_the_patches_whose_light_changed():
     assert not kept.fits(voxelize(scene.transformed_group("small-box", np.diag([1.0, 0.5, 1.0, 1.0])), 16))
 
 
+def test_the_coarse_bounce_is_carried_to_the_probes_trilinearly():
+    """`bounce.spread`'s weights carry a coarse lattice's values to the probes: a linear field comes out
+    as the same field at the probes between the coarse lattice's outer centres, and each probe's weights
+    sum to one (beyond those centres, where the field is held at the faces, too)."""
+    from viewer.neural import bounce
+    from viewer.probes.grid import ProbeGrid
+
+    lo, hi = np.array([-1.0, -0.5, -2.0]), np.array([1.5, 1.0, 2.0])
+    weights = bounce.spread(tuple(lo), tuple(hi), 24, 12)
+    coarse = ProbeGrid.positions_for(lo, hi, 12).reshape(-1, 3)
+    fine = ProbeGrid.positions_for(lo, hi, 24).reshape(-1, 3)
+    field = np.column_stack([coarse @ [1.0, -2.0, 0.5] + 3.0, np.ones(len(coarse))])
+    out = bounce.spread_onto(weights, field)
+    np.testing.assert_allclose(out[:, 1], 1.0, rtol=1e-12)
+    inside = np.all((fine >= coarse.min(axis=0)) & (fine <= coarse.max(axis=0)), axis=1)
+    assert inside.mean() > 0.7   # (22 / 24)^3
+    np.testing.assert_allclose(out[inside, 0], fine[inside] @ [1.0, -2.0, 0.5] + 3.0, rtol=1e-12, atol=1e-12)
+
+
 def test_the_bounce_gather_of_any_surface_light():
     """`Bounce.gathered` gathers the light the voxels leave with as the bounce does: given each voxel's
     albedo x its irradiance from the direct light / pi it is the bounce; it is linear, and a surface
