@@ -76,6 +76,43 @@ def test_between_near_all_and_near_a_probe_sums_the_lamps_quarters():
     assert np.abs(whole - every).max() > 2 * np.abs(summed - every).max()
 
 
+def test_each_patch_s_pieces_merge_by_quarter():
+    """`quartered` against the merge written out per patch and quarter: random patches facing each axis,
+    one with no pieces, one whose pieces all lie in one quarter, one whose pieces are dark (its quarter
+    then sits at the centre of area)."""
+    from viewer.neural.direct import Pieces, quartered
+
+    rng = np.random.default_rng(5)
+    counts = [7, 0, 12, 5, 9]
+    centre, normal = rng.normal(size=(5, 3)), np.eye(3)[[0, 1, 2, 0, 1]] * [[1], [-1], [1], [-1], [1]]
+    start = np.concatenate([[0], np.cumsum(counts)])
+    position = np.repeat(centre, counts, axis=0) + rng.normal(size=(start[-1], 3)) * 0.1
+    position[start[3]:start[4]] = centre[3] + [0.0, 0.05, 0.07]   # patch 3: one quarter
+    gain = rng.random(start[-1])
+    gain[start[4]:start[5]] = 0.0                                  # patch 4: dark
+    pieces = Pieces(start, position, rng.normal(size=(start[-1], 3)), rng.random(start[-1]), gain, 0.3)
+    out = quartered(pieces, centre, normal)
+    rows = []
+    for e in range(5):
+        a, b = (np.argmax(np.abs(normal[e])) + 1) % 3, (np.argmax(np.abs(normal[e])) + 2) % 3
+        mine = np.arange(start[e], start[e + 1])
+        quarter = 2 * (position[mine, a] > centre[e, a]) + (position[mine, b] > centre[e, b])
+        for q in range(4):
+            s = mine[quarter == q]
+            if len(s):
+                w, power = pieces.area[s], pieces.area[s] * gain[s]
+                at = power @ position[s] / power.sum() if power.sum() > 0 else w @ position[s] / w.sum()
+                n = w @ pieces.normal[s]
+                rows.append((e, w.sum(), power.sum() / w.sum(), at, n / np.linalg.norm(n)))
+    assert out.start.tolist() == np.concatenate([[0], np.cumsum(np.bincount([r[0] for r in rows], minlength=5))]).tolist()
+    assert np.diff(out.start)[1] == 0 and np.diff(out.start)[3] == 1
+    np.testing.assert_allclose(out.area, [r[1] for r in rows], rtol=1e-12)
+    np.testing.assert_allclose(out.gain, [r[2] for r in rows], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(out.position, [r[3] for r in rows], rtol=1e-12)
+    np.testing.assert_allclose(out.normal, [r[4] for r in rows], rtol=1e-12)
+    assert out.near == 0.3
+
+
 def test_the_gather_sums_every_patch_at_every_probe_with_its_shadow():
     """The compiled gather against the sum written out in numpy: patches of random places, facings, areas
     and colours (one colour black), shadowed per patch and probe, over more probes than one block holds."""

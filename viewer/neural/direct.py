@@ -105,32 +105,44 @@ def quartered(pieces: Pieces, centre: np.ndarray, normal: np.ndarray) -> Pieces:
     """Each patch's pieces merged by the quarter of the patch they lie in (either side of its centre
     `centre` (E, 3) along the two axes across its facing, from `normal` (E, 3)): up to four pieces a patch,
     each at its pieces' centre of power (area x gain), with their area, their mean normal and the gain
-    of their power over their area."""
-    counts = np.diff(pieces.start)
-    patch = np.repeat(np.arange(len(counts)), counts)
-    if len(patch) == 0:
+    of their power over their area. The sums in one compiled pass over the pieces, in their order (81
+    patches of 6,144 pieces: 0.42 -> 0.08 ms, paid by every lamp's basis summed)."""
+    if len(pieces.area) == 0:
         return pieces
-    axis = np.argmax(np.abs(normal), axis=1)[patch]
-    offset = pieces.position - centre[patch]
-    rows = np.arange(len(patch))
-    across = (offset[rows, (axis + 1) % 3] > 0).astype(np.int64) * 2 + (offset[rows, (axis + 2) % 3] > 0)
-    key, group = np.unique(patch * 4 + across, return_inverse=True)
-    group = group.ravel()
-    count = len(key)
-    power = pieces.area * pieces.gain
-
-    def total(values):
-        return np.bincount(group, values, minlength=count)
-
-    area, flux = total(pieces.area), total(power)
-    def centre(weight, of):   # the pieces' centre weighted by `weight`, where `of` (its sums) is not 0
-        return np.stack([total(weight * pieces.position[:, a]) for a in range(3)], 1) / np.where(of > 0, of, 1)[:, None]
-
-    position = np.where(flux[:, None] > 0, centre(power, flux), centre(pieces.area, area))
-    mean_normal = np.stack([total(pieces.area * pieces.normal[:, a]) for a in range(3)], 1)
-    mean_normal /= np.maximum(np.linalg.norm(mean_normal, axis=1, keepdims=True), 1e-12)
-    start = np.concatenate([[0], np.cumsum(np.bincount(key // 4, minlength=len(counts)))]).astype(np.int64)
+    axis = np.argmax(np.abs(normal), axis=1)
+    sums = np.zeros((len(pieces.start) - 1, 4, 11))
+    held = np.zeros((len(pieces.start) - 1, 4), np.bool_)
+    _quarter_sums(pieces.start, np.asarray(pieces.position, np.float64), np.asarray(pieces.normal, np.float64),
+                  np.asarray(pieces.area, np.float64), np.asarray(pieces.gain, np.float64),
+                  np.asarray(centre, np.float64), axis, sums, held)
+    quarter = sums[held]   # by patch, then quarter: the order of their keys
+    area, flux = quarter[:, 0], quarter[:, 1]
+    position = np.where(flux[:, None] > 0, quarter[:, 2:5] / np.where(flux > 0, flux, 1)[:, None],
+                        quarter[:, 5:8] / np.where(area > 0, area, 1)[:, None])
+    mean_normal = quarter[:, 8:11] / np.maximum(np.linalg.norm(quarter[:, 8:11], axis=1, keepdims=True), 1e-12)
+    start = np.concatenate([[0], np.cumsum(held.sum(axis=1))]).astype(np.int64)
     return Pieces(start, position, mean_normal, area, flux / area, pieces.near)
+
+
+@numba.njit(cache=True, nogil=True)
+def _quarter_sums(start, position, normal, area, gain, centre, axis, sums, held):
+    """sums[e, q] = the area, power (area x gain), power x position, area x position and area x normal of
+    patch e's pieces in quarter q (held[e, q]: it has some), summed in the pieces' order."""
+    for e in range(start.shape[0] - 1):
+        first, second = (axis[e] + 1) % 3, (axis[e] + 2) % 3
+        for s in range(start[e], start[e + 1]):
+            q = (2 if position[s, first] - centre[e, first] > 0 else 0) + (
+                1 if position[s, second] - centre[e, second] > 0 else 0)
+            a = area[s]
+            power = a * gain[s]
+            row = sums[e, q]
+            row[0] += a
+            row[1] += power
+            for k in range(3):
+                row[2 + k] += power * position[s, k]
+                row[5 + k] += a * position[s, k]
+                row[8 + k] += a * normal[s, k]
+            held[e, q] = True
 
 
 def _patch_groups(cell: np.ndarray, voxels: VoxelGrid) -> tuple[np.ndarray, np.ndarray, int]:
