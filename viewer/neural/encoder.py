@@ -256,8 +256,8 @@ class Encoder:
         moved or resized, a new light, a colour no longer shared, a patch whose cluster of visibility
         rays gained or lost a patch) form new ones, whose rays are traced and bases computed. With
         `new_voxels` (the geometry changed) or after a move, the kept emitters' values at the voxels
-        (`received`) are summed again where the voxels or their shadows changed. Returns whether the emitters changed (beyond their
-        radiances)."""
+        (`received`) are summed again where the voxels or their shadows changed. Returns whether the
+        emitters changed (beyond their radiances)."""
         position, normal, area, radiance = encoding.emitting_patches(self._geometry.cell, voxels)
         target, cluster = self._shadows.targets(position, normal)
         if self._shadows.switched:   # the probes' visibility is found another way now: no basis holds
