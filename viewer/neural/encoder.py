@@ -206,15 +206,14 @@ class Encoder:
         redo = np.ones(3, bool) if self._last is None else ~unchanged
         if self._bounce is None or not self._bounce.fits(voxels):
             self._bounce = encoding.Bounce(voxels, self.lo, self.hi, m)
-        seen = np.zeros((len(self.points), sh.SH_COUNT, 3), np.float32)
-        bounce = np.zeros((len(self.points), sh.SH_COUNT, 3))
+        seen = bounce = None
         if voxels.count and redo.any():
             self._bounce.light(None, received)
             surface = self._bounce.leaving(voxels.albedo)[:, redo]
             if self._seen is not None:
-                seen[..., redo], surface = encoding.seen_light(self._seen, self._bounce, voxels.albedo[:, redo],
-                                                               surface)
-            bounce[..., redo] = self._bounce.gathered(surface)
+                seen, surface = encoding.seen_light(self._seen, self._bounce, voxels.albedo[:, redo], surface)
+            bounce = self._bounce.gathered(surface)
+        seen, bounce = _passes(seen, redo, np.float32, m ** 3), _passes(bounce, redo, np.float64, m ** 3)
         inv = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1.0), 0.0)
         previous = None if self._last is None else self._last.inputs.reshape(3, CHANNELS, -1)
         opened = (np.ones(m ** 3, np.float32) if self._seen is None or not voxels.count
@@ -373,6 +372,17 @@ class Encoder:
             part = labels[tuple(local.T)]
             out += [patches[mine[part == label]] for label in np.unique(part)]
         return out
+
+
+def _passes(part: np.ndarray | None, redo: np.ndarray, dtype, probes: int) -> np.ndarray:
+    """(P, 9, 3) `part`'s light (P, 9, C) in the colour passes `redo` (3,) bool, zero in the others: `part`
+    itself where it holds all three (an edit that changes every pass: no copy of 1-3 MB to make)."""
+    if part is not None and redo.all() and part.dtype == dtype and part.flags.c_contiguous:
+        return part
+    out = np.zeros((probes, sh.SH_COUNT, 3), dtype)
+    if part is not None:
+        out[..., redo] = part
+    return out
 
 
 def emitter_basis(points: np.ndarray, position, normal, area, weights, visible: np.ndarray,
