@@ -6,6 +6,7 @@ lamp's patches by their identity, and which voxels' light from a lamp holds thro
 from __future__ import annotations
 
 import weakref
+from dataclasses import fields
 
 import numpy as np
 
@@ -113,12 +114,20 @@ def kept_received(before: tuple | None, received: np.ndarray, lit: tuple) -> tup
         return None
     (old_voxels, old_visible, old_rows, old_pieces), (voxels, visible, rows, pieces) = before, lit
     if old_voxels.voxel_size != voxels.voxel_size or not all(
-            np.array_equal(getattr(old_pieces, f), getattr(pieces, f)) for f in ("start", "position", "normal",
-                                                                                 "area", "gain", "near")):
+            np.array_equal(getattr(old_pieces, f.name), getattr(pieces, f.name)) for f in fields(pieces)):
         return None
     match = same_voxels(old_voxels, voxels)
-    redo = match < 0
-    at = np.where(redo, 0, match)
-    for old, new in set(zip(old_rows.tolist(), rows.tolist())):
-        redo |= old_visible[old, at] != visible[new]
+    at = np.maximum(match, 0)
+    redo = (match < 0) | rows_changed(old_visible, old_rows, visible, rows, at)
     return np.flatnonzero(redo), received[at]
+
+
+def rows_changed(before: np.ndarray, before_rows: np.ndarray, now: np.ndarray, rows: np.ndarray,
+                 at: np.ndarray | None = None) -> np.ndarray:
+    """(P,) bool: the points (columns of `now` (R, P)) where some patch's visibility differs, patch e
+    reading row `before_rows[e]` of `before` then and row `rows[e]` of `now` now; `at` (P,): the column
+    of `before` each point was (None: the same)."""
+    out = np.zeros(now.shape[1], bool)
+    for old, new in set(zip(np.asarray(before_rows).tolist(), np.asarray(rows).tolist())):
+        out |= (before[old] if at is None else before[old, at]) != now[new]
+    return out

@@ -48,8 +48,8 @@ from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
 from viewer.probes import sh
 from viewer.neural.encoding import CHANNELS, Encoding
-from viewer.neural.changes import (kept_received, patch_keys, proportional_channels, same_columns, same_direction,
-                                   same_sun, sun_parts)
+from viewer.neural.changes import (kept_received, patch_keys, proportional_channels, rows_changed, same_columns,
+                                   same_direction, same_sun, sun_parts)
 from viewer.neural.lattice import LatticeGeometry, LatticeShadows, assemble, moved_box
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
@@ -338,10 +338,7 @@ class Encoder:
         if emitter.shadows is None:
             changed = np.ones(len(self.points), bool)
         else:
-            before, rows = emitter.shadows
-            changed = np.zeros(len(self.points), bool)
-            for old, new in set(zip(rows.tolist(), own.tolist())):
-                changed |= before[old] != visible[new]
+            changed = rows_changed(*emitter.shadows, visible, own)
         probes = np.flatnonzero(changed)
         if len(probes) == 0:
             return emitter.basis
