@@ -104,7 +104,8 @@ def test_each_patch_s_pieces_merge_by_quarter():
                 at = power @ position[s] / power.sum() if power.sum() > 0 else w @ position[s] / w.sum()
                 n = w @ pieces.normal[s]
                 rows.append((e, w.sum(), power.sum() / w.sum(), at, n / np.linalg.norm(n)))
-    assert out.start.tolist() == np.concatenate([[0], np.cumsum(np.bincount([r[0] for r in rows], minlength=5))]).tolist()
+    per_patch = np.bincount([r[0] for r in rows], minlength=5)
+    assert out.start.tolist() == np.concatenate([[0], np.cumsum(per_patch)]).tolist()
     assert np.diff(out.start)[1] == 0 and np.diff(out.start)[3] == 1
     np.testing.assert_allclose(out.area, [r[1] for r in rows], rtol=1e-12)
     np.testing.assert_allclose(out.gain, [r[2] for r in rows], rtol=1e-12, atol=0)

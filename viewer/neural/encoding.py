@@ -136,10 +136,10 @@ def compressed(inputs: np.ndarray, previous: tuple[np.ndarray, np.ndarray] | Non
     the light (`COMPRESSED`) through asinh. A network exported with two inputs takes it beside the
     inputs: the eight ONNX operators that spell asinh cost 4 ms of the network's 19 on a 24^3 lattice's
     three passes. Compiled, in one pass that copies the other channels, shared among the cores
-    (`viewer.neural.asinh`, with a logarithm that vectorizes: 0.8-0.9 ms for those three passes on an Intel Xeon with
-    AVX-512, where the C library's log took 2.9). numpy's asinh took 1.3 ms on an Intel Xeon machine,
-    whose vector library it has a kernel for, but 27 ms of one core on an AMD EPYC one, which it has none
-    for.
+    (`viewer.neural.asinh`, with a logarithm that vectorizes: 0.8-0.9 ms for those three passes on an
+    Intel Xeon with AVX-512, where the C library's log took 2.9). numpy's asinh took 1.3 ms on an Intel
+    Xeon machine, whose vector library it has a kernel for, but 27 ms of one core on an AMD EPYC one,
+    which it has none for.
 
     `previous`: (inputs, compressed) of an earlier call of the same shape: the rows (pass, feature) whose
     inputs are equal to its are copied from it rather than computed again (an albedo edit leaves the

@@ -76,8 +76,8 @@ class WallTaps:
     def __init__(self, links: np.ndarray, opened: np.ndarray):
         m = links.shape[1]
         self.side = m
-        walled, differs, plain_weight, walled_weight = _walled_taps(np.ascontiguousarray(links, np.bool_),
-                                                                    np.ascontiguousarray(opened, np.float32).reshape(-1))
+        opened = np.ascontiguousarray(opened, np.float32).reshape(-1)
+        walled, differs, plain_weight, walled_weight = _walled_taps(np.ascontiguousarray(links, np.bool_), opened)
         rows = np.flatnonzero(differs)
         self.rows = rows
         """(S,) the probes (flat, x slowest) some of whose taps differ from the plain filter's."""
