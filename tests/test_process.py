@@ -46,3 +46,25 @@ def test_a_small_pass_runs_on_one_thread_and_the_count_comes_back():
         with cores_for(1):
             raise RuntimeError("a failed pass")
     assert numba.get_num_threads() == every
+
+
+@pytest.mark.parametrize("numpy_first", [False, True])
+def test_numpys_products_run_on_one_thread_unless_the_user_says_otherwise(numpy_first):
+    """Importing the viewer leaves numpy's BLAS one thread (its spinning threads would take the other core
+    from the compiled passes that follow), whether numpy was imported before it or not; a user's own
+    OPENBLAS_NUM_THREADS is kept."""
+    import os
+    import subprocess
+    import sys
+
+    first = "import numpy; import viewer" if numpy_first else "import viewer; import numpy"
+    probe = (f"{first}; from threadpoolctl import threadpool_info; "
+             "print(sorted({i['num_threads'] for i in threadpool_info() if i['user_api'] == 'blas'}))")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+
+    def threads(environment):
+        return subprocess.run([sys.executable, "-c", probe], env=environment, capture_output=True, text=True,
+                              check=True).stdout.strip()
+
+    assert threads(env) == "[1]"
+    assert threads({**env, "OPENBLAS_NUM_THREADS": "2"}) == "[2]"

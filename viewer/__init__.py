@@ -1,12 +1,34 @@
 """gi-viewer: real-time diffuse global illumination from voxels and SH light probes."""
 
 import os
+import sys
 
 # numba's parallel loops (viewer.rays.dda, viewer.physical.relight) run on OpenMP threads, which by default spin while
 # they wait for work. When the render loop or llvmpipe keeps the other core busy, the spinning threads
 # take its time: a relight measured 190 ms instead of 57 ms under load (docs/PERFORMANCE.md). Waiting
 # passively costs nothing on an idle machine. Set before any import loads the OpenMP runtime.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+
+def _one_blas_thread() -> None:
+    """numpy's matrix products on one thread, in every part of the viewer. OpenBLAS's threads spin for
+    about a tenth of a second after each product they share, and the products here are small: the spinning
+    thread only takes the other core from the compiled passes, onnxruntime and Embree that follow. Measured
+    on 2 cores: the physical solver's new scene in a generator room 360 -> 317 ms and its moved box 224 ->
+    193 ms on one BLAS thread (the Cornell box alike within a few ms), and the network's new scene right
+    after a solver's 145 ms instead of 105. The variable is read when numpy loads OpenBLAS; where numpy
+    was imported before the viewer, its threads are limited where they are. A user's own
+    OPENBLAS_NUM_THREADS is kept."""
+    if "OPENBLAS_NUM_THREADS" in os.environ:
+        return
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    if "numpy" in sys.modules:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(limits=1, user_api="blas")
+
+
+_one_blas_thread()
 
 
 def _keep_freed_blocks() -> bool:

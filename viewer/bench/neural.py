@@ -113,7 +113,7 @@ def measure(scene: Scene, field: NeuralField, probes: int, voxels: int, repeats:
 
 def _before(scene: Scene, field: NeuralField, probes: int, voxels: int) -> dict[str, float]:
     """One update as the neural source ran before the incremental encoder: everything from scratch."""
-    from viewer.neural.field import one_blas_thread, clock_now
+    from viewer.neural.field import clock_now
     from viewer.rays.voxels import voxelize
 
     wall = time.perf_counter()
@@ -122,8 +122,7 @@ def _before(scene: Scene, field: NeuralField, probes: int, voxels: int) -> dict[
     blockers = encoding.occluders(scene, grid)   # with the voxels, as NeuralGI lists them
     lo, hi = scene.bounds
     voxelized = clock_now()
-    with one_blas_thread():
-        enc = encoding.encode(grid, scene.sun, lo, hi, probes, blockers)
+    enc = encoding.encode(grid, scene.sun, lo, hi, probes, blockers)
     encoded = clock_now()
     out = field.run(enc.inputs, encoding_walls(enc))   # the filter stopped at walls, as the viewer runs it
     ran = clock_now()

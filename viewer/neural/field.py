@@ -117,21 +117,6 @@ def file_sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-_blas = None
-
-
-def one_blas_thread():
-    """BLAS on one thread for the encoding's small products: OpenBLAS's threads spin-wait for each
-    other, and when the renderer (or anything else) keeps the second core busy a 36864 x 16 x 3 product
-    takes 30 ms instead of 0.4 ms (measured here)."""
-    global _blas
-    if _blas is None:
-        from threadpoolctl import ThreadpoolController
-
-        _blas = ThreadpoolController()
-    return _blas.limit(limits=1, user_api="blas")
-
-
 class NeuralField:
     """A loaded model: `predict` maps voxels to probes."""
 
@@ -195,9 +180,8 @@ class NeuralField:
         `reuse=False` encodes and runs everything afresh: what a new scene costs."""
         m = resolution or self.resolution
         clock = clock_now()
-        with one_blas_thread():
-            encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m)
-            enc = encoder.encode(voxels, sun, blockers)
+        encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m)
+        enc = encoder.encode(voxels, sun, blockers)
         encoded = clock_now()
         out = self._network(encoder, enc.inputs) if reuse else self.run(enc.inputs, wall_taps(encoder.seen))
         ran = clock_now()
