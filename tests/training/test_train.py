@@ -84,11 +84,8 @@ def test_export_runs_in_the_neural_source(tiny, tmp_path):
     assert card["architecture"]["seen_gain"] == 1.0
     with torch.no_grad():
         answer = ProbeNet(config)(torch.from_numpy(inputs)).numpy()
-    import onnxruntime
-    from viewer.neural.network_feed import feed
-    session = onnxruntime.InferenceSession(str(tmp_path / "start.onnx"))
-    exported = session.run(None, feed([i.name for i in session.get_inputs()], inputs, export.kernels(
-        ProbeNet(config))))[0]
+    exported = export.network_output(tmp_path / "start.onnx", inputs, export.kernels(ProbeNet(config)),
+                                     export.model_tail(ProbeNet(config)))
     np.testing.assert_allclose(exported[:, :18], answer[:, :18], atol=1e-5)   # whatever the random weights
 
 

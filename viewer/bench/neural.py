@@ -139,7 +139,8 @@ def network_configs(configs, probes: int, repeats: int) -> list[tuple[str, int, 
     import torch
 
     from viewer.neural.network_feed import feed
-    from viewer.training.export import export_onnx
+    from viewer.neural.network_tail import fed_names, run_graph
+    from viewer.training.export import export_onnx, model_tail
     from viewer.training.export import kernels as export_kernels
     from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
 
@@ -160,10 +161,11 @@ def network_configs(configs, probes: int, repeats: int) -> list[tuple[str, int, 
             path = Path(folder) / f"{name}.onnx"
             export_onnx(model, path, probes)
             session = open_session(path, threads=1)
-            names, kernels = [i.name for i in session.get_inputs()], export_kernels(model)
+            tail = model_tail(model)   # the export ends the graph at its head (`split_tail`)
+            names, kernels = fed_names([i.name for i in session.get_inputs()], tail), export_kernels(model)
 
-            def network():   # the asinh of the inputs and the seen filter included, as the field computes them
-                session.run(None, feed(names, inputs, kernels))
+            def network():   # the asinh, the seen filter and the tail included, as the field computes them
+                run_graph(session, feed(names, inputs, kernels), tail)
 
             for _ in range(3):
                 network()

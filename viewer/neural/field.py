@@ -23,6 +23,7 @@ from viewer.neural import encoding
 from viewer.neural.domain import Domain, Shape, measure, outside
 from viewer.neural.encoder import Encoder
 from viewer.neural.network_feed import FILTERED, WallTaps, feed, wall_taps
+from viewer.neural.network_tail import HEAD, Tail, fed_names, run_graph
 from viewer.probes.grid import ProbeGrid
 from viewer.resources import DEFAULT_MODEL
 from viewer.scene import Scene
@@ -138,9 +139,13 @@ class NeuralField:
                              f"the encoding gives (3, {self.channels}, M, M, M)")
         if len(outputs) != 1 or outputs[0].shape[1] != OUTPUTS:
             raise ModelError(f"{self.card.path.name}: gives outputs {outputs[0].shape}, expected (3, {OUTPUTS}, M, M, M)")
-        self.input_names = [i.name for i in inputs]
+        self.tail = Tail.of(self.card.data) if outputs[0].name == HEAD else None
+        """The arithmetic after the network's head, where its graph ends there (viewer.neural.network_tail)."""
+        if outputs[0].name == HEAD and self.tail is None:
+            raise ModelError(f"{self.card.path.name}: its graph ends at its head, but its card has no tail gains")
+        self.input_names = fed_names([i.name for i in inputs], self.tail)
         """The encoded inputs first, then those made from them (`network_feed.feed`): the same through asinh
-        where the network does not compute it itself, and its seen filter's products where it takes them."""
+        where the graph does not compute it, its seen filter's products where it or its tail reads them."""
         self.kernels = None
         """(9, 27) the seen filter's kernels from the card, for a network that takes their products."""
         if any(name in FILTERED for name in self.input_names):
@@ -232,7 +237,7 @@ class NeuralField:
         # its compressed rows serve the next run where the inputs stay the same: only inputs nobody can
         # change in place (the encoder's are read-only), so that equal rows are truly the same values
         self._fed = None if inputs.flags.writeable else fed
-        return self.session.run(None, fed)[0]
+        return run_graph(self.session, fed, self.tail)
 
     def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:
         """Voxelize the scene at the card's resolution, list its occluders, and predict over its bounds."""

@@ -5,7 +5,7 @@ ProbeNet (viewer/training/models.py) filters the seen light and the unshadowed g
 probes' open share, with one learned 3x3x3 kernel per SH coefficient (the edges repeated). onnxruntime's
 CPU convolution has no depthwise path in 3D: on the Cornell box's three colour passes the two filters
 took 13.5 ms of the network's 40 (one thread, a 2-core AMD EPYC machine). The export moves them out of
-the graph (`viewer.training.export.split_filters`), which then takes their products as inputs, and
+the graph (`viewer.training.onnx_graph.split_filters`), which then takes their products as inputs, and
 writes the kernels on the model's card; a graph that filters itself is fed as before. Outside the graph
 the filter also stops at walls (`WallTaps`), as training's does.
 """

@@ -21,6 +21,8 @@ from viewer.neural import encoding
 from viewer.neural.domain import Domain
 from viewer.neural.field import OUTPUTS, file_sha256
 from viewer.neural.network_feed import FILTERED, feed
+from viewer.neural.network_tail import HEAD, Tail, fed_names, run_graph
+from viewer.training.onnx_graph import split_filters, split_tail
 from viewer.training.models import ProbeNet, ProbeNetConfig, parameter_count
 from viewer.training.samples import ENCODING_VOXELS
 
@@ -43,10 +45,11 @@ def load_run(run: Path) -> ProbeNet:
     return model.eval()
 
 
-def export_onnx(model: ProbeNet, path: Path, resolution: int) -> None:
+def export_onnx(model: ProbeNet, path: Path, resolution: int, tail: bool = True) -> None:
     """`model` as an ONNX file of two inputs, the encoded inputs and the same through asinh
     (`encoding.compressed`: numpy computes it in a third of the time the ONNX operators took), in
-    inference mode (its training-time sink left out) whatever mode it is in."""
+    inference mode (its training-time sink left out) whatever mode it is in; its seen filter taken out
+    of the graph (`split_filters`) and, with `tail`, the graph cut after its head (`split_tail`)."""
     model = model.eval()
     example = torch.zeros(3, encoding.CHANNELS, resolution, resolution, resolution)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -61,89 +64,22 @@ def export_onnx(model: ProbeNet, path: Path, resolution: int) -> None:
                           output_names=["probes"], dynamo=False, opset_version=OPSET,
                           dynamic_axes={**{name: lattice for name in INPUT_NAMES}, "probes": lattice})
     split_filters(path)
+    if tail:
+        split_tail(path)
 
 
-def split_filters(path: Path) -> np.ndarray | None:
-    """Move ProbeNet's seen filter out of the exported graph at `path` (rewritten in place): each grouped
-    3x3x3 convolution of a replicate-padded product of encoding channels and the open share becomes a
-    graph input named for the channels (`network_feed.FILTERED`), which the runtime computes
-    (`network_feed.filtered`: onnxruntime has no depthwise 3D convolution), and the nodes that only fed
-    it go. Returns its kernels (9, 27); None where the graph has no such convolution (left as it is)."""
-    import onnx
-    from onnx import helper, numpy_helper
+def network_output(path: Path, inputs: np.ndarray, kernels: np.ndarray, tail: Tail | None) -> np.ndarray:
+    """The exported network at `path` on encoded `inputs` as the viewer runs it (viewer.neural.field): its
+    feed, and the `tail` where its graph ends at its head."""
+    import onnxruntime as ort
 
-    model = onnx.load(str(path))
-    graph = model.graph
-    producer = {out: node for node in graph.node for out in node.output}
-    weights = {item.name: item for item in graph.initializer}
-    replaced, kernels = {}, None
-    for node in list(graph.node):
-        if node.op_type != "Conv" or len(node.input) < 2 or node.input[1] not in weights:
-            continue
-        group = next((helper.get_attribute_value(a) for a in node.attribute if a.name == "group"), 1)
-        weight = numpy_helper.to_array(weights[node.input[1]])
-        pad = producer.get(node.input[0])
-        if group != 9 or weight.shape != (9, 1, 3, 3, 3) or pad is None or pad.op_type != "Pad":
-            continue
-        name = _filtered_channels(producer.get(pad.input[0]), producer, weights)
-        if name is not None:
-            replaced[node.output[0]] = name
-            graph.node.remove(node)
-            kernels = weight.reshape(9, 27)
-    if not replaced:
-        return None
-    for node in graph.node:
-        for k, name in enumerate(node.input):
-            node.input[k] = replaced.get(name, name)
-    graph.input.extend(helper.make_tensor_value_info(name, onnx.TensorProto.FLOAT, ["passes", 9, "m", "m", "m"])
-                       for name in replaced.values())
-    _drop_unused(graph)
-    onnx.checker.check_model(model)
-    onnx.save(model, str(path))
-    return kernels
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    return run_graph(session, feed(fed_names([i.name for i in session.get_inputs()], tail), inputs, kernels), tail)
 
 
-def _filtered_channels(product, producer: dict, weights: dict) -> str | None:
-    """The `network_feed.FILTERED` name of a Mul node of a Slice of the graph's `inputs` (9 channels from
-    where a FILTERED entry starts) and another factor; None if it is not one."""
-    from onnx import numpy_helper
-
-    from viewer.neural.network_feed import FILTERED
-
-    def constant(name):
-        if name in weights:
-            return numpy_helper.to_array(weights[name])
-        node = producer.get(name)
-        if node is not None and node.op_type == "Constant":
-            return numpy_helper.to_array(node.attribute[0].t)
-        return None
-
-    if product is None or product.op_type != "Mul":
-        return None
-    for factor in product.input:
-        part = producer.get(factor)
-        if part is None or part.op_type != "Slice" or part.input[0] != INPUT_NAMES[0]:
-            continue
-        start, stop = constant(part.input[1]), constant(part.input[2])
-        for name, channels in FILTERED.items():
-            if start is not None and stop is not None and (int(start[0]), int(stop[0])) == (channels.start,
-                                                                                            channels.stop):
-                return name
-    return None
-
-
-def _drop_unused(graph) -> None:
-    """Remove the nodes whose outputs nothing reads, again until none is left, and the unread weights."""
-    while True:
-        read = {name for node in graph.node for name in node.input} | {out.name for out in graph.output}
-        unused = [node for node in graph.node if not any(out in read for out in node.output)]
-        if not unused:
-            break
-        for node in unused:
-            graph.node.remove(node)
-    read = {name for node in graph.node for name in node.input}
-    for item in [item for item in graph.initializer if item.name not in read]:
-        graph.initializer.remove(item)
+def model_tail(model: ProbeNet) -> Tail:
+    """The gains `split_tail` reads from an export of `model`."""
+    return Tail(float(model.bounce_gain.detach()), float(model.seen_gain.detach()))
 
 
 INPUT_NAMES = ("inputs", "compressed")
@@ -154,12 +90,10 @@ def max_difference(model: ProbeNet, path: Path, inputs: np.ndarray) -> float:
     """Largest |onnxruntime - torch| over the outputs for the given encoded inputs, relative to the
     largest output (at least 1): float32 round-off grows with the values (outputs by a lamp reach
     hundreds of times the room's mean)."""
-    import onnxruntime as ort
-
-    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
     inputs = inputs.astype(np.float32)
     compressed = encoding.compressed(inputs)   # both given the viewer's asinh: torch's differs a little
-    ours = session.run(None, feed([i.name for i in session.get_inputs()], inputs, kernels(model)))[0]
+    tail = model_tail(model) if graph_output(path) == HEAD else None
+    ours = network_output(path, inputs, kernels(model), tail)
     with torch.no_grad():
         theirs = model.eval()(torch.from_numpy(inputs), torch.from_numpy(compressed)).numpy()
     return float(np.abs(ours - theirs).max() / max(1.0, float(np.abs(theirs).max())))
@@ -185,15 +119,18 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
                              "scale (mean direct radiance DC over the probes, shadows traced), outputs multiplied by it",
             "second_input": {"name": "compressed", "features": "the same, the light through asinh: channels "
                              + ", ".join(f"{part.start}-{part.stop - 1}" for part in encoding.COMPRESSED)},
-            "filtered": {"inputs": graph_filters(path),
-                         "what": "the seen filter's products, which the graph takes as inputs where it lists "
+            "filtered": {"inputs": list(FILTERED) if graph_output(path) == HEAD else graph_filters(path),
+                         "what": "the seen filter's products, which the graph (or its tail) reads where it lists "
                                  "them: the channels " + ", ".join(f"{name} {part.start}-{part.stop - 1}"
                                                                   for name, part in FILTERED.items())
                                  + " times the open share, each convolved with its 3x3x3 kernel, edges repeated "
                                    "(viewer.neural.network_feed)",
                          "kernels": kernels(model).tolist()},
         },
-        "outputs": {"name": "probes", "channels": OUTPUTS,
+        **({"tail": model_tail(model).to_dict()} if graph_output(path) == HEAD else {}),
+        "outputs": {"name": graph_output(path), "channels": OUTPUTS,
+                    "tail": "where the name is head, the graph ends at ProbeNet's head and the card's tail gains "
+                            "finish it (viewer.neural.network_tail)",
                     "layout": "0-8 SH of all incident light, 9-17 SH of the light reflected by surfaces, "
                               "18 validity logit (> 0: outside solid geometry)"},
         "probes": {"resolution": resolution, "runs_at": "any M divisible by 2^levels (trained at resolution)", "box": "scene bounds", "centres": "lo + (i + 0.5) (hi - lo) / M",
@@ -210,6 +147,13 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
 def kernels(model: ProbeNet) -> np.ndarray:
     """(9, 27) float32 the seen filter's kernels, as the card carries them."""
     return model.seen_filter.weight.detach().numpy().reshape(9, 27).astype(np.float32)
+
+
+def graph_output(path: Path) -> str:
+    """The name of the graph's output: `network_tail.HEAD` where `split_tail` cut it."""
+    import onnxruntime as ort
+
+    return ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_outputs()[0].name
 
 
 def graph_filters(path: Path) -> list[str]:
@@ -250,6 +194,8 @@ def read_back(path: Path) -> ProbeNet:
             array = stored[name]
         elif name == "seen_filter.weight":
             array = np.asarray(card["inputs"]["filtered"]["kernels"], np.float32).reshape(value.shape)
+        elif name in card.get("tail", {}):   # a gain of the arithmetic cut off after the head (`split_tail`)
+            array = np.asarray(card["tail"][name], np.float32).reshape(value.shape)
         else:   # a Linear's weight, stored transposed as a MatMul's operand
             matches = [a.T for a in unnamed if a.T.shape == tuple(value.shape)]
             if len(matches) != 1:
@@ -262,6 +208,34 @@ def read_back(path: Path) -> ProbeNet:
     if difference > TOLERANCE:
         raise ValueError(f"{path}: the weights read back differ from onnxruntime by {difference:.2e}")
     return model.eval()
+
+
+def cut_exported(path: Path) -> float:
+    """`split_tail` on an exported network at `path` whose card is beside it: the file cut in place, its card
+    given the tail's gains and the file's new sha256; checked as an export is (the file restored where the
+    cut graph and its tail differ from the whole). Returns the largest difference, relative to the
+    largest output; ValueError where there is nothing to cut."""
+    from viewer.scene import load
+
+    card_path = Path(path).with_suffix(".json")
+    card, whole = json.loads(card_path.read_text()), Path(path).read_bytes()
+    kernels = np.asarray(card["inputs"]["filtered"]["kernels"], np.float32).reshape(9, 27)
+    inputs = encoding.encode_scene(load("paper-test"), 8, 8).inputs
+    before = network_output(path, inputs, kernels, None)
+    tail = split_tail(path)
+    if tail is None:
+        raise ValueError(f"{path}: no head and gains to cut after (cut already, or not a ProbeNet)")
+    difference = float(np.abs(network_output(path, inputs, kernels, tail) - before).max()
+                       / max(1.0, float(np.abs(before).max())))
+    if difference > TOLERANCE:
+        Path(path).write_bytes(whole)
+        raise ValueError(f"{path}: the cut graph and its tail differ from the whole by {difference:.2e}")
+    card.update(tail=tail.to_dict(), sha256=file_sha256(path))
+    card["outputs"]["name"] = HEAD
+    card["inputs"]["filtered"]["inputs"] = list(FILTERED)
+    card.setdefault("metrics", {})["tail_relative_difference"] = difference
+    card_path.write_text(json.dumps(card, indent=1) + "\n")
+    return difference
 
 
 def main(argv=None) -> int:
@@ -277,7 +251,19 @@ def main(argv=None) -> int:
     parser.add_argument("--read-back", action="store_true",
                         help="the other way: `run` is an exported .onnx file (its card beside it), whose weights "
                              "go to --out as a run's checkpoint, the start of `train --init`")
+    parser.add_argument("--split-tail", action="store_true",
+                        help="`run` is an exported .onnx file (its card beside it), whose graph is cut after its "
+                             "head in place: the arithmetic after it runs in one compiled pass (the same output)")
     args = parser.parse_args(argv)
+    if args.split_tail:
+        if not args.run.is_file() or not args.run.with_suffix(".json").is_file():
+            parser.error(f"{args.run}: no exported network with its card beside it")
+        try:
+            difference = cut_exported(args.run)
+        except ValueError as exc:
+            parser.error(str(exc))
+        print(f"cut {args.run} after its head (the tail's output vs the whole graph's: {difference:.1e})", file=sys.stderr)
+        return 0
     if args.read_back:
         if not args.run.is_file() or not args.run.with_suffix(".json").is_file():
             parser.error(f"{args.run}: no exported network with its card beside it")

@@ -38,6 +38,7 @@ from torch.nn import functional as F
 
 from viewer.neural import encoding
 from viewer.neural.network_feed import tap_sources
+from viewer.neural.network_tail import DETAIL_FLOOR, DETAIL_MAX, REFLECTED_FLOOR
 
 
 BOUNCE_GAIN, SEEN_GAIN = 0.0, 1.0
@@ -222,15 +223,8 @@ MAGNITUDE_FLOOR = 0.1
 the encoding's units, where the room's mean direct DC is 1), so one output unit is a tenth of a dim
 corner's light and a tenth of a lamp's neighbour's, and the loss (relative near the lamps) asks for
 outputs of one size."""
-REFLECTED_FLOOR = 0.01
-"""The reflected light's correction is relative to the bounce: times |bounce DC| + this. Reflected light
-is proportional to the albedo, and so is the bounce; scaled by the direct light instead, the correction
-gave rooms with walls of albedo 0.01-0.04 five to seven times their true indirect light."""
 
 
-DETAIL_FLOOR, DETAIL_MAX = 1e-4, 4.0
-"""`detail_gain`'s guards: the smallest unshadowed light (in the encoding's units, where the room's mean
-direct DC is 1) it divides by, and the largest gain it gives."""
 
 
 def detail_gain(seen: torch.Tensor, smooth: torch.Tensor) -> torch.Tensor:
