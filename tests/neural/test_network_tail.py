@@ -104,6 +104,15 @@ def test_the_field_runs_a_cut_graph_with_its_cards_gains_and_refuses_one_without
     inputs = random_inputs(passes=2)
     expected = a.run(inputs)
     np.testing.assert_allclose(b.run(inputs), expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max())
+    # with walls, given or made on the filter's thread as the field's encoder asks for them
+    from viewer.scene import load
+
+    enc = encoding.encode_scene(load("cornell"), 8, 16)
+    walls = encoding_walls(enc)
+    expected = a.run(enc.inputs, walls)
+    for given in (walls, lambda: walls):
+        np.testing.assert_allclose(b.run(enc.inputs, given), expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max())
+    assert not np.allclose(b.run(enc.inputs), expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max())
     card = json.loads(cut.with_suffix(".json").read_text())
     del card["tail"]
     cut.with_suffix(".json").write_text(json.dumps(card))

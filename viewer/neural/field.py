@@ -13,6 +13,8 @@ import hashlib
 import json
 import time
 from dataclasses import dataclass, replace
+from functools import partial
+from typing import Callable
 from pathlib import Path
 
 import numba
@@ -23,7 +25,7 @@ from viewer.neural import encoding
 from viewer.neural.domain import Domain, Shape, measure, outside
 from viewer.neural.encoder import Encoder
 from viewer.neural.network_feed import FILTERED, WallTaps, feed, wall_taps
-from viewer.neural.network_tail import HEAD, Tail, fed_names, run_graph
+from viewer.neural.network_tail import HEAD, Tail, fed_names, run_graph, run_overlapped
 from viewer.probes.grid import ProbeGrid
 from viewer.resources import DEFAULT_MODEL
 from viewer.scene import Scene
@@ -217,7 +219,7 @@ class NeuralField:
         keys = [(encoder.serial, int(r)) for r in encoder.revisions]
         stale = [c for c in range(3) if self._output is None or self._output_keys[c] != keys[c]
                  or self._output.shape[2:] != inputs.shape[2:]]
-        walls = wall_taps(encoder.seen)
+        walls = partial(wall_taps, encoder.seen)   # made where the filter needs them (`run_overlapped`)
         if len(stale) == 3:
             self._output = self.run(inputs, walls)
         elif stale:
@@ -227,17 +229,22 @@ class NeuralField:
         self._output_keys = keys
         return self._output
 
-    def run(self, inputs: np.ndarray, walls: WallTaps | None = None) -> np.ndarray:
+    def run(self, inputs: np.ndarray, walls: "WallTaps | Callable[[], WallTaps | None] | None" = None) -> np.ndarray:
         """The network on encoded inputs (passes, CHANNELS, M, M, M): its raw output (passes, 19, M, M, M);
-        its seen filter stopped at the `walls` of the inputs' geometry (`network_feed.wall_taps`)."""
+        its seen filter stopped at the `walls` of the inputs' geometry (`network_feed.wall_taps`, or what
+        makes them)."""
         self.passes_run = len(inputs)
         if inputs.shape[1] != self.channels:
             inputs = np.ascontiguousarray(inputs[:, :self.channels])
-        fed = feed(self.input_names, inputs, self.kernels, walls, self._fed)
+        if self.tail is None:
+            fed = feed(self.input_names, inputs, self.kernels, walls() if callable(walls) else walls, self._fed)
+            out = run_graph(self.session, fed, self.tail)
+        else:
+            fed, out = run_overlapped(self.session, inputs, self.kernels, walls, self._fed, self.tail)
         # its compressed rows serve the next run where the inputs stay the same: only inputs nobody can
         # change in place (the encoder's are read-only), so that equal rows are truly the same values
         self._fed = None if inputs.flags.writeable else fed
-        return run_graph(self.session, fed, self.tail)
+        return out
 
     def solve(self, scene: Scene, include_emitted: bool = True, timings: dict | None = None) -> ProbeGrid:
         """Voxelize the scene at the card's resolution, list its occluders, and predict over its bounds."""

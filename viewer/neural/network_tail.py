@@ -13,13 +13,14 @@ tests/neural/test_network_tail.py).
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
 from viewer.neural import encoding
-from viewer.neural.network_feed import FILTERED
+from viewer.neural.network_feed import FILTERED, feed, filtered
 
 _OPEN, _SEEN, _BOUNCE, _DIRECT = encoding.OPEN, encoding.SEEN.start, encoding.BOUNCE.start, encoding.DIRECT.start
 HEAD = "head"
@@ -76,6 +77,28 @@ def run_graph(session, fed: dict[str, np.ndarray], tail: Tail | None) -> np.ndar
     graph finished by `tail` where it ends at its head."""
     out = session.run(None, {i.name: fed[i.name] for i in session.get_inputs()})[0]
     return out if tail is None else tail.probes(fed["inputs"], fed["seen_filtered"], fed["bounce_filtered"], out)
+
+
+def run_overlapped(session, inputs: np.ndarray, kernels: np.ndarray, walls, previous: dict | None,
+                   tail: Tail) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """`feed` and `run_graph` for a graph that ends at its head, the seen filter's products (which only the
+    tail reads) made on a thread of their own while onnxruntime runs the head, which leaves part of the
+    second core idle; `walls` (`network_feed.WallTaps`, None, or what makes them: a new geometry's, 1.2 ms
+    on a 24^3 lattice) are made there too. Returns the feed and the output."""
+    fed = feed(["inputs", "compressed"], inputs, kernels, None, previous)
+
+    def products() -> dict[str, np.ndarray]:
+        taps = walls() if callable(walls) else walls
+        return {name: filtered(inputs, part, kernels, taps) for name, part in FILTERED.items()}
+
+    made = _FILTERS.submit(products)
+    head = session.run(None, {i.name: fed[i.name] for i in session.get_inputs()})[0]
+    fed.update(made.result())
+    return fed, tail.probes(fed["inputs"], fed["seen_filtered"], fed["bounce_filtered"], head)
+
+
+_FILTERS = ThreadPoolExecutor(max_workers=1, thread_name_prefix="seen-filter")
+"""The thread the seen filter's products are made on beside the network's head (`run_overlapped`)."""
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
