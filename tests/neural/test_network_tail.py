@@ -126,7 +126,8 @@ def test_a_cut_graphs_weights_read_back_with_its_gains(tmp_path):
     _, cut = graphs(tmp_path, model)
     export.write_card(cut, model, 8, training={"note": "random weights, for tests"}, metrics={})
     back = export.read_back(cut)
-    assert float(back.bounce_gain.detach()) == pytest.approx(0.3) and float(back.seen_gain.detach()) == pytest.approx(0.8)
+    gains = (float(back.bounce_gain.detach()), float(back.seen_gain.detach()))
+    assert gains == pytest.approx((0.3, 0.8))
     assert export.split_tail(cut) is None   # nothing left to cut: the file stays as it is
 
 

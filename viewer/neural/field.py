@@ -190,7 +190,7 @@ class NeuralField:
         encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m)
         enc = encoder.encode(voxels, sun, blockers)
         encoded = clock_now()
-        out = self._network(encoder, enc.inputs) if reuse else self.run(enc.inputs, wall_taps(encoder.seen))
+        out = self._network(encoder, enc.inputs) if reuse else self.run(enc.inputs, partial(wall_taps, encoder.seen))
         ran = clock_now()
         grid = unpack(out, enc.scale, enc.lo, enc.hi, include_emitted)
         if reuse and blockers is not None:   # the geometry's first vote on which probes are valid stays

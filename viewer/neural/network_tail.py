@@ -123,8 +123,9 @@ def _tail(inputs, seen_filtered, bounce_filtered, head, bounce_gain, seen_gain, 
         b, i = task // m, task % m
         shares, seen_dc = np.zeros((m, m), np.float32), np.zeros((m, m), np.float32)
         counted = 0
-        for di in range(-1, 2):   # along the first axis: the open shares' edges repeated, the seen DC's
-            a = min(max(i + di, 0), m - 1)                                    # within the lattice
+        # along the first axis: the open shares with the lattice's edges repeated, the seen DC within it
+        for di in range(-1, 2):
+            a = min(max(i + di, 0), m - 1)
             shares += inputs[b, _OPEN, a]
             if 0 <= i + di < m:
                 seen_dc += inputs[b, _SEEN, i + di]

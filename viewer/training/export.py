@@ -262,7 +262,8 @@ def main(argv=None) -> int:
             difference = cut_exported(args.run)
         except ValueError as exc:
             parser.error(str(exc))
-        print(f"cut {args.run} after its head (the tail's output vs the whole graph's: {difference:.1e})", file=sys.stderr)
+        print(f"cut {args.run} after its head (the tail's output vs the whole graph's: {difference:.1e})",
+              file=sys.stderr)
         return 0
     if args.read_back:
         if not args.run.is_file() or not args.run.with_suffix(".json").is_file():
