@@ -75,8 +75,8 @@ def fed_names(graph_inputs: list[str], tail: Tail | None) -> list[str]:
 def run_graph(session, fed: dict[str, np.ndarray], tail: Tail | None) -> np.ndarray:
     """The network's output (passes, 19, M, M, M) from onnxruntime's `session` on `fed` (`fed_names`), its
     graph finished by `tail` where it ends at its head."""
-    out = session.run(None, {i.name: fed[i.name] for i in session.get_inputs()})[0]
-    return out if tail is None else tail.probes(fed["inputs"], fed["seen_filtered"], fed["bounce_filtered"], out)
+    out = _graph(session, fed)
+    return out if tail is None else _finished(tail, fed, out)
 
 
 def run_overlapped(session, inputs: np.ndarray, kernels: np.ndarray, walls, previous: dict | None,
@@ -92,9 +92,18 @@ def run_overlapped(session, inputs: np.ndarray, kernels: np.ndarray, walls, prev
         return {name: filtered(inputs, part, kernels, taps) for name, part in FILTERED.items()}
 
     made = _FILTERS.submit(products)
-    head = session.run(None, {i.name: fed[i.name] for i in session.get_inputs()})[0]
+    head = _graph(session, fed)
     fed.update(made.result())
-    return fed, tail.probes(fed["inputs"], fed["seen_filtered"], fed["bounce_filtered"], head)
+    return fed, _finished(tail, fed, head)
+
+
+def _graph(session, fed: dict[str, np.ndarray]) -> np.ndarray:
+    """The graph's output on the inputs of `fed` it takes."""
+    return session.run(None, {i.name: fed[i.name] for i in session.get_inputs()})[0]
+
+
+def _finished(tail: Tail, fed: dict[str, np.ndarray], head: np.ndarray) -> np.ndarray:
+    return tail.probes(fed["inputs"], fed["seen_filtered"], fed["bounce_filtered"], head)
 
 
 _FILTERS = ThreadPoolExecutor(max_workers=1, thread_name_prefix="seen-filter")

@@ -105,6 +105,7 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
     from (else the one `training` names), whose training domain (viewer.neural.domain) the card carries: the
     viewer warns on scenes outside it."""
     ranges = ranges or training.get("ranges")
+    output = graph_output(path)
     card = {
         "name": path.stem,
         "file": path.name,
@@ -119,7 +120,7 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
                              "scale (mean direct radiance DC over the probes, shadows traced), outputs multiplied by it",
             "second_input": {"name": "compressed", "features": "the same, the light through asinh: channels "
                              + ", ".join(f"{part.start}-{part.stop - 1}" for part in encoding.COMPRESSED)},
-            "filtered": {"inputs": list(FILTERED) if graph_output(path) == HEAD else graph_filters(path),
+            "filtered": {"inputs": list(FILTERED) if output == HEAD else graph_filters(path),
                          "what": "the seen filter's products, which the graph (or its tail) reads where it lists "
                                  "them: the channels " + ", ".join(f"{name} {part.start}-{part.stop - 1}"
                                                                   for name, part in FILTERED.items())
@@ -127,8 +128,8 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
                                    "(viewer.neural.network_feed)",
                          "kernels": kernels(model).tolist()},
         },
-        **({"tail": model_tail(model).to_dict()} if graph_output(path) == HEAD else {}),
-        "outputs": {"name": graph_output(path), "channels": OUTPUTS,
+        **({"tail": model_tail(model).to_dict()} if output == HEAD else {}),
+        "outputs": {"name": output, "channels": OUTPUTS,
                     "tail": "where the name is head, the graph ends at ProbeNet's head and the card's tail gains "
                             "finish it (viewer.neural.network_tail)",
                     "layout": "0-8 SH of all incident light, 9-17 SH of the light reflected by surfaces, "

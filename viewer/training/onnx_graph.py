@@ -37,13 +37,7 @@ def split_tail(path: Path) -> Tail | None:
     if not heads or "bounce_gain" not in weights or "seen_gain" not in weights:
         return None
     tail = Tail(float(weights["bounce_gain"]), float(weights["seen_gain"]))
-    last = heads[-1]
-    cut = last.output[0]
-    for node in graph.node:   # the head's output named as the graph's
-        for k, name in enumerate(node.input):
-            if name == cut:
-                node.input[k] = HEAD
-    last.output[0] = HEAD
+    heads[-1].output[0] = HEAD   # the graph's output; the nodes after it go below, as nothing reads them
     del graph.output[:]
     graph.output.append(helper.make_tensor_value_info(HEAD, onnx.TensorProto.FLOAT, ["passes", OUTPUTS, "m", "m", "m"]))
     _drop_unused(graph)
