@@ -225,8 +225,6 @@ corner's light and a tenth of a lamp's neighbour's, and the loss (relative near 
 outputs of one size."""
 
 
-
-
 def detail_gain(seen: torch.Tensor, smooth: torch.Tensor) -> torch.Tensor:
     """(B, 1, M, M, M): how much of the unshadowed gather's fine detail the filtered seen light takes: the
     share of the unshadowed light (filtered as the seen light is, `smooth`) that the rays see, per probe
