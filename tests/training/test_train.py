@@ -245,3 +245,35 @@ def test_a_network_without_the_unshadowed_bounce_keeps_its_gain_at_zero():
     after.train()(x)[:, REFLECTED].square().mean().backward()
     optimizer.step()
     assert float(after.bounce_gain) == 0.0 and float(after.seen_gain) != pytest.approx(1.0)
+
+
+def test_wider_coarse_levels_start_from_a_narrower_networks_answers():
+    """A network whose coarse levels are wider (`ProbeNetConfig.coarse`) loads a narrower one's weights
+    and gives its answers exactly; after one step its new channels carry something (they are trained,
+    not dead), and a shape that would shrink is refused."""
+    from viewer.scene import load
+    from viewer.training.models import REFLECTED
+
+    x = torch.from_numpy(encoding.encode_scene(load("cornell"), 8, 16).inputs)
+    torch.manual_seed(7)
+    narrow = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=3))
+    with torch.no_grad():
+        for p in narrow.parameters():
+            p.normal_(0.0, 0.2)   # a trained network's head is not zero: its answer depends on every level
+    wide = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=3, coarse=(16, 24)))
+    assert wide.config.widths() == [4, 16, 24] and narrow.config.widths() == [4, 8, 16]
+    wide.load_unshadowed(narrow.state_dict())
+    narrow.eval(), wide.eval()
+    with torch.no_grad():
+        torch.testing.assert_close(wide(x), narrow(x), rtol=0, atol=0)
+    assert not torch.equal(wide.down[1][0].weight[8:], torch.zeros_like(wide.down[1][0].weight[8:]))
+    optimizer = torch.optim.SGD(wide.parameters(), lr=0.01)
+    wide.train()(x)[:, REFLECTED].square().mean().backward()
+    assert wide.project[1].weight.grad[:, 8:].abs().sum() > 0   # the new channels' way out learns
+    optimizer.step()
+    with torch.no_grad():
+        assert not torch.equal(wide.eval()(x), narrow(x))
+    with pytest.raises(ValueError, match="cannot grow"):
+        narrow.load_unshadowed(wide.state_dict())
+    with pytest.raises(ValueError, match="coarse widths"):
+        ProbeNetConfig(levels=3, coarse=(16,))

@@ -53,6 +53,10 @@ from the seen light, the same recipe ends at 32.2-32.5% (docs/TRAINING.md)."""
 class ProbeNetConfig:
     width: int = 16
     """Channels of the first coarse level (M/2); each coarser level doubles them (capped at 4x)."""
+    coarse: tuple = ()
+    """Channels of the levels after the first (M/4, M/8, ...) where they differ from `width`'s rule: the
+    coarse levels cost little (a 6^3 lattice has 1/64 of the probes), so they can be wider than the
+    first level, which reads every probe."""
     hidden: int = 16
     """Width of the per-probe head."""
     head_layers: int = 2
@@ -88,6 +92,16 @@ class ProbeNetConfig:
     zeroed as they come in: the same network blind to visibility beyond the direct light's shadows
     (to measure what the seen rays bring)."""
 
+    def __post_init__(self):
+        object.__setattr__(self, "coarse", tuple(int(c) for c in self.coarse))
+        if self.coarse and len(self.coarse) != self.levels - 1:
+            raise ValueError(f"{len(self.coarse)} coarse widths for {self.levels - 1} levels after the first")
+
+    def widths(self) -> list[int]:
+        """The channels of each level below the lattice, the first (M/2) first."""
+        rule = [self.width * min(2 ** level, 4) for level in range(self.levels)]
+        return rule[:1] + list(self.coarse) if self.coarse else rule
+
     def to_dict(self) -> dict:
         return asdict(self)
 
@@ -106,7 +120,7 @@ class ProbeNet(nn.Module):
         super().__init__()
         self.config = config
         h = config.hidden
-        widths = [encoding.CHANNELS] + [config.width * min(2 ** level, 4) for level in range(config.levels)]
+        widths = [encoding.CHANNELS] + config.widths()
         self.down = nn.ModuleList(
             nn.Sequential(nn.Conv3d(widths[i], widths[i + 1], 2, stride=2), nn.ReLU(),
                           nn.Conv3d(widths[i + 1], widths[i + 1], 3, padding=1), nn.ReLU())
@@ -182,9 +196,10 @@ class ProbeNet(nn.Module):
         return torch.cat([total, reflected, out[:, VALIDITY:]], dim=1)
 
     def load_unshadowed(self, state: dict) -> None:
-        """Load `state` (a state dict); where this network takes no unshadowed bounce, that bounce's
-        learned gain is moved to the seen light, which carries the same light with visibility."""
-        self.load_state_dict(state)
+        """Load `state` (a state dict, of this network or of a narrower one: `widened`); where this network
+        takes no unshadowed bounce, that bounce's learned gain is moved to the seen light, which carries
+        the same light with visibility."""
+        self.load_state_dict(widened(state, self.state_dict()))
         if not self.config.unshadowed:
             with torch.no_grad():
                 self.seen_gain += self.bounce_gain
@@ -194,6 +209,29 @@ class ProbeNet(nn.Module):
         if self.config.upsample == "nearest":
             return F.interpolate(x, scale_factor=2, mode="nearest")
         return F.interpolate(x, scale_factor=2, mode="trilinear", align_corners=False)
+
+
+def widened(state: dict, wide: dict) -> dict:
+    """`state` (a state dict) grown to the shapes of `wide` (another ProbeNet's, whose levels have as many
+    channels or more) computing the same function: each weight keeps its values in its leading block;
+    a channel it lacked starts as `wide` has it (the new network's random start), except that the channels
+    `state` had take nothing from the new ones (those weights are zero). So the wider network starts
+    as the narrower one's answers, and training finds a use for the new channels: their outgoing weights
+    have gradients as soon as they carry anything."""
+    out = {}
+    for name, value in wide.items():
+        old = state[name]
+        if tuple(old.shape) == tuple(value.shape):
+            out[name] = old
+            continue
+        if old.dim() != value.dim() or any(a > b for a, b in zip(old.shape, value.shape)):
+            raise ValueError(f"{name}: {tuple(old.shape)} cannot grow to {tuple(value.shape)}")
+        grown = value.clone()
+        if old.dim() >= 2:
+            grown[:old.shape[0], old.shape[1]:] = 0.0   # the kept outputs ignore the new inputs
+        grown[tuple(slice(0, n) for n in old.shape)] = old
+        out[name] = grown
+    return out
 
 
 def walled_taps(links: torch.Tensor, passes: int) -> torch.Tensor:

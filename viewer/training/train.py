@@ -286,6 +286,9 @@ def main(argv=None) -> int:
     add_out(parser, required=True, help="run directory (resumed if it exists)")
     parser.add_argument("--probes", type=int, default=24)
     parser.add_argument("--width", type=int, default=ProbeNetConfig.width)
+    parser.add_argument("--coarse", type=int, nargs="*", default=[],
+                        help="channels of the levels after the first, where wider than --width's rule; with "
+                             "--init, the narrower network's weights start it and it gives their answers")
     parser.add_argument("--hidden", type=int, default=ProbeNetConfig.hidden)
     parser.add_argument("--head-layers", type=int, default=ProbeNetConfig.head_layers)
     parser.add_argument("--levels", type=int, default=ProbeNetConfig.levels)
@@ -331,7 +334,8 @@ def main(argv=None) -> int:
     val_set = val_set.subset(np.arange(min(args.val_rooms, len(val_set))))
     record_data(args.out, args.data, train_set, val_set, args.probes,
                 " ".join(["python -m viewer.training.train", *(sys.argv[1:] if argv is None else argv)]))
-    config = ProbeNetConfig(width=args.width, hidden=args.hidden, head_layers=args.head_layers, levels=args.levels,
+    config = ProbeNetConfig(width=args.width, coarse=tuple(args.coarse), hidden=args.hidden,
+                            head_layers=args.head_layers, levels=args.levels,
                             seen=not args.without_seen, bounce_gain=args.start_gains[0],
                             seen_gain=args.start_gains[1], reflected_correction=not args.no_reflected_correction,
                             direct_correction=not args.no_direct_correction, unshadowed=not args.no_unshadowed)
