@@ -263,7 +263,8 @@ def test_wider_coarse_levels_start_from_a_narrower_networks_answers():
     wide = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=3, coarse=(16, 24)))
     assert wide.config.widths() == [4, 16, 24] and narrow.config.widths() == [4, 8, 16]
     wide.load_unshadowed(narrow.state_dict())
-    narrow.eval(), wide.eval()
+    narrow.eval()
+    wide.eval()
     with torch.no_grad():
         torch.testing.assert_close(wide(x), narrow(x), rtol=0, atol=0)
     assert not torch.equal(wide.down[1][0].weight[8:], torch.zeros_like(wide.down[1][0].weight[8:]))
@@ -277,3 +278,5 @@ def test_wider_coarse_levels_start_from_a_narrower_networks_answers():
         narrow.load_unshadowed(wide.state_dict())
     with pytest.raises(ValueError, match="coarse widths"):
         ProbeNetConfig(levels=3, coarse=(16,))
+    with pytest.raises(ValueError, match="not the same layers"):   # another head, not a wider one
+        ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=3, head_layers=3)).load_unshadowed(narrow.state_dict())

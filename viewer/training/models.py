@@ -218,6 +218,9 @@ def widened(state: dict, wide: dict) -> dict:
     `state` had take nothing from the new ones (those weights are zero). So the wider network starts
     as the narrower one's answers, and training finds a use for the new channels: their outgoing weights
     have gradients as soon as they carry anything."""
+    if state.keys() != wide.keys():
+        differ = sorted(set(state) ^ set(wide))
+        raise ValueError(f"not the same layers: {', '.join(differ[:4])}{' ...' if len(differ) > 4 else ''}")
     out = {}
     for name, value in wide.items():
         old = state[name]
