@@ -170,7 +170,7 @@ def test_neural_gi_recolours_the_voxels_of_a_colour_edit(exported):
         assert np.array_equal(grid.valid, first.valid if what in ("albedo", "lamp colour") else fresh.valid), what
 
 
-@pytest.mark.parametrize("damage", ["garbage", "truncated", "no-card", "bad-card", "sha", "version"])
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "no-card", "bad-card", "sha", "version", "rays"])
 def test_bad_model_is_refused_with_a_clear_message(exported, tmp_path, damage):
     _, path = exported
     target = tmp_path / "model.onnx"
@@ -191,12 +191,48 @@ def test_bad_model_is_refused_with_a_clear_message(exported, tmp_path, damage):
         card["sha256"] = "0" * 64
     elif damage == "version":
         card["inputs"]["encoding_version"] = encoding.VERSION + 1
+    elif damage == "rays":
+        card["inputs"]["seen_rays"] = 0
     if damage != "no-card":
         target.with_suffix(".json").write_text(json.dumps(card))
     with pytest.raises(neural.ModelError) as info:
         neural.NeuralField(target)
     message = str(info.value)
     assert "\n" not in message and "model" in message.lower() or target.name in message
+
+
+def test_the_runtime_casts_the_seen_rays_the_card_names(exported, tmp_path):
+    """A network learns on features of a number of seen rays a probe; the card names it (the export
+    writes the encoding's), and the source casts that many, in a new scene and after a move. A card
+    written before cards named it gets the encoding's count. The same network fed other rays gives
+    other probes."""
+    _, path = exported
+    assert json.loads(path.with_suffix(".json").read_text())["inputs"]["seen_rays"] == encoding.SEEN_RAYS
+    shipped = neural.ModelCard.read(ROOT / "models" / "probenet.onnx")
+    assert shipped.seen_rays == encoding.SEEN_RAYS
+    target = tmp_path / "model.onnx"
+    shutil.copy(path, target)
+    card = json.loads(path.with_suffix(".json").read_text())
+    card["inputs"]["seen_rays"] = 8
+    target.with_suffix(".json").write_text(json.dumps(card))
+    scene = load("cornell")
+    field = neural.NeuralField(target)
+    eight = field.solve(scene)
+    assert field.encoder(*scene.bounds, field.resolution).seen.rays == 8
+    matrix = np.eye(4)
+    matrix[0, 3] = 0.05
+    moved = scene.transformed_group("small-box", matrix)   # kept rays and rays cast again: 8 a probe
+    gi = neural.NeuralGI(field)
+    gi.update(scene)
+    gi.update(moved)
+    assert field.encoder(*moved.bounds, field.resolution).seen.rays == 8
+    del card["inputs"]["seen_rays"]
+    target.with_suffix(".json").write_text(json.dumps(card))
+    older = neural.NeuralField(target)
+    assert older.card.seen_rays == encoding.SEEN_RAYS
+    default = older.solve(scene)
+    assert older.encoder(*scene.bounds, older.resolution).seen.rays == encoding.SEEN_RAYS
+    assert not np.allclose(eight.coefficients, default.coefficients)
 
 
 def test_sample_with_a_missing_model_exits_2(tmp_path):

@@ -90,9 +90,11 @@ class Encoder:
     One encoder serves one lattice; any voxel grid and occluders may be passed to `encode`, and whatever
     still holds from the previous call is reused."""
 
-    def __init__(self, lo, hi, resolution: int):
+    def __init__(self, lo, hi, resolution: int, rays: int = encoding.SEEN_RAYS):
+        """`rays`: the seen rays a probe (those the network was trained with: `ModelCard.seen_rays`)."""
         self.lo, self.hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         self.resolution = int(resolution)
+        self.rays = int(rays)
         self.points = ProbeGrid.positions_for(self.lo, self.hi, self.resolution).reshape(-1, 3)  # x slowest, as encode
         self.serial = next(_serials)
         """Tells encoders apart (a cache of the network's outputs keys on it and on `revisions`)."""
@@ -149,7 +151,7 @@ class Encoder:
         box = None if not shadows_changed or self._shadows is None else moved_box(self._shadows.blockers, blockers)
         if geometry_changed or shadows_changed:
             clock = time.perf_counter()
-            self._seen = encoding.seen_rays(blockers, voxels, self.points, self._seen, box)
+            self._seen = encoding.seen_rays(blockers, voxels, self.points, self._seen, box, self.rays)
             self.ray_seconds = time.perf_counter() - clock
         if shadows_changed:
             self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing,

@@ -88,6 +88,11 @@ class ModelCard:
         return int(self.data["inputs"]["voxels"])
 
     @property
+    def seen_rays(self) -> int:
+        """The seen rays a probe the network learned on, which the runtime casts (SEEN_RAYS on older cards)."""
+        return int(self.data["inputs"].get("seen_rays", encoding.SEEN_RAYS))
+
+    @property
     def sha256(self) -> str:
         return str(self.data["sha256"])
 
@@ -111,6 +116,8 @@ class ModelCard:
             data = json.loads(card_path.read_text())
             card = ModelCard(model, data)
             _ = (card.probes, card.voxels, card.sha256, data["inputs"]["encoding_version"], card.domain)
+            if card.seen_rays < 1:
+                raise ValueError(f"seen_rays {card.seen_rays}")
         except (ValueError, KeyError, TypeError) as exc:
             raise ModelError(f"{card_path.name}: not a valid model card ({exc})") from None
         return card
@@ -187,7 +194,7 @@ class NeuralField:
         `reuse=False` encodes and runs everything afresh: what a new scene costs."""
         m = resolution or self.resolution
         clock = clock_now()
-        encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m)
+        encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m, self.card.seen_rays)
         enc = encoder.encode(voxels, sun, blockers)
         encoded = clock_now()
         out = self._network(encoder, enc.inputs) if reuse else self.run(enc.inputs, partial(wall_taps, encoder.seen))
@@ -210,7 +217,7 @@ class NeuralField:
     def encoder(self, lo, hi, resolution: int) -> Encoder:
         """The encoder of this lattice, kept from the last call when the lattice is the same."""
         if self._encoder is None or not self._encoder.fits(lo, hi, resolution):
-            self._encoder = Encoder(lo, hi, resolution)
+            self._encoder = Encoder(lo, hi, resolution, self.card.seen_rays)
         return self._encoder
 
     def _network(self, encoder: Encoder, inputs: np.ndarray) -> np.ndarray:

@@ -116,6 +116,7 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
         "inputs": {
             "name": "inputs", "shape": ["3 x scenes", encoding.CHANNELS, resolution, resolution, resolution],
             "features": list(encoding.FEATURES), "encoding_version": encoding.VERSION, "voxels": ENCODING_VOXELS,
+            "seen_rays": encoding.SEEN_RAYS,
             "normalization": "one pass per colour channel; emission and direct light divided by the pass's "
                              "scale (mean direct radiance DC over the probes, shadows traced), outputs multiplied by it",
             "second_input": {"name": "compressed", "features": "the same, the light through asinh: channels "
