@@ -58,7 +58,8 @@ def test_the_validation_rooms_are_the_training_generators():
         assert (room.sun is None) == (stored.sun is None)
 
 
-@pytest.mark.parametrize("argv", [["cornell", "--move", "no-such-group"], ["no-such-scene"], ["--rooms", "-1"]])
+@pytest.mark.parametrize("argv", [["cornell", "--move", "no-such-group"], ["no-such-scene"], ["--rooms", "-1"],
+                                  ["cornell", "--model", "no-such-model.onnx"]])
 def test_bad_input_is_one_line_and_status_2(argv, capsys):
     with pytest.raises(SystemExit) as exit_:
         share.main(argv)

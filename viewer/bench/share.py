@@ -21,6 +21,7 @@ from __future__ import annotations
 import os
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -28,7 +29,7 @@ from viewer import scene as scenes
 from viewer.bench.edit_methods import Edit, moved_a_tenth
 from viewer.cli_parsing import add_repeats, tool_parser
 from viewer.evaluation import procedural
-from viewer.neural.field import DEFAULT_MODEL, NeuralField, NeuralGI
+from viewer.neural.field import DEFAULT_MODEL, ModelError, NeuralField, NeuralGI
 from viewer.neural.ranges import PRESETS
 from viewer.physical.gi import GISettings, PhysicalGI
 from viewer.scene import Scene, SceneError
@@ -112,12 +113,17 @@ def main(argv: list[str] | None = None) -> int:
                         help="also the training generator's first N validation rooms")
     parser.add_argument("--move", help="the group moved (default: the non-emitting group of the most triangles)")
     parser.add_argument("--threads", type=int, default=1, help="onnxruntime's threads (the viewer's: up to 4)")
+    parser.add_argument("--model", type=Path, default=DEFAULT_MODEL,
+                        help="the network (.onnx with its card; the seen rays it casts are the card's)")
     add_repeats(parser, 5)
     args = parser.parse_args(argv)
     if args.rooms < 0:
         parser.error(f"--rooms must be 0 or more, not {args.rooms}")
     names = args.scenes if args.scenes or args.rooms else ["cornell"]
-    field = NeuralField(DEFAULT_MODEL, threads=args.threads)
+    try:
+        field = NeuralField(args.model, threads=args.threads)
+    except ModelError as exc:
+        parser.error(str(exc))
     results = {}
     for name in [*names, *range(args.rooms)]:
         try:
@@ -130,7 +136,8 @@ def main(argv: list[str] | None = None) -> int:
         measure(scene, field, group, 1)   # compile and warm up first
         results[scene.name] = measure(scene, field, group, args.repeats)
         print("\n".join(table({scene.name: results[scene.name]})[2:]), flush=True)
-    command = " ".join(names + (["--rooms", str(args.rooms)] if args.rooms else []))
+    command = " ".join(names + (["--rooms", str(args.rooms)] if args.rooms else [])
+                       + (["--model", str(args.model)] if args.model != DEFAULT_MODEL else []))
     print("\n".join(["", *table(results), "",
                      f"`python -m viewer.bench.share {command} --threads {args.threads} --repeats "
                      f"{args.repeats}`, {time.strftime('%Y-%m-%d')}, 1-minute load average {os.getloadavg()[0]:.1f} "
