@@ -334,7 +334,7 @@ def main(argv=None) -> int:
     val_set = val_set.subset(np.arange(min(args.val_rooms, len(val_set))))
     record_data(args.out, args.data, train_set, val_set, args.probes,
                 " ".join(["python -m viewer.training.train", *(sys.argv[1:] if argv is None else argv)]))
-    config = ProbeNetConfig(width=args.width, coarse=tuple(args.coarse), hidden=args.hidden,
+    config = ProbeNetConfig(width=args.width, coarse=args.coarse, hidden=args.hidden,
                             head_layers=args.head_layers, levels=args.levels,
                             seen=not args.without_seen, bounce_gain=args.start_gains[0],
                             seen_gain=args.start_gains[1], reflected_correction=not args.no_reflected_correction,
