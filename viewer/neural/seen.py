@@ -13,10 +13,11 @@ solver's probe rays; a back face or nothing brings no light) and takes that voxe
 light: albedo x its direct irradiance / pi (`Bounce.leaving`). The directions are interleaved over the
 lattice (`interleaved_lattices`): the 27 probes of any 3x3x3 block take the 27 disjoint subsets of one
 spherical Fibonacci lattice of 27 x SEEN_RAYS directions, so the neighbourhood that the network's
-filter averages holds 864 evenly spread directions (432 at 16 rays a probe, where 27 independently
-turned lattices of 16 overlapped and left gaps). The same rays and cost, and less error once filtered: on the solver's converged light,
-3x3x3 box filtered against its probes, 8.0% instead of 8.9% on the paper's seven scenes and 29.4%
-instead of 31.1% in 20 validation rooms (median; 32 turned rays a probe give 7.7% and 28.0%).
+filter averages holds 27 x SEEN_RAYS evenly spread directions (1,728 at 64 rays a probe). Measured at
+16 rays a probe, where 27 independently turned lattices overlapped and left gaps: the same rays and
+cost, and less error once filtered (on the solver's converged light, 3x3x3 box filtered against its
+probes, 8.0% instead of 8.9% on the paper's seven scenes and 29.4% instead of 31.1% in 20 validation
+rooms, median; 32 turned rays a probe give 7.7% and 28.0%).
 
 The light bounces on, and the seen feature follows it one bounce further (`seen_light`): what the rays
 gathered is read back at the voxels (`bounce.READ_BACK` voxels in front of each) and reflected again,
@@ -46,14 +47,16 @@ from viewer.rays.packets import LANES
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import VoxelGrid
 
-SEEN_RAYS = 32
-"""Rays a probe. On the ladder's 20 validation rooms (the converged light, box filtered): 8 rays 34.9%,
-16 rays 30.0%, 32 rays 28.1%, 64 rays 27.6%, for 80 / 184 / 362 / 823 ms of rays a geometry then. Where
-the network's remaining error is, in the reflected light's directions (L1 and L2), 32 rays buy more: the
-version-11 network fed 32 rays' features was 9.3% and 7.7% off Mitsuba's indirect light in paper-test
-and CornellBox-Original where 16 gave 9.6% and 8.2% (64: 9.2% and 7.6%), for 11-17 ms more of a new
-scene's 72-103 ms on the Cornell box and the 68k-triangle scan (Embree called from compiled loops), and
-an albedo edit in the same 28-30 ms."""
+SEEN_RAYS = 64
+"""Rays a probe: the fewest that keep the network's reflected light within 1.5x the solver's error in
+every scene of `python -m viewer.training.evaluate --val 20 --dark 4`. Scenes above 1.5x, and the
+worst: the network trained on 32 rays 3 of 26 (val-00012 1.70x); fine-tuned from it on the same 1,605
+rooms' features at 48 rays (6 epochs of 500 steps) 3 (1.52x), at 64 rays none (1.49x), at 128 rays none
+(1.35x). With fewer rays the network's seen filter learns to blur more (its DC kernel's
+centre 14% of the kernel at 32 rays, 30% at 128) and the light it blurs across is the error left. The
+shipped network, fine-tuned 8 epochs more, is 1.48x at worst. 64 rays cost a new generator room 36-39
+ms more (val-00002 and val-00004: 99-115 -> 138-151 ms), a moved object 6-9 ms (the rays through its
+box), an albedo edit the gathers' 1-3 ms; docs/PERFORMANCE.md has the shares of the solver's time."""
 SEEN_BOUNCES = 4
 """Bounces the seen feature gathers; the last one also carries the bounces after it (`seen_light`). With
 three, the tail fell short where the walls reflect much: on the Cornell box the seen light's red was 7%
