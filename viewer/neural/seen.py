@@ -118,6 +118,11 @@ class SeenRays:
         """(3, m, m, m) bool on a cubic lattice (else None): whether the segment from each probe to its
         next one along x, y, z crosses no surface (`filtered` does not average across a wall)."""
 
+    @property
+    def distances(self) -> np.ndarray | None:
+        """(P, R) how far each ray went to the face it met (None where the caster gives no faces)."""
+        return None if self._faces is None else self._faces[1]
+
     def filtered(self, light: np.ndarray) -> np.ndarray:
         """(P, 9, C) `light` averaged over the 3x3x3 probes around each, each probe weighted by its open
         share, and a neighbour beyond the lattice's faces or across a surface (`links`) taken as the

@@ -47,13 +47,19 @@ def filtered(light: np.ndarray, weight: np.ndarray, m: int) -> np.ndarray:
     return (num / np.maximum(den, 1.0 / 27.0)[..., None]).reshape(-1, 9, 3)
 
 
-def scene_rows(scene) -> dict:
-    m = LATTICE
+def scored_scene(scene, m: int = LATTICE):
+    """What the gather studies start from: the evaluation's 500 free-space points of `scene`, Mitsuba's
+    indirect light there (cached), and the scene voxelized at `m` with its occluders."""
     points = free_space_points(scene, 500, margin=0.06, seed=1)
     truth = truth_sh(scene, points, 4096, include_emitted=False)
-    lo, hi = scene.bounds
     grid = voxelize(scene, m)
-    blockers = encoding.occluders(scene, grid)
+    return points, truth, grid, encoding.occluders(scene, grid)
+
+
+def scene_rows(scene) -> dict:
+    m = LATTICE
+    points, truth, grid, blockers = scored_scene(scene, m)
+    lo, hi = scene.bounds
     spacing = (hi - lo) / m
     flat = encoding.lattice_cells(grid.position, lo, spacing, m)
     lights = encoding.emitting_patches(flat, grid)
