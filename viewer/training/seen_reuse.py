@@ -36,7 +36,6 @@ from viewer.rays.voxels import VoxelGrid
 from viewer.training.surface_light import LATTICE, scored_scene
 
 
-
 def reused(rays: SeenRays, voxels: VoxelGrid, radiance: np.ndarray, reach: str = "block") -> np.ndarray:
     """(P, 9, C) the light of the voxels leaving with `radiance` (K, C), gathered at each probe of `rays`
     (a cubic lattice) from its own rays and its neighbours' (`reach`: "self" its own only, which is
@@ -78,6 +77,9 @@ def _reachable(links, i, j, k, a, b, c) -> bool:
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _reused(points, directions, distances, landed, normals, radiance, m, links, reach):
+    """`reused` on arrays: each probe of the m^3 lattice reads the probes of `reach` around it that its
+    `links` reach, and every hit of theirs that faces it, weighed by its density from this probe over the
+    sum of its densities from all the probes read (the balance heuristic); the probes split over the cores."""
     probes, rays = landed.shape
     channels = radiance.shape[1]
     out = np.zeros((probes, 9, channels))
@@ -127,6 +129,8 @@ def _reused(points, directions, distances, landed, normals, radiance, m, links, 
                     continue
                 weight = cosine / far2 / density
                 x, y, z = sx / far, sy / far, sz / far
+                # viewer.probes.sh.basis's order and constants (a probe reading its own rays alone gathers
+                # exactly what SeenRays.gathered does: tests/training/test_seen_reuse.py)
                 basis = (0.282095, 0.488603 * y, 0.488603 * z, 0.488603 * x, 1.092548 * x * y, 1.092548 * y * z,
                          0.315392 * (3.0 * z * z - 1.0), 1.092548 * x * z, 0.546274 * (x * x - y * y))
                 for b in range(9):
