@@ -47,8 +47,7 @@ def reused(rays: SeenRays, voxels: VoxelGrid, radiance: np.ndarray, reach: str =
     directions = lattice_rays(rays.probes, rays.rays, rays.seed)[0]
     landed = rays.voxel.reshape(rays.probes, rays.rays)
     return _reused(np.asarray(rays.points, np.float64), np.asarray(directions, np.float64),
-                   np.asarray(rays.distances, np.float64).reshape(rays.probes, rays.rays),
-                   np.where(landed < voxels.count, landed, -1).astype(np.int64),
+                   np.asarray(rays.distances, np.float64), np.where(landed < rays.count, landed, -1).astype(np.int64),
                    np.asarray(voxels.normal, np.float64), np.asarray(radiance, np.float64), side,
                    np.ascontiguousarray(rays.links), {"self": 0, "faces": 1, "block": 2}[reach])
 
