@@ -58,6 +58,21 @@ def test_closest_hits_are_embreex_own_bit_for_bit():
 
 
 @needs_embree
+def test_a_hierarchy_left_to_choose_is_built_quickly_only_when_large(monkeypatch):
+    """`quick=None`: Embree's low build quality above QUICK_FACES triangles (its build is the cost there),
+    the default below (its rays are); either way the same hits."""
+    triangles = cornell_with_sphere()
+    origins, directions = rays(triangles, 20_000)
+    small = embree.Hierarchy(triangles, quick=None)
+    monkeypatch.setattr(embree, "QUICK_FACES", len(triangles) - 1)
+    large = embree.Hierarchy(triangles, quick=None)
+    assert not small.quick and large.quick
+    for a, b in zip(embree.Scene(small).closest(origins, directions, 1e37),
+                    embree.Scene(large).closest(origins, directions, 1e37)):
+        np.testing.assert_array_equal(a, b)
+
+
+@needs_embree
 def test_a_segment_is_blocked_where_embreex_says_so():
     triangles = cornell_with_sphere()
     origins, directions = rays(triangles, 100_000, seed=6)

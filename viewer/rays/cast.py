@@ -131,7 +131,7 @@ class TriangleCaster:
     """`_hull_corners`, once asked."""
     _direct: "embree.Scene | None" = None
     """Embree called from compiled loops (viewer.rays.embree); None where only embreex's binding works."""
-    _quick = False
+    _quick: bool | None = False
     _stayed: _Stayed | None = None
     """The faces that stayed, where this caster was made from a previous one with some faces moved: the
     next move of the same faces keeps them."""
@@ -140,13 +140,13 @@ class TriangleCaster:
     same faces by a translation (a drag) keeps it, moved (`moved_faces.translation`)."""
 
     def __init__(self, scene, cells: dda.Cells | None = None, backend: str | None = None,
-                 previous: "TriangleCaster | None" = None, quick: bool = False):
+                 previous: "TriangleCaster | None" = None, quick: bool | None = False):
         """`cells`: the scene's dda.Cells (any grid, Cells.blocking will do) when the caller has them, for
         the DDA backend; `backend`: "embree", "dda", or None for Embree where it is installed ("embreex":
         Embree through embreex's own binding, which holds Python's lock: for comparisons). `previous`:
         the caster of the same faces before some of them moved (a dragged lamp or object), whose
         hierarchy of the faces that stayed is kept where it has one (`_parted`). `quick`: Embree built
-        quickly, its rays a little slower (`embree.Hierarchy`): for a caster of few rays a build."""
+        quickly, its rays slower (`embree.Hierarchy`; None: the large hierarchies alone)."""
         self._quick = quick
         backend = backend or ("embree" if embree_available() else "dda")
         if backend in ("embree", "embreex") and not embree_available():

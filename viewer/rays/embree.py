@@ -48,6 +48,12 @@ IDENTITY = np.array([1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0], np.float32)
 """An instance's transform: the identity, columns of a 3x4 matrix."""
 SCENE_ROBUST = 1 << 2
 BUILD_QUALITY_LOW = 0
+QUICK_FACES = 20_000
+"""Above this many triangles a hierarchy built for speed of building (`Hierarchy`'s `quick=None`) takes
+Embree's low build quality; at or below it, the default. The neural encoding's 885k seen rays of a 24^3
+lattice: a 904-triangle generator room's 70 -> 47 ms at the default quality (0.3 -> 0.4 ms to build), a
+68k-triangle scan's 58 -> 51 ms, built in 16 ms instead of 6 (a moved scan builds again, with fewer
+rays)."""
 
 _lock = threading.Lock()
 _library = None   # (ctypes library, device, rtcIntersect1's address, rtcOccluded1's) once loaded
@@ -134,17 +140,19 @@ class Hierarchy:
     """Triangles in one Embree hierarchy of their own (one robust triangle mesh, as embreex builds it): a
     `Scene` queries one alone, or several side by side."""
 
-    def __init__(self, triangles: np.ndarray, quick: bool = False):
+    def __init__(self, triangles: np.ndarray, quick: bool | None = False):
         """`triangles` (F, 3, 3): each face's corners; face i is primitive i. `quick`: built with Embree's
         low build quality (a Morton build: a 272k-triangle scan in 20 ms instead of 48, a 68k one in 5
-        instead of 10), whose rays run 5-9% slower (the same hits): for a caster that traces few rays a
-        build."""
+        instead of 10), whose rays run slower (the same hits): 5-14% on a scan, 1.5-1.6x in rooms of a
+        hundred to a thousand large triangles; None: quick above QUICK_FACES triangles."""
         library = _load()
         if library is None:
             raise OSError(f"Embree cannot be called directly: {_failed}")
         lib, device = library[0], library[1]
         faces = len(triangles)
         self.count = faces
+        self.quick = faces > QUICK_FACES if quick is None else bool(quick)
+        """Whether it was built with the low build quality."""
         # Embree reads vertices 16 bytes at a time: one more vertex than the faces use keeps the last read
         # inside the buffer. Both buffers stay referenced here, as long as the scene that shares them.
         self._vertices = np.zeros((3 * faces + 1, 3), np.float32)
@@ -153,7 +161,7 @@ class Hierarchy:
         scene = lib.rtcNewScene(device)
         lib.rtcSetSceneFlags(scene, SCENE_ROBUST)
         geometry = lib.rtcNewGeometry(device, GEOMETRY_TRIANGLE)
-        if quick:
+        if self.quick:
             lib.rtcSetSceneBuildQuality(scene, BUILD_QUALITY_LOW)
             lib.rtcSetGeometryBuildQuality(geometry, BUILD_QUALITY_LOW)
         lib.rtcSetSharedGeometryBuffer(geometry, BUFFER_VERTEX, 0, FORMAT_FLOAT3, self._vertices.ctypes.data, 0,
@@ -179,7 +187,7 @@ class Scene:
     faces at the same distances (every one of a million random rays), at 14.3 M rays a second instead of
     17.1 on two cores (a second level to traverse)."""
 
-    def __init__(self, *parts, quick: bool = False, shifts=None):
+    def __init__(self, *parts, quick: bool | None = False, shifts=None):
         """Each part (F_i, 3, 3) triangles or a `Hierarchy` (`quick`: see there); the parts' faces are
         numbered one after the other (primitive i of part k is face offset_k + i). `shifts`: one (3,)
         translation or None a part, where a part's hierarchy serves its triangles moved (a dragged

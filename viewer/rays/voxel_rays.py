@@ -39,7 +39,7 @@ class VoxelRays:
     """A scene's triangles and the voxel listing of its grid, ready for rays that land on voxels."""
 
     def __init__(self, scene, cells: dda.Cells, backend: str | None = None, caster: TriangleCaster | None = None,
-                 previous: "VoxelRays | None" = None, quick: bool = False):
+                 previous: "VoxelRays | None" = None, quick: bool | None = False):
         """`backend`: "embree", "dda", or None for Embree where it is installed. `caster`: the Embree
         hierarchy of the same triangles, when another listing of them already built one. `previous`: the
         rays of the same faces before some of them moved, whose hierarchy of the others is kept
