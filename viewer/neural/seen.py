@@ -54,7 +54,8 @@ worst: the network trained on 32 rays 3 of 26 (val-00012 1.70x); fine-tuned from
 rooms' features at 48 rays (6 epochs of 500 steps) 3 (1.52x), at 64 rays none (1.49x), at 128 rays none
 (1.35x). With fewer rays the network's seen filter learns to blur more (its DC kernel's
 centre 14% of the kernel at 32 rays, 30% at 128) and the light it blurs across is the error left. The
-shipped network, fine-tuned 8 epochs more, is 1.48x at worst. 64 rays cost a new generator room 36-39
+shipped network, fine-tuned 8 epochs more, is 1.48x at worst; the 48-ray one, fine-tuned the same 8
+epochs more, stays above in two (val-00007 and val-00016, 1.51x). 64 rays cost a new generator room 36-39
 ms more (val-00002 and val-00004: 99-115 -> 138-151 ms), a moved object 6-9 ms (the rays through its
 box), an albedo edit the gathers' 1-3 ms; docs/PERFORMANCE.md has the shares of the solver's time."""
 SEEN_BOUNCES = 4
