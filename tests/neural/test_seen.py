@@ -98,7 +98,8 @@ def test_the_seen_bounces_converge_to_the_solvers_probes(monkeypatch, read_back,
 def test_the_rays_gather_each_probes_sum_of_basis_times_radiance():
     """`SeenRays.gathered` is, for every probe, the sum over its rays of the SH weights of the ray's
     direction times the radiance of the voxel it lands on (nothing where it lands on none), on a cubic
-    lattice (shared sets) and on loose points (a set a probe)."""
+    lattice (shared sets) and on loose points (a set a probe), for RGB and for light of other widths
+    (gathered three channels at a time)."""
     from viewer import scene as scenes
     from viewer.neural import encoding
     from viewer.neural.seen import SeenRays
@@ -109,15 +110,19 @@ def test_the_rays_gather_each_probes_sum_of_basis_times_radiance():
     voxels = voxelize(scene, 12)
     landing = encoding.occluders(scene, voxels)
     lo, hi = scene.bounds
-    radiance = np.random.default_rng(4).random((voxels.count, 3)).astype(np.float32)
-    padded = np.vstack([radiance, np.zeros((1, 3), np.float32)])
-    for points in (ProbeGrid.positions_for(lo, hi, 6).reshape(-1, 3),
-                   lo + (hi - lo) * np.random.default_rng(5).random((7, 3))):
+    for channels, points in ((3, ProbeGrid.positions_for(lo, hi, 6).reshape(-1, 3)),
+                             (3, lo + (hi - lo) * np.random.default_rng(5).random((7, 3))),
+                             (1, ProbeGrid.positions_for(lo, hi, 6).reshape(-1, 3)),
+                             (5, ProbeGrid.positions_for(lo, hi, 6).reshape(-1, 3))):
+        radiance = np.random.default_rng(4).random((voxels.count, channels)).astype(np.float32)
+        padded = np.vstack([radiance, np.zeros((1, channels), np.float32)])
         rays = SeenRays(landing, voxels.count, points, 16)
         _, basis, sets = lattice_rays(len(points), 16, SEED)
         landed = padded[rays.voxel.reshape(len(points), 16)]                   # (P, R, C)
         expected = np.einsum("pbr,prc->pbc", basis[sets].astype(np.float64), landed)
-        np.testing.assert_allclose(rays.gathered(radiance), expected, rtol=1e-5, atol=1e-6)
+        found = rays.gathered(radiance)
+        assert found.shape == (len(points), 9, channels)
+        np.testing.assert_allclose(found, expected, rtol=1e-5, atol=1e-6)
 
 
 @pytest.mark.parametrize("side", [24, 13])

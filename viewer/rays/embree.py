@@ -143,7 +143,7 @@ class Hierarchy:
     def __init__(self, triangles: np.ndarray, quick: bool | None = False):
         """`triangles` (F, 3, 3): each face's corners; face i is primitive i. `quick`: built with Embree's
         low build quality (a Morton build: a 272k-triangle scan in 20 ms instead of 48, a 68k one in 5
-        instead of 10), whose rays run slower (the same hits): 5-14% on a scan, 1.5-1.6x in rooms of a
+        instead of 10), whose rays run slower (the same hits): 5-14% on a scan, 1.3-1.6x in rooms of a
         hundred to a thousand large triangles; None: quick above QUICK_FACES triangles."""
         library = _load()
         if library is None:
