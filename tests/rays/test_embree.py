@@ -60,7 +60,7 @@ def test_closest_hits_are_embreex_own_bit_for_bit():
 @needs_embree
 def test_a_hierarchy_left_to_choose_is_built_quickly_only_when_large(monkeypatch):
     """`quick=None`: Embree's low build quality above QUICK_FACES triangles (its build is the cost there),
-    the default below (its rays are); either way the same hits."""
+    the default below (its rays are); either way the same hits where no two faces tie."""
     triangles = cornell_with_sphere()
     origins, directions = rays(triangles, 20_000)
     small = embree.Hierarchy(triangles, quick=None)

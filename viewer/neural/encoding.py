@@ -194,7 +194,8 @@ class Occluders(VoxelRays):
         a 24^3 lattice): at its default build quality up to QUICK_FACES triangles a hierarchy, quickly
         above (`embree.Hierarchy`). Those rays in generator rooms of 118 and 904 triangles: 47 -> 29 and
         70 -> 47 ms at the default quality, where the build stays under half a millisecond; a 68k-triangle
-        scan's 58 -> 51 ms would cost 10 ms more to build."""
+        scan's 58 -> 51 ms would cost 10 ms more to build. (Where coplanar faces tie, a box's base on the
+        floor, the two builds may give a ray different faces: docs/PERFORMANCE.md.)"""
         k = SHADOW_CELLS
         backend = backend or ("embree" if embree_available() else "dda")
         grid = (scene, voxels.lo, voxels.voxel_size / k, voxels.resolution * k)

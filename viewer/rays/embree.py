@@ -143,8 +143,10 @@ class Hierarchy:
     def __init__(self, triangles: np.ndarray, quick: bool | None = False):
         """`triangles` (F, 3, 3): each face's corners; face i is primitive i. `quick`: built with Embree's
         low build quality (a Morton build: a 272k-triangle scan in 20 ms instead of 48, a 68k one in 5
-        instead of 10), whose rays run slower (the same hits): 5-14% on a scan, 1.3-1.6x in rooms of a
-        hundred to a thousand large triangles; None: quick above QUICK_FACES triangles."""
+        instead of 10), whose rays run slower: 5-14% on a scan, 1.3-1.6x in rooms of a hundred to a
+        thousand large triangles; None: quick above QUICK_FACES triangles. Either build meets the same
+        faces at the same distances, except where coplanar faces tie: which one a ray gets follows the
+        hierarchy."""
         library = _load()
         if library is None:
             raise OSError(f"Embree cannot be called directly: {_failed}")
