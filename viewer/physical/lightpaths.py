@@ -22,6 +22,7 @@ from scipy import sparse
 
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.physical.geometry import SURFACE_OFFSET, Geometry, lamp_faces
+from viewer.probes.sh import add_basis
 from viewer.scene import Scene
 from viewer.rays.voxels import FACINGS, subdivide
 
@@ -207,19 +208,6 @@ def _surface_irradiance(points, normals, centre, patch_normal, patch_area, first
     return out
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _sh9(x, y, z, out, scale):
-    out[0] += scale * 0.282095
-    out[1] += scale * 0.488603 * y
-    out[2] += scale * 0.488603 * z
-    out[3] += scale * 0.488603 * x
-    out[4] += scale * 1.092548 * x * y
-    out[5] += scale * 1.092548 * y * z
-    out[6] += scale * 0.315392 * (3 * z * z - 1)
-    out[7] += scale * 1.092548 * x * z
-    out[8] += scale * 0.546274 * (x * x - y * y)
-
-
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _probe_sh(points, centre, patch_normal, patch_area, first, spos, snormal, sarea, target, far):
     """(P, 9, U) float32 SH of each patch's light at each probe per unit radiance, before visibility:
@@ -235,11 +223,11 @@ def _probe_sh(points, centre, patch_normal, patch_area, first, spos, snormal, sa
                 for s in range(first[j], first[j + 1]):
                     omega, dx, dy, dz = _solid_angle(p, spos[s], snormal[s], sarea[s])
                     if omega > 0:
-                        _sh9(dx, dy, dz, acc, omega)
+                        add_basis(dx, dy, dz, acc, omega)
             else:
                 omega, dx, dy, dz = _solid_angle(p, centre[j], patch_normal[j], patch_area[j])
                 if omega > 0:
-                    _sh9(dx, dy, dz, acc, omega)
+                    add_basis(dx, dy, dz, acc, omega)
             if acc[0] > 0:
                 for b in range(9):
                     out[i, b, j] = acc[b]

@@ -6,6 +6,7 @@ for a unit direction (x, y, z) in world axes pointing from the probe towards whe
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 SH_COUNT = 9
@@ -29,6 +30,21 @@ def basis(directions: np.ndarray) -> np.ndarray:
         1.092548 * x * z,
         0.546274 * (x * x - y * y),
     ], axis=-1)
+
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def add_basis(x, y, z, out, scale):
+    """out (9,) += scale x `basis` of the unit direction (x, y, z), for compiled loops."""
+    out[0] += scale * 0.282095
+    out[1] += scale * 0.488603 * y
+    out[2] += scale * 0.488603 * z
+    out[3] += scale * 0.488603 * x
+    out[4] += scale * 1.092548 * x * y
+    out[5] += scale * 1.092548 * y * z
+    out[6] += scale * 0.315392 * (3 * z * z - 1)
+    out[7] += scale * 1.092548 * x * z
+    out[8] += scale * 0.546274 * (x * x - y * y)
 
 
 # --- Quadrature on the sphere ---------------------------------------------------------------------------

@@ -32,6 +32,7 @@ from viewer.evaluation.error import relative_rmse
 from viewer.neural.seen import SeenRays, lattice_rays
 from viewer.physical.gi import GISettings, PhysicalGI
 from viewer.probes.grid import ProbeGrid
+from viewer.probes.sh import add_basis
 from viewer.rays.voxels import VoxelGrid
 from viewer.training.surface_light import LATTICE, scored_scene
 
@@ -85,6 +86,7 @@ def _reused(points, directions, distances, landed, normals, radiance, m, links, 
     for p in numba.prange(probes):
         i, j, k = p // (m * m), (p // m) % m, p % m
         read = np.empty(27, np.int64)
+        basis = np.empty(9)   # a hit's SH weights
         count = 0
         for di in range(-1, 2):
             for dj in range(-1, 2):
@@ -127,14 +129,11 @@ def _reused(points, directions, distances, landed, normals, radiance, m, links, 
                 if density <= 0.0:
                     continue
                 weight = cosine / far2 / density
-                x, y, z = sx / far, sy / far, sz / far
-                # viewer.probes.sh.basis's order and constants (a probe reading its own rays alone gathers
-                # exactly what SeenRays.gathered does: tests/training/test_seen_reuse.py)
-                basis = (0.282095, 0.488603 * y, 0.488603 * z, 0.488603 * x, 1.092548 * x * y, 1.092548 * y * z,
-                         0.315392 * (3.0 * z * z - 1.0), 1.092548 * x * z, 0.546274 * (x * x - y * y))
+                basis[:] = 0.0
+                add_basis(sx / far, sy / far, sz / far, basis, weight)
                 for b in range(9):
                     for ch in range(channels):
-                        out[p, b, ch] += weight * basis[b] * radiance[v, ch]
+                        out[p, b, ch] += basis[b] * radiance[v, ch]
     return out
 
 
