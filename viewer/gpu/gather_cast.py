@@ -10,7 +10,8 @@ import numba
 import numpy as np
 
 from viewer.rays import dda, embree
-from viewer.rays.cast import TriangleCaster, embree_available, first_face
+from viewer.rays.cast import TriangleCaster, embree_available
+from viewer.rays.sides import first_face
 from viewer.rays.voxels import grid_frame
 from viewer.scene import Scene
 
@@ -79,37 +80,37 @@ def pixels_of(face, u, v, front, face_tile, tile_origin, tile_n, width):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def land(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, intersect, scene, record, faces,
-         e1, e2, face_tile, tile_origin, tile_n, width):
+         e1, e2, twin, v0, face_tile, tile_origin, tile_n, width):
     """The pixel that ray k of sample s lands on, traced through Embree as it is made (viewer.rays.embree)."""
     dx, dy, dz = direction(s, k, normals, tangents, bitangents, rows, columns, shift)
-    f, _, u, v, front = first_face(intersect, scene, record, faces, e1, e2, points[s, 0] + lift * normals[s, 0],
-                                   points[s, 1] + lift * normals[s, 1], points[s, 2] + lift * normals[s, 2], dx, dy, dz,
-                                   np.inf)
+    f, _, u, v, front = first_face(intersect, scene, record, faces, e1, e2, twin, v0,
+                                   points[s, 0] + lift * normals[s, 0], points[s, 1] + lift * normals[s, 1],
+                                   points[s, 2] + lift * normals[s, 2], dx, dy, dz, np.inf)
     return pixel_of(f, u, v, front, face_tile, tile_origin, tile_n, width)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def land_grid(points, normals, tangents, bitangents, rows, columns, shift, lift, samples, rays, intersect, scene, faces,
-              e1, e2, face_tile, tile_origin, tile_n, width, hits):
+              e1, e2, twin, v0, face_tile, tile_origin, tile_n, width, hits):
     """hits[s, k] for every ray k of `rays` of every sample s of `samples`, on all cores."""
     for i in numba.prange(samples.shape[0]):
         record = embree.record()
         s = samples[i]
         for k in rays:
             hits[s, k] = land(s, k, points, normals, tangents, bitangents, rows, columns, shift, lift, intersect, scene,
-                              record, faces, e1, e2, face_tile, tile_origin, tile_n, width)
+                              record, faces, e1, e2, twin, v0, face_tile, tile_origin, tile_n, width)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def land_listed(points, normals, tangents, bitangents, rows, columns, shift, lift, todo, intersect, scene, faces,
-                e1, e2, face_tile, tile_origin, tile_n, width, out):
+                e1, e2, twin, v0, face_tile, tile_origin, tile_n, width, out):
     """out[i]: the pixel ray todo[i] = (sample, ray) lands on, on all cores."""
     count = todo.shape[0]
     for block in numba.prange((count + embree.BLOCK - 1) // embree.BLOCK):
         record = embree.record()
         for i in range(block * embree.BLOCK, min(count, (block + 1) * embree.BLOCK)):
             out[i] = land(todo[i, 0], todo[i, 1], points, normals, tangents, bitangents, rows, columns, shift, lift,
-                          intersect, scene, record, faces, e1, e2, face_tile, tile_origin, tile_n, width)
+                          intersect, scene, record, faces, e1, e2, twin, v0, face_tile, tile_origin, tile_n, width)
 
 
 def direct_args(caster, face_tile, tile_origin, tile_n, width: int) -> tuple | None:
@@ -117,7 +118,7 @@ def direct_args(caster, face_tile, tile_origin, tile_n, width: int) -> tuple | N
     compiled loops (None for another: the DDA, embreex's binding)."""
     if caster.direct is None:
         return None
-    return (*caster.direct.handle, caster.faces, caster.e1, caster.e2,
+    return (*caster.direct.handle, caster.faces, caster.e1, caster.e2, caster.twin, caster.v0,
             np.ascontiguousarray(face_tile, np.int64), np.ascontiguousarray(tile_origin, np.int64),
             np.ascontiguousarray(tile_n, np.int64), int(width))
 

@@ -12,8 +12,8 @@ cores (docs/PERFORMANCE.md, `python -m viewer.bench.rays`): 14.3 M rays a second
 fallback where embreex is not installed, and the caster of the stages that need a cell's voxel rather
 than a face.
 
-A hit's side comes from the face's own normal (e1 x e2, counter-clockwise front) against the ray's
-direction, as the DDA's BACKFACE does: light reflected by the back of a face is the back side's.
+A hit's side comes from the face's own normal against the ray's direction, and a two-sided sheet's
+reversed faces give the near side (viewer/rays/sides.py).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import numba
 import numpy as np
 
 from viewer.rays import dda, embree, moved_faces
+from viewer.rays.sides import NO_FACE, NO_TWIN, reversed_twins, sides
 
 try:   # optional at run time: the DDA answers the same questions without it, slower on detailed meshes
     from embreex import rtcore_scene
@@ -40,8 +41,6 @@ its speed, which a box room's hierarchy, built in a fraction of a millisecond, d
 moved box's probes took 66 ms instead of 60-62 with parts). Moved faces at least this many are built
 apart whatever their share (a scan in a room): the next move of the same faces by a translation (a
 drag) keeps their hierarchy, which a million triangles took 100-200 ms to build."""
-NO_FACE = -1
-"""Hits.face of a ray that meets nothing within its length."""
 EMBREE_CHUNK = 1 << 14
 """Rays per call into embreex's binding (where viewer.rays.embree cannot load), which holds Python's lock
 while it traces: about 5 ms at a time (Python's own switch interval), so that a frame on the render
@@ -132,6 +131,9 @@ class TriangleCaster:
     _direct: "embree.Scene | None" = None
     """Embree called from compiled loops (viewer.rays.embree); None where only embreex's binding works."""
     _quick: bool | None = False
+    twin: np.ndarray = NO_TWIN
+    """(F,) each scene face's reversed twin, -1 for none (`sides.reversed_twins`), or NO_TWIN where no face
+    has one (and for the DDA, whose march settles a tie by the order its cells list the faces)."""
     _stayed: _Stayed | None = None
     """The faces that stayed, where this caster was made from a previous one with some faces moved: the
     next move of the same faces keeps them."""
@@ -169,6 +171,11 @@ class TriangleCaster:
         else:
             mesh = np.asarray(scene.triangles)[faces]
         self._embrace(mesh, faces, *scene.edges, backend == "embree", parts)
+        # a move keeps a scene without two-sided sheets without (a face dragged exactly onto another's
+        # corners, wound the other way, is not looked for): 24 ms of a million-triangle scan's move
+        kept = (previous is not None and previous.backend == self.backend and previous.twin is NO_TWIN
+                and len(previous.v0) == len(scene.faces))
+        self.twin = NO_TWIN if kept else reversed_twins(scene.triangles)
 
     def _parted(self, scene, faces: np.ndarray, previous: "TriangleCaster | None"):
         """(faces that stayed, faces that moved, `_Stayed` of the former, of the latter or None) where
@@ -301,7 +308,7 @@ class TriangleCaster:
         if self._direct is not None:
             primitive, t, u, v = self._direct.closest(o, d, min(float(t_max), 1e37))
             face = np.where(primitive >= 0, self._faces[np.maximum(primitive, 0)], NO_FACE)
-            return Hits(face, t, u, v, _front(d, face, self.e1, self.e2))
+            return Hits(*self._sides(o, d, face, t, u, v))
         face = np.empty(len(o), np.int64)
         t, u, v = np.empty(len(o)), np.empty(len(o)), np.empty(len(o))
         o32, d32 = o.astype(np.float32), d.astype(np.float32)
@@ -314,46 +321,19 @@ class TriangleCaster:
             face[part] = np.where(hit, self._faces[np.where(hit, prim, 0)], NO_FACE)
             t[part] = np.where(hit, found["tfar"], np.inf)
             u[part], v[part] = found["u"], found["v"]
-        return Hits(face, t, u, v, _front(d, face, self.e1, self.e2))
+        return Hits(*self._sides(o, d, face, t, u, v))
+
+    def _sides(self, o, d, face, t, u, v) -> tuple:
+        """(face, t, u, v, front) of Embree's hits: the face met and its side (`sides.facing_face`)."""
+        face, u, v, front = sides(o, d, face, t, np.asarray(u, np.float64), np.asarray(v, np.float64), self.v0,
+                                  self.e1, self.e2, self.twin)
+        return face, t, u, v, front
 
 
 def closest_hits(scene, origins: np.ndarray, directions: np.ndarray, t_max: float = np.inf,
                  backend: str | None = None) -> Hits:
     """The first face each ray meets (TriangleCaster once: build a caster to cast more than one set)."""
     return TriangleCaster(scene, backend=backend).closest_hits(origins, directions, t_max)
-
-
-@numba.njit(cache=True, nogil=True)
-def _front(d, face, e1, e2):
-    """Whether each ray met its face from the front (`front_of`). One thread: a few nanoseconds a ray, and
-    a parallel loop would add seconds to a first run's compile."""
-    out = np.zeros(face.shape[0], np.bool_)
-    for r in range(face.shape[0]):
-        if face[r] >= 0:
-            out[r] = front_of(face[r], d[r, 0], d[r, 1], d[r, 2], e1, e2)
-    return out
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def front_of(f, dx, dy, dz, e1, e2):
-    """Whether a ray along d meets face f from the front: d . (e1 x e2) < 0, the DDA's test."""
-    nx = e1[f, 1] * e2[f, 2] - e1[f, 2] * e2[f, 1]
-    ny = e1[f, 2] * e2[f, 0] - e1[f, 0] * e2[f, 2]
-    nz = e1[f, 0] * e2[f, 1] - e1[f, 1] * e2[f, 0]
-    return dx * nx + dy * ny + dz * nz < 0.0
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def first_face(intersect, scene, record, faces, e1, e2, ox, oy, oz, dx, dy, dz, far):
-    """(face, t, u, v, front) of the first face a ray meets, as `TriangleCaster.closest_hits` names it
-    (face NO_FACE for none), traced through Embree from a compiled loop that makes its rays as it goes:
-    `intersect`, `scene` of `TriangleCaster.direct.handle`, `record` an `embree.record()`, `faces`, `e1`,
-    `e2` the caster's."""
-    primitive, t, u, v = embree.closest(intersect, scene, record, ox, oy, oz, dx, dy, dz, far)
-    if primitive < 0:
-        return NO_FACE, t, u, v, False
-    f = faces[primitive]
-    return f, t, u, v, front_of(f, dx, dy, dz, e1, e2)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)

@@ -295,7 +295,7 @@ def _ray(ray, bits, at, ox, oy, oz, dx, dy, dz, far):
 @numba.njit(cache=True, nogil=True, inline="always")
 def closest(intersect, scene, record, ox, oy, oz, dx, dy, dz, far):
     """(primitive, t, u, v) of the first face the ray meets within `far` (primitive -1 for none), through
-    a `record`: for compiled loops that make their rays as they go (viewer.rays.cast.first_face).
+    a `record`: for compiled loops that make their rays as they go (viewer.rays.sides.first_face).
     `intersect`, `scene`: a `Scene`'s `handle`."""
     ray, bits, at, address = record
     _ray(ray, bits, at, ox, oy, oz, dx, dy, dz, far)

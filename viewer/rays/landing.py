@@ -9,7 +9,7 @@ import numpy as np
 
 from viewer.rays import dda, embree
 from viewer.rays.packets import LANES, closest8, packet
-from viewer.rays.cast import NO_FACE, first_face, front_of
+from viewer.rays.sides import NO_FACE, facing_face, first_face
 from viewer.rays.listing import NEIGHBOUR_ORDER
 
 FAR = 1e37
@@ -31,7 +31,7 @@ def landed(o, d, face, t, front, lo, h, n, first, triangle, voxel):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def bundle(o, d, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, voxel, out):
+def bundle(o, d, intersect, scene, faces, e1, e2, twin, v0, lo, h, n, first, triangle, voxel, out):
     """out[p, k]: the voxel that ray k of origin p meets first (d (P, D, 3), or (1, D, 3) shared), traced
     through Embree as it is made (viewer.rays.embree) and looked up at once, on every core."""
     step = 0 if d.shape[0] == 1 else 1
@@ -39,14 +39,14 @@ def bundle(o, d, intersect, scene, faces, e1, e2, lo, h, n, first, triangle, vox
         record, q = embree.record(), p * step
         for k in range(d.shape[1]):
             dx, dy, dz = d[q, k, 0], d[q, k, 1], d[q, k, 2]
-            f, t, _, _, front = first_face(intersect, scene, record, faces, e1, e2, o[p, 0], o[p, 1], o[p, 2], dx, dy,
-                                           dz, FAR)
+            f, t, _, _, front = first_face(intersect, scene, record, faces, e1, e2, twin, v0, o[p, 0], o[p, 1],
+                                           o[p, 2], dx, dy, dz, FAR)
             out[p, k] = voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def bundle_kept(o, d, which, kept, box_lo, box_hi, old_hits, remap, intersect, scene, faces, e1, e2, lo, h, n,
-                first, triangle, voxel, out, face, t):
+def bundle_kept(o, d, which, kept, box_lo, box_hi, old_hits, remap, intersect, scene, faces, e1, e2, twin, v0, lo, h,
+                n, first, triangle, voxel, out, face, t):
     """`_bundle` for directions d[which[p]] from origin p (d (S, D, 3)), keeping each ray's face and t:
     with `kept`, a ray that does not pass through the box [box_lo, box_hi] before its hit (`face`, `t` as
     they are) keeps them, and its voxel is the one it landed on before (`old_hits` (P, D), empty: looked
@@ -63,8 +63,8 @@ def bundle_kept(o, d, which, kept, box_lo, box_hi, old_hits, remap, intersect, s
             if not kept or meets_box(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz,
                                      FAR if face[p, k] == NO_FACE else t[p, k], box_lo, box_hi):
                 traced[p] += 1
-                f, th, _, _, front = first_face(intersect, scene, record, faces, e1, e2, o[p, 0], o[p, 1], o[p, 2],
-                                                dx, dy, dz, FAR)
+                f, th, _, _, front = first_face(intersect, scene, record, faces, e1, e2, twin, v0, o[p, 0], o[p, 1],
+                                                o[p, 2], dx, dy, dz, FAR)
                 face[p, k], t[p, k] = f, th
             else:
                 if known:   # a miss or a back face stays one: the same face, met from the same side
@@ -73,8 +73,9 @@ def bundle_kept(o, d, which, kept, box_lo, box_hi, old_hits, remap, intersect, s
                     if was < 0 or now >= 0:
                         out[p, k] = now
                         continue
-                f, th = face[p, k], t[p, k]
-                front = f != NO_FACE and front_of(f, dx, dy, dz, e1, e2)
+                f, th, front = face[p, k], t[p, k], False
+                if f != NO_FACE:
+                    f, front = facing_face(f, dx, dy, dz, e1, e2, twin)
             out[p, k] = voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, th, front, lo, h, n, first, triangle,
                                  voxel)
     return traced
@@ -101,8 +102,8 @@ PACKETS_A_TASK = 64
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def bundle_packed(o, d, per_origin, packets, intersect8, scene, faces, e1, e2, lo, h, n, first, triangle, voxel,
-                  out, face, t):
+def bundle_packed(o, d, per_origin, packets, intersect8, scene, faces, e1, e2, twin, lo, h, n, first, triangle,
+                  voxel, out, face, t):
     """`bundle_kept` with every ray traced, LANES at a time: `packets` (N, LANES) flat ray indices
     (origin x per_origin + ray, -1 for none), each once; d (R, 3) and out, face, t (R,) flat."""
     for block in numba.prange((packets.shape[0] + PACKETS_A_TASK - 1) // PACKETS_A_TASK):
@@ -115,9 +116,10 @@ def bundle_packed(o, d, per_origin, packets, intersect8, scene, faces, e1, e2, l
                 if r < 0:
                     continue
                 q, dx, dy, dz = r // per_origin, d[r, 0], d[r, 1], d[r, 2]
-                f = NO_FACE if face[r] < 0 else faces[face[r]]
+                f, front = NO_FACE, False
+                if face[r] >= 0:
+                    f, front = facing_face(faces[face[r]], dx, dy, dz, e1, e2, twin)
                 face[r] = f
-                front = f != NO_FACE and front_of(f, dx, dy, dz, e1, e2)
                 out[r] = voxel_of(o[q, 0], o[q, 1], o[q, 2], dx, dy, dz, f, t[r], front, lo, h, n, first, triangle,
                                   voxel)
 

@@ -96,7 +96,7 @@ class VoxelRays:
             out = np.empty((len(o), count), np.int32)
             c, caster = self.cells, self.caster
             bundle(o, np.ascontiguousarray(d[None] if d.ndim == 2 else d), *caster.direct.handle, caster.faces,
-                   caster.e1, caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out)
+                   caster.e1, caster.e2, caster.twin, caster.v0, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out)
             return out
         d = np.broadcast_to(d[None] if d.ndim == 2 else d, (len(o), count, 3))
         out = np.empty((len(o), count), np.int32)
@@ -137,7 +137,7 @@ class VoxelRays:
             if len(d) != len(o):
                 raise ValueError("rays in packets take a row of directions for each origin")
             bundle_packed(o, d.reshape(-1, 3), d.shape[1], packets, *caster.direct.packets, caster.faces, caster.e1,
-                          caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out.reshape(-1),
+                          caster.e2, caster.twin, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out.reshape(-1),
                           face.reshape(-1), t.reshape(-1))
             return out, face, t, out.size
         if before is None:   # every ray traced: a box that holds everything
@@ -149,7 +149,8 @@ class VoxelRays:
                            else (np.zeros((0, 0), np.int32), np.zeros(0, np.int32)))
         traced = bundle_kept(o, d, which, kept, lo, hi, np.ascontiguousarray(old_hits, np.int32),
                              np.ascontiguousarray(remap, np.int32), *caster.direct.handle, caster.faces, caster.e1,
-                             caster.e2, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out, face, t)
+                             caster.e2, caster.twin, caster.v0, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out, face,
+                             t)
         return out, face, t, int(traced.sum())
 
     def escapes(self, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
