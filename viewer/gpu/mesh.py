@@ -11,6 +11,7 @@ import numpy as np
 from viewer.rays.moved_faces import changed_rows
 from viewer.scene import Scene
 from viewer.scene.geometry import faces_touching
+from viewer.rays.sides import NO_TWIN, reversed_twins
 from viewer.threads import cores_for
 
 SCENE_ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission", "in_uv")
@@ -220,6 +221,11 @@ class SceneMesh(TriangleBuffer):
 
     def __init__(self, ctx: moderngl.Context, scene: Scene):
         super().__init__(ctx)
+        self.sheets = reversed_twins(scene.triangles) is not NO_TWIN
+        """Whether the scene has two-sided sheets (faces on the same corners wound opposite ways,
+        viewer.rays.sides): `render` then draws the faces that face the camera before those seen from
+        behind, pushed back a hair, so that each side of a sheet shows its own face (drawn together, the
+        two faces' equal depths took turns along the sheet). A drag keeps it."""
         vertices = self._vertices(scene)
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(np.ascontiguousarray(vertices))   # read in place, not copied
@@ -230,6 +236,19 @@ class SceneMesh(TriangleBuffer):
     @staticmethod
     def _vertices(scene: Scene) -> np.ndarray:
         return scene_vertices(scene)
+
+    def render(self, program: moderngl.Program, first: int = 0, count: int | None = None) -> None:
+        if not self.sheets:
+            super().render(program, first, count)
+            return
+        ctx = self.ctx
+        ctx.enable(moderngl.CULL_FACE)
+        ctx.cull_face = "back"
+        super().render(program, first, count)
+        ctx.cull_face, ctx.polygon_offset = "front", (1.0, 1.0)
+        super().render(program, first, count)
+        ctx.cull_face, ctx.polygon_offset = "back", (0.0, 0.0)
+        ctx.disable(moderngl.CULL_FACE)
 
     @staticmethod
     def remade(old: "SceneMesh | None", ctx: moderngl.Context, scene: Scene, previous: Scene | None) -> "SceneMesh":
