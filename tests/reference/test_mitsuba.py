@@ -233,3 +233,29 @@ def test_scalar_variant_fallback_agrees():
                          capture_output=True, text=True).stdout.split()
     assert out[0] == "scalar_rgb"
     assert float(out[1]) == pytest.approx(1.0, rel=0.04)
+
+
+def test_each_side_of_a_two_sided_sheet_shows_its_own_face():
+    """Two faces on the same corners wound opposite ways, white and green: Mitsuba met one of them from
+    both sides (green from both); pulled a hair apart (`sheets_apart`), each side shows its own, and a
+    scene without such faces is converted as it is."""
+    from viewer.reference.conversion import SHEET_GAP, sheets_apart
+
+    corners = np.array([[0.4, 1.0, -1.0], [0.4, 1.0, 1.0], [0.4, -0.6, 1.0], [0.4, -0.6, -1.0]])   # light passes under
+    faces = np.array([[0, 2, 1], [0, 3, 2], [0, 1, 2], [0, 2, 3]])   # white towards -x, green towards +x
+    albedo = np.array([[0.8] * 3] * 2 + [[0.2, 0.7, 0.2]] * 2)
+    sheet = Scene("sheet", corners, faces, albedo, np.zeros((4, 3)), np.zeros(4, np.int64), ("sheet",))
+    parts = [(q, (0.5,) * 3, (0.0,) * 3) for _, q in inward_box_faces(skip=set())]
+    parts.append((quad([-0.25, 0.98, -0.25], [0.5, 0, 0], [0, 0, 0.5]), (0.5,) * 3, (10.0,) * 3))
+    room = build("room", parts)
+    scene = Scene.concatenate("sheet-room", [room, sheet])
+    apart = sheets_apart(scene)
+    moved = np.abs(apart.triangles - scene.triangles).max(axis=(1, 2))
+    diagonal = float(np.linalg.norm(scene.bounds[1] - scene.bounds[0]))
+    np.testing.assert_allclose(moved[-4:], SHEET_GAP * diagonal, rtol=1e-6)
+    assert np.all(moved[:-4] == 0) and sheets_apart(room) is room
+    for origin, white in (((-0.6, 0.0, 0.0), True), ((0.9, 0.0, 0.0), False)):
+        image = reference.render(scene, Camera(origin=origin, target=(0.4, 0.3, 0.0), fov=30.0), 16, 16, 64,
+                                 cache=False)
+        r, g, _ = image[4:12, 4:12].reshape(-1, 3).mean(axis=0)
+        assert (r / g > 0.9) if white else (r / g < 0.4)   # green reflects 0.2 / 0.7 of red to green, or less

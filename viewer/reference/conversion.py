@@ -5,11 +5,39 @@ Apart from the estimators (viewer/reference/mitsuba.py), which load the scene th
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from viewer.rays.sides import NO_TWIN, reversed_twins
 from viewer.reference.runtime import aligned, loaded, variant
 from viewer.scene import Scene
 from viewer.scene.textures import textured_faces
+
+SHEET_GAP = 1e-4
+"""How far the two faces of a two-sided sheet are pulled apart for Mitsuba, each towards its front, as a
+share of the scene's bounding diagonal (0.35 mm in a 2 m room)."""
+
+
+def sheets_apart(scene: Scene) -> Scene:
+    """`scene` with each two-sided sheet's faces (faces on the same corners wound opposite ways:
+    viewer.rays.sides.reversed_twins) moved SHEET_GAP apart, each along its own normal; the scene itself
+    where it has none. Mitsuba meets one of two coincident faces from either side, whichever its
+    hierarchy tests first (a sheet white on one side and green on the other showed green to both), where
+    the viewer's rays meet the face on their side."""
+    twin = reversed_twins(scene.triangles)
+    if twin is NO_TWIN:
+        return scene
+    faces = np.flatnonzero(twin >= 0)
+    corners = np.asarray(scene.triangles[faces], np.float64)
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    lo, hi = scene.bounds
+    corners += (SHEET_GAP * float(np.linalg.norm(hi - lo)) * normal)[:, None, :]
+    vertices = np.concatenate([scene.vertices, corners.reshape(-1, 3)])
+    indices = np.array(scene.faces, copy=True)
+    indices[faces] = len(scene.vertices) + np.arange(3 * len(faces)).reshape(-1, 3)
+    return replace(scene, vertices=vertices, faces=indices)
 
 
 def to_mitsuba(scene: Scene, max_depth: int = -1) -> dict:
@@ -23,6 +51,8 @@ def to_mitsuba(scene: Scene, max_depth: int = -1) -> dict:
       area emitters emit on that side only, as ours do.
     - The BSDF is a two-sided diffuse: our surfaces reflect on both sides (Mitsuba's `diffuse` alone is
       black from behind); emission stays one-sided.
+    - The two faces of a two-sided sheet are pulled a hair apart (`sheets_apart`), so that each side
+      shows its own face.
     - A textured group's faces that emit nothing form a mesh of their own, with per-corner texture
       coordinates and a `bitmap` reflectance: the texture (linear) times the group's albedo over the
       texture's mean, its wrap modes, bilinear (the renderer's finest mip level). Mitsuba reads texture
@@ -32,6 +62,7 @@ def to_mitsuba(scene: Scene, max_depth: int = -1) -> dict:
       reaches into the scene's bounds (`_sun_lit_fraction`), not all that crosses its bounding disc.
     """
     mi, _, _ = loaded()
+    scene = sheets_apart(scene)
     lo, hi = scene.bounds
     radius = 0.5 * float(np.linalg.norm(hi - lo))
     out: dict = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)}}
