@@ -9,7 +9,8 @@ tracer names either one: which depends on the order its hierarchy tests them, so
 on the near side could be named the far side's face met from behind, which brings no light. Each face's
 reversed twin is found once per caster (`reversed_twins`), and a face met from behind that has one is
 named as its twin met from the front (`facing_face`): the sheet's near side, whichever of the two the
-tracer reported.
+tracer reported. Faces that share a plane without sharing corners (a quad and its reversed copy split
+along the other diagonal, a box's base on the floor) still tie, and the tracer's order settles them.
 """
 
 from __future__ import annotations

@@ -2,8 +2,9 @@
 
 `two_rooms()`: the lamp lights the room at x < 0; the room at x > 0 is closed off by a wall 0.02 thick,
 so Mitsuba finds no light there at all. With `door=True` light reaches it through a doorway far from the
-lamp, and the dark room's light has a true value to compare with. Measured per method, with and without
-the product's leak reduction:
+lamp, and the dark room's light has a true value to compare with; `two-rooms-door-sheet` is the same with a
+wall of no thickness, a two-sided sheet (two quads on the same corners, one facing each room). Measured
+per method, with and without the product's leak reduction:
 
 - in free space (what `sample` returns): probe validity on or off (`GISettings.invalid_backface_fraction`
   0.25 or 1: probes that see backfaces are filled from their neighbours, or used as they are);
@@ -34,16 +35,18 @@ POINTS = 800
 SURFACE_SPP = 1024
 
 
-def wall_points(scene_has_door: bool, side: int, count: int = 9) -> tuple[np.ndarray, np.ndarray]:
-    """Points on one face of the dividing wall (side +1: the dark room's), with its normal; the doorway
-    left out."""
+def wall_points(scene_has_door: bool, side: int, count: int = 9, wall: float = scenes.WALL_THICKNESS
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Points on one face of the dividing wall `wall` thick (side +1: the dark room's), with its normal;
+    the doorway left out. A sheet's (`wall` 0) lie a millimetre off it, clear of the hair by which Mitsuba
+    gets its two faces apart (viewer.reference.conversion.sheets_apart)."""
     y, z = np.meshgrid(np.linspace(-0.9, 0.9, count), np.linspace(-0.9, 0.9, count), indexing="ij")
     y, z = y.ravel(), z.ravel()
     if scene_has_door:
         (z0, z1), (y0, y1) = scenes.DOOR
         keep = ~((z > z0 - 0.05) & (z < z1 + 0.05) & (y < y1 + 0.05))
         y, z = y[keep], z[keep]
-    x = np.full_like(y, side * 0.5 * scenes.WALL_THICKNESS)
+    x = np.full_like(y, side * max(0.5 * wall, 1e-3))
     normals = np.tile([side, 0.0, 0.0], (len(y), 1))
     return np.stack([x, y, z], axis=1), normals
 
@@ -63,15 +66,16 @@ def surface_light(grid, points, normals, reduction: bool) -> np.ndarray:
 def run(config: RunConfig) -> StudyResult:
     result = StudyResult("leaking", COLUMNS)
     sizes = [(16, 16)] if config.quick else [(16, 16), (32, 24)]
-    for door in ([False] if config.quick else [False, True]):
-        scene = scenes.two_rooms(door=door)
+    for door, thickness in ([(False, scenes.WALL_THICKNESS)] if config.quick
+                            else [(False, scenes.WALL_THICKNESS), (True, scenes.WALL_THICKNESS), (True, 0.0)]):
+        scene = scenes.two_rooms(door=door, wall=thickness)
         points = free_space_points(scene, POINTS, margin=0.06, seed=5)
         dark = scenes.in_dark_room(points)
         truth = radiance(reference.probe_sh(scene, points, directions=1024))
         lit_truth = truth[~dark].mean()
         dark_truth = truth[dark].mean()
-        wall, wall_normal = wall_points(door, +1)
-        lit_wall, lit_normal = wall_points(door, -1)
+        wall, wall_normal = wall_points(door, +1, wall=thickness)
+        lit_wall, lit_normal = wall_points(door, -1, wall=thickness)
         lit_wall_truth = reference.irradiance(scene, lit_wall, lit_normal, spp=SURFACE_SPP).mean()
         wall_truth = reference.irradiance(scene, wall, wall_normal, spp=SURFACE_SPP).mean(axis=1)
         result.rows.append(dict(scene=scene.name, method="Mitsuba (truth)", size="-", reduction="-", lit=1.0,

@@ -6,6 +6,8 @@ one-sided quad lamps facing down (counter-clockwise seen from below, docs/ARCHIT
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from viewer.scene import Scene
@@ -88,7 +90,9 @@ DOOR = ((0.3, 0.8), (-1.0, 0.2))
 def two_rooms(door: bool = False, wall: float = WALL_THICKNESS) -> Scene:
     """Two 2 x 2 x 2 rooms side by side (x in -2..0 lit by a lamp, x in 0..2 dark), divided by a wall
     `wall` thick at x = 0: a quad facing each room. With `door`, light reaches the dark room through a
-    doorway (its jambs and lintel included, so the inside of the wall stays closed)."""
+    doorway (its jambs and lintel included, so the inside of the wall stays closed). A wall 0 thick is a
+    two-sided sheet: the dark room's side is the lit side's triangles wound the other way (`-sheet` ends
+    the name)."""
     w = 0.5 * wall
     parts = [room(lo=(-2, -1, -1), hi=(2, 1, 1)), lamp(centre=(-1.0, LAMP_HEIGHT, 0.0))]
     if not door:
@@ -96,13 +100,19 @@ def two_rooms(door: bool = False, wall: float = WALL_THICKNESS) -> Scene:
     else:
         (z0, z1), (y0, y1) = DOOR
         spans = [((-1.0, -1.0), (1.0, z0)), ((-1.0, z1), (1.0, 1.0)), ((y1, z0), (1.0, z1))]
-        parts += [rectangle(2, z0, (-w, y0), (w, y1), facing=1, name="jamb"),     # (x, y) spans
-                  rectangle(2, z1, (-w, y0), (w, y1), facing=-1, name="jamb"),
-                  rectangle(1, y1, (z0, -w), (z1, w), facing=-1, name="jamb")]     # lintel, (z, x)
+        if w > 0:   # a sheet has no jambs
+            parts += [rectangle(2, z0, (-w, y0), (w, y1), facing=1, name="jamb"),     # (x, y) spans
+                      rectangle(2, z1, (-w, y0), (w, y1), facing=-1, name="jamb"),
+                      rectangle(1, y1, (z0, -w), (z1, w), facing=-1, name="jamb")]     # lintel, (z, x)
     for lo, hi in spans:
-        parts.append(rectangle(0, -w, lo, hi, facing=-1, name="wall"))   # faces the lit room
-        parts.append(rectangle(0, w, lo, hi, facing=1, name="wall"))     # faces the dark room
-    return Scene.concatenate("two-rooms-door" if door else "two-rooms", parts)
+        lit = rectangle(0, -w, lo, hi, facing=-1, name="wall")           # faces the lit room
+        parts.append(lit)
+        if w > 0:
+            parts.append(rectangle(0, w, lo, hi, facing=1, name="wall"))  # faces the dark room
+        else:   # a sheet: the same triangles wound the other way (viewer.rays.sides.reversed_twins)
+            parts.append(replace(lit, faces=np.ascontiguousarray(lit.faces[:, ::-1])))
+    name = ("two-rooms-door" if door else "two-rooms") + ("-sheet" if wall == 0 else "")
+    return Scene.concatenate(name, parts)
 
 
 def in_dark_room(points: np.ndarray) -> np.ndarray:
