@@ -24,7 +24,7 @@ import numba
 import numpy as np
 
 from viewer.rays import dda, embree, moved_faces
-from viewer.rays.sides import NO_FACE, NO_TWIN, reversed_twins, sides
+from viewer.rays.sides import NO_FACE, NO_TWIN, barycentrics, reversed_twins, sides
 
 try:   # optional at run time: the DDA answers the same questions without it, slower on detailed meshes
     from embreex import rtcore_scene
@@ -354,16 +354,8 @@ def _marched_hits(o, d, t_max, by_face, flipped):
             f, th = dda.march(ox, oy, oz, dx, dy, dz, t_max, flipped, none)
         if f < 0:
             continue
-        wx, wy, wz = ox + th * dx - v0[f, 0], oy + th * dy - v0[f, 1], oz + th * dz - v0[f, 2]
-        aa = e1[f, 0] ** 2 + e1[f, 1] ** 2 + e1[f, 2] ** 2
-        ab = e1[f, 0] * e2[f, 0] + e1[f, 1] * e2[f, 1] + e1[f, 2] * e2[f, 2]
-        bb = e2[f, 0] ** 2 + e2[f, 1] ** 2 + e2[f, 2] ** 2
-        wa = wx * e1[f, 0] + wy * e1[f, 1] + wz * e1[f, 2]
-        wb = wx * e2[f, 0] + wy * e2[f, 1] + wz * e2[f, 2]
-        det = aa * bb - ab * ab
         face[r], t[r], front[r] = f, th, ahead
-        if det > 0.0:
-            u[r], v[r] = (bb * wa - ab * wb) / det, (aa * wb - ab * wa) / det
+        u[r], v[r] = barycentrics(ox + th * dx, oy + th * dy, oz + th * dz, f, v0, e1, e2)
     return face, t, u, v, front
 
 

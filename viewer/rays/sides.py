@@ -44,6 +44,9 @@ def reversed_twins(corners: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True)
 def _keys(c, key):
+    """key[f]: face f's corners weighted by irrational numbers, least, middle and greatest, each times an
+    irrational weight of its own; min and max are exact, so any order of the same corners gives the same
+    bits."""
     a, b, d, e, g = np.sqrt(2.0), np.sqrt(3.0), np.sqrt(5.0), np.sqrt(13.0), np.sqrt(17.0)
     for f in range(c.shape[0]):
         w0 = a * c[f, 0, 0] + b * c[f, 0, 1] + d * c[f, 0, 2]
@@ -92,6 +95,7 @@ def _reversed(c, f, g):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _normal(c, f):
+    """Face f's (unnormalized) normal: its counter-clockwise front."""
     ux, uy, uz = c[f, 1, 0] - c[f, 0, 0], c[f, 1, 1] - c[f, 0, 1], c[f, 1, 2] - c[f, 0, 2]
     vx, vy, vz = c[f, 2, 0] - c[f, 0, 0], c[f, 2, 1] - c[f, 0, 1], c[f, 2, 2] - c[f, 0, 2]
     return uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
