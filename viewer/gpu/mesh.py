@@ -39,10 +39,27 @@ class TriangleBuffer:
             self._arrays[key] = self.ctx.vertex_array(program, [(self.buffer, layout, *names)])
         return self._arrays[key]
 
+    sheets = False
+    """Whether the triangles hold two-sided sheets (faces on the same corners wound opposite ways,
+    viewer.rays.sides): `render` then draws the faces that face the camera before those seen from behind,
+    pushed back a hair, so that each side of a sheet shows its own face (drawn together, the two faces'
+    equal depths took turns along the sheet)."""
+
     def render(self, program: moderngl.Program, first: int = 0, count: int | None = None) -> None:
         """Draw the triangles, or `count` vertices from vertex `first` (one group's, see `group_runs`)."""
         count = self.vertex_count - first if count is None else count
-        self.vertex_array(program).render(moderngl.TRIANGLES, vertices=count, first=first)
+        array = self.vertex_array(program)
+        if not self.sheets:
+            array.render(moderngl.TRIANGLES, vertices=count, first=first)
+            return
+        ctx = self.ctx
+        ctx.enable(moderngl.CULL_FACE)
+        ctx.cull_face = "back"
+        array.render(moderngl.TRIANGLES, vertices=count, first=first)
+        ctx.cull_face, ctx.polygon_offset = "front", (1.0, 1.0)
+        array.render(moderngl.TRIANGLES, vertices=count, first=first)
+        ctx.cull_face, ctx.polygon_offset = "back", (0.0, 0.0)
+        ctx.disable(moderngl.CULL_FACE)
 
     def forget_programs(self) -> None:
         """Drop the vertex arrays (after shaders were reloaded: they point at the old programs)."""
@@ -221,11 +238,7 @@ class SceneMesh(TriangleBuffer):
 
     def __init__(self, ctx: moderngl.Context, scene: Scene):
         super().__init__(ctx)
-        self.sheets = reversed_twins(scene.triangles) is not NO_TWIN
-        """Whether the scene has two-sided sheets (faces on the same corners wound opposite ways,
-        viewer.rays.sides): `render` then draws the faces that face the camera before those seen from
-        behind, pushed back a hair, so that each side of a sheet shows its own face (drawn together, the
-        two faces' equal depths took turns along the sheet). A drag keeps it."""
+        self.sheets = reversed_twins(scene.triangles) is not NO_TWIN   # a drag keeps it
         vertices = self._vertices(scene)
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(np.ascontiguousarray(vertices))   # read in place, not copied
@@ -236,19 +249,6 @@ class SceneMesh(TriangleBuffer):
     @staticmethod
     def _vertices(scene: Scene) -> np.ndarray:
         return scene_vertices(scene)
-
-    def render(self, program: moderngl.Program, first: int = 0, count: int | None = None) -> None:
-        if not self.sheets:
-            super().render(program, first, count)
-            return
-        ctx = self.ctx
-        ctx.enable(moderngl.CULL_FACE)
-        ctx.cull_face = "back"
-        super().render(program, first, count)
-        ctx.cull_face, ctx.polygon_offset = "front", (1.0, 1.0)
-        super().render(program, first, count)
-        ctx.cull_face, ctx.polygon_offset = "back", (0.0, 0.0)
-        ctx.disable(moderngl.CULL_FACE)
 
     @staticmethod
     def remade(old: "SceneMesh | None", ctx: moderngl.Context, scene: Scene, previous: Scene | None) -> "SceneMesh":

@@ -50,7 +50,9 @@ def tent_neighbours(lightmap: BakedDirectLight, samples: np.ndarray, records: np
     and side (coplanar, the same normal: across the edges of a face's triangles too); one of a tile with
     one reads those within SMALL_RADIUS whose normals are near its own. Records inside a solid (most of
     their rays meet the backs of faces: the floor under a box) are nobody's neighbours but their own
-    samples', so that their darkness does not spread onto the visible floor beside.
+    samples', so that their darkness does not spread onto the visible floor beside; nor are the back sides
+    of a two-sided sheet's faces, which the other face's front hides (its light on them was the other
+    material's).
 
     The FILTER_MAX nearest records within the largest reach are found through a grid of cells that wide,
     its records sorted by cell, in one parallel pass that also weighs and normalizes them (the Cornell
@@ -71,6 +73,7 @@ def tent_neighbours(lightmap: BakedDirectLight, samples: np.ndarray, records: np
     count = len(samples)
     near, tent = np.empty((2 * count, FILTER_MAX), np.int32), np.empty((2 * count, FILTER_MAX), np.float32)
     inside = rays.inside(lightmap.covered.shape[1])
+    inside[len(records):] |= lightmap.texel_back_hidden[samples[records]]   # a sheet's hidden back sides
     if count == 0:
         return Tent(near, tent, points, normals, inside, (), 0)
     bound = float(reach.max())
