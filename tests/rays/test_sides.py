@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from viewer.rays import cast, dda
-from viewer.rays.sides import NO_TWIN, reversed_twins
+from viewer.scene.geometry import NO_TWIN, reversed_twins
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import voxelize_with_faces
 from viewer.scene import Scene

@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from viewer.gpu.mesh import TriangleBuffer, scene_vertices, write_colours
-from viewer.rays.sides import NO_TWIN, reversed_twins
+from viewer.scene.geometry import NO_TWIN
 from viewer.scene import Scene, SceneError
 
 ATLAS_WIDTH = 2048
@@ -208,7 +208,7 @@ class BakedDirectLight(TriangleBuffer):
         """(T,) each covered texel's face, as an index into the non-degenerate faces."""
         self.texel_inside = inside[self.covered]
         """(T,) the covered texels whose point lies in their triangle (`lightmap_texels`)."""
-        twin = reversed_twins(scene.triangles)
+        twin = scene.twins
         self.sheets = twin is not NO_TWIN   # the surface pass draws this buffer: each side its own face
         self.texel_back_hidden = (np.zeros(len(self.texel_faces), bool) if twin is NO_TWIN
                                   else (twin >= 0)[scene.face_areas > 0][self.texel_faces])

@@ -10,8 +10,7 @@ import numpy as np
 
 from viewer.rays.moved_faces import changed_rows
 from viewer.scene import Scene
-from viewer.scene.geometry import faces_touching
-from viewer.rays.sides import NO_TWIN, reversed_twins
+from viewer.scene.geometry import NO_TWIN, faces_touching
 from viewer.threads import cores_for
 
 SCENE_ATTRIBUTES = ("in_position", "in_normal", "in_albedo", "in_emission", "in_uv")
@@ -238,7 +237,7 @@ class SceneMesh(TriangleBuffer):
 
     def __init__(self, ctx: moderngl.Context, scene: Scene):
         super().__init__(ctx)
-        self.sheets = reversed_twins(scene.triangles) is not NO_TWIN   # a drag keeps it
+        self.sheets = scene.twins is not NO_TWIN   # a drag keeps it
         vertices = self._vertices(scene)
         self.vertex_count = len(vertices)
         self.buffer = ctx.buffer(np.ascontiguousarray(vertices))   # read in place, not copied

@@ -32,7 +32,6 @@ def basis(directions: np.ndarray) -> np.ndarray:
     ], axis=-1)
 
 
-
 @numba.njit(cache=True, nogil=True, inline="always")
 def add_basis(x, y, z, out, scale):
     """out (9,) += scale x `basis` of the unit direction (x, y, z), for compiled loops."""

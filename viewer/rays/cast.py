@@ -24,7 +24,7 @@ import numba
 import numpy as np
 
 from viewer.rays import dda, embree, moved_faces
-from viewer.rays.sides import NO_FACE, NO_TWIN, barycentrics, reversed_twins, sides
+from viewer.rays.sides import NO_FACE, NO_TWIN, barycentrics, sides
 
 try:   # optional at run time: the DDA answers the same questions without it, slower on detailed meshes
     from embreex import rtcore_scene
@@ -132,7 +132,7 @@ class TriangleCaster:
     """Embree called from compiled loops (viewer.rays.embree); None where only embreex's binding works."""
     _quick: bool | None = False
     twin: np.ndarray = NO_TWIN
-    """(F,) each scene face's reversed twin, -1 for none (`sides.reversed_twins`), or NO_TWIN where no face
+    """(F,) each scene face's reversed twin, -1 for none (`Scene.twins`), or NO_TWIN where no face
     has one (and for the DDA, whose march settles a tie by the order its cells list the faces)."""
     _stayed: _Stayed | None = None
     """The faces that stayed, where this caster was made from a previous one with some faces moved: the
@@ -175,7 +175,7 @@ class TriangleCaster:
         # corners, wound the other way, is not looked for): 24 ms of a million-triangle scan's move
         kept = (previous is not None and previous.backend == self.backend and previous.twin is NO_TWIN
                 and len(previous.v0) == len(scene.faces))
-        self.twin = NO_TWIN if kept else reversed_twins(scene.triangles)
+        self.twin = NO_TWIN if kept else scene.twins
 
     def _parted(self, scene, faces: np.ndarray, previous: "TriangleCaster | None"):
         """(faces that stayed, faces that moved, `_Stayed` of the former, of the latter or None) where

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from viewer.rays.sides import NO_TWIN, reversed_twins
+from viewer.scene.geometry import NO_TWIN
 from viewer.reference.runtime import aligned, loaded, variant
 from viewer.scene import Scene
 from viewer.scene.textures import textured_faces
@@ -21,11 +21,11 @@ share of the scene's bounding diagonal (0.35 mm in a 2 m room)."""
 
 def sheets_apart(scene: Scene) -> Scene:
     """`scene` with each two-sided sheet's faces (faces on the same corners wound opposite ways:
-    viewer.rays.sides.reversed_twins) moved SHEET_GAP apart, each along its own normal; the scene itself
+    `Scene.twins`) moved SHEET_GAP apart, each along its own normal; the scene itself
     where it has none. Mitsuba meets one of two coincident faces from either side, whichever its
     hierarchy tests first (a sheet white on one side and green on the other showed green to both), where
     the viewer's rays meet the face on their side."""
-    twin = reversed_twins(scene.triangles)
+    twin = scene.twins
     if twin is NO_TWIN:
         return scene
     faces = np.flatnonzero(twin >= 0)

@@ -29,11 +29,12 @@ from typing import NamedTuple
 import numpy as np
 
 from viewer.reference import cache as reference_cache
-from viewer.reference.conversion import load_scene, sheets_apart, to_mitsuba  # noqa: F401 - part of the face
+from viewer.reference.conversion import load_scene, to_mitsuba  # noqa: F401 - part of the face
 from viewer.reference.runtime import (INSTALL_HINT, VARIANTS, ReferenceUnavailable,  # noqa: F401 - the face
                                       aligned, loaded, variant)
 from viewer.probes import sh
 from viewer.scene import Camera, Scene
+from viewer.scene.geometry import NO_TWIN
 
 LANES_PER_LAUNCH = 1 << 21
 """Rays traced per Dr.Jit launch; larger jobs run in batches of whole probes."""
@@ -323,6 +324,6 @@ def _cached(kind, scene, arrays, params, use_cache, compute):
         return compute()
     mi, _, _ = loaded()
     tag = f"{CACHE_VERSION}|{kind}|{variant()}|{mi.__version__}"
-    if sheets_apart(scene) is not scene:   # converted so since the cache's version: older results differ
+    if scene.twins is not NO_TWIN:   # its sheets pulled apart since the cache's version: older results differ
         tag += "|sheets apart"
     return reference_cache.load_or_compute(kind, reference_cache.key(tag, scene, arrays, params), compute)

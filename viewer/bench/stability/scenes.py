@@ -109,7 +109,7 @@ def two_rooms(door: bool = False, wall: float = WALL_THICKNESS) -> Scene:
         parts.append(lit)
         if w > 0:
             parts.append(rectangle(0, w, lo, hi, facing=1, name="wall"))  # faces the dark room
-        else:   # a sheet: the same triangles wound the other way (viewer.rays.sides.reversed_twins)
+        else:   # a sheet: the same triangles wound the other way (`Scene.twins`)
             parts.append(replace(lit, faces=np.ascontiguousarray(lit.faces[:, ::-1])))
     name = ("two-rooms-door" if door else "two-rooms") + ("-sheet" if wall == 0 else "")
     return Scene.concatenate(name, parts)
