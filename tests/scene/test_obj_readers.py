@@ -4,6 +4,7 @@ the same scene, bit for bit, on the files each takes (viewer/scene/obj.py)."""
 import numpy as np
 
 from viewer.scene import obj
+from viewer.scene.geometry import NO_TWIN
 
 
 def test_an_obj_read_in_bulk_is_the_obj_read_line_by_line(tmp_path):
@@ -49,3 +50,37 @@ def test_an_obj_of_plain_triangles_is_read_as_the_bulk_reader_reads_it(tmp_path)
         path.write_text(plain + other)
         assert obj._read_plain(path, obj._lines(path)) is None, other
     assert obj._read_plain(path, ["v 0 0 0", "v 1 0 0"]) is None   # no faces
+
+
+def test_a_sheet_written_as_two_reversed_polygons_splits_alike_on_both_sides(tmp_path):
+    """A two-sided sheet written `f 1 2 3 4` on one side and `f 8 7 6 5` on the other (its own corners, its
+    own material; fanned each from its first corner, the two sides would split along different diagonals)
+    and a reversed pentagon on shared corners: every triangle gets a reversed twin, whichever reader reads
+    the file, and the fronts and the surface covered stay. A polygon without a reversed twin keeps its
+    first-corner fan, and a repeated polygon facing the same way is no sheet."""
+    text = ("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1.2 1 0\nv 0 1 0\n"
+            "v 0 0 0\nv 1 0 0\nv 1.2 1 0\nv 0 1 0\n"
+            "v 0 0 2\nv 1 0 2\nv 1.5 0.5 2\nv 1 1 2\nv 0 1 2\n"
+            "usemtl red\nf 1 2 3 4\nusemtl lamp\nf 8 7 6 5\n"
+            "usemtl red\nf 9 10 11 12 13\nf 11 10 9 13 12\n")
+    bulk, each = read_twice(tmp_path / "sheet.obj", text, obj._read_bulk, obj._read_lines)
+    assert_same_scene(bulk, each, ("red", "lamp"))
+    twin = bulk.twins
+    assert np.all(twin[:10] >= 0), twin
+    corners = bulk.vertices[bulk.faces]
+    for face, other in enumerate(twin[:10]):
+        assert sorted(map(tuple, corners[face])) == sorted(map(tuple, corners[other]))
+        assert bulk.face_normals[face] @ bulk.face_normals[other] < 0
+    # the fronts: the first quad faces +z, the second -z; the pentagons +z and -z; the areas kept
+    assert np.allclose(bulk.face_normals[:2, 2], 1) and np.allclose(bulk.face_normals[2:4, 2], -1)
+    assert np.isclose(bulk.face_areas[:2].sum(), bulk.face_areas[2:4].sum())
+    assert np.isclose(bulk.face_areas[4:7].sum(), bulk.face_areas[7:10].sum())
+    lone = obj.read(_written(tmp_path / "lone.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\n"
+                                                   "f 2 3 4 1\nf 2 3 4 1\nf 1 5 2 3\n"))
+    np.testing.assert_array_equal(lone.faces, [[1, 2, 3], [1, 3, 0]] * 2 + [[0, 4, 1], [0, 1, 2]])
+    assert lone.twins is NO_TWIN
+
+
+def _written(path, text: str):
+    path.write_text(text)
+    return path

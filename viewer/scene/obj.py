@@ -3,7 +3,9 @@ Scene as OBJ + MTL + sidecar.
 
 Our own, because trimesh 5.2 resolves relative (negative) face indices against the end of the whole file
 instead of the vertices read so far, which scrambles files like the public-domain CornellBox-Original.obj.
-Polygons are fan-triangulated in their vertex order, so the counter-clockwise front is kept.
+Polygons are fan-triangulated in their vertex order, so the counter-clockwise front is kept; a polygon
+whose reverse is in the file too (a two-sided sheet, each side its own material) is fanned from the
+corner both share first (`_sheet_fans`), so that each of its triangles has its reversed twin.
 """
 
 from __future__ import annotations
@@ -67,9 +69,11 @@ class _Materials:
                     check_readable(library, "material library")
                     self.materials.update(read_mtl(library))
 
-    def scene(self, path: Path, positions, faces, face_material) -> Scene:
+    def scene(self, path: Path, positions, faces, face_material, polygons=()) -> Scene:
         if not len(faces):
             raise SceneError(f"{path}: no faces found")
+        if len(polygons):
+            faces = _sheet_fans(np.asarray(positions, np.float64).reshape(-1, 3), faces, polygons)
         materials, names = self.materials, self.names
         albedo = np.array([materials.get(n, {}).get("Kd", DEFAULT_ALBEDO) for n in names], np.float64)
         emission = np.array([materials.get(n, {}).get("Ke", (0.0, 0.0, 0.0)) for n in names], np.float64)
@@ -135,6 +139,7 @@ def _read_bulk(path: Path, lines: list[str]) -> Scene | None:
     corners: list[str] = []          # three a triangle, polygons fanned from their first corner
     so_far: list[int] = []           # vertices read before each triangle's line (relative indices)
     face_material: list[int] = []
+    polygons: list[int] = []         # (first triangle, corners) of each polygon of four corners or more
     state = _Materials()
     for _, raw, words in _statements(lines):
         key = words[0]
@@ -149,6 +154,7 @@ def _read_bulk(path: Path, lines: list[str]) -> Scene | None:
             if count == 3:
                 corners.extend(words[1:])
             else:
+                polygons.extend((len(corners) // 3, count))
                 for k in range(2, count):
                     corners.extend((words[1], words[k], words[k + 1]))
             so_far.extend([len(coordinates) // 3] * (count - 2))
@@ -167,7 +173,7 @@ def _read_bulk(path: Path, lines: list[str]) -> Scene | None:
     resolved = np.where(index > 0, index - 1, vertices + index)
     if not np.all(np.isfinite(positions)) or np.any((index == 0) | (resolved < 0) | (resolved >= vertices)):
         return None
-    return state.scene(path, positions, resolved.reshape(-1, 3), face_material)
+    return state.scene(path, positions, resolved.reshape(-1, 3), face_material, polygons)
 
 
 def _read_lines(path: Path, lines: list[str]) -> Scene:
@@ -175,6 +181,7 @@ def _read_lines(path: Path, lines: list[str]) -> Scene:
     positions: list[list[float]] = []
     faces: list[tuple[int, int, int]] = []
     face_material: list[int] = []
+    polygons: list[int] = []
     state = _Materials()
     for number, raw, words in _statements(lines):
         key = words[0]
@@ -186,12 +193,54 @@ def _read_lines(path: Path, lines: list[str]) -> Scene:
             corners = [_index(w, len(positions), path, number) for w in words[1:]]
             if len(corners) < 3:
                 raise SceneError(f"{path}:{number}: a face needs at least three vertices")
+            if len(corners) > 3:
+                polygons.extend((len(faces), len(corners)))
             for k in range(1, len(corners) - 1):
                 faces.append((corners[0], corners[k], corners[k + 1]))
                 face_material.append(state.current)
         else:
             state.line(key, words, raw, path)
-    return state.scene(path, positions, faces, face_material)
+    return state.scene(path, positions, faces, face_material, polygons)
+
+
+WEIGHTS = np.sqrt([2.0, 3.0, 5.0])
+"""A corner's weight: its position's dot product with these irrational numbers (distinct corners, distinct
+weights)."""
+
+
+def _sheet_fans(positions: np.ndarray, faces, polygons: list[int]) -> np.ndarray:
+    """`faces` (T, 3) with every polygon that has a reversed twin in the file fanned again from its corner
+    of least weight. `polygons` lists (first triangle, corners) of each polygon fanned from its first
+    corner. A sheet written as `f 1 2 3 4` and `f 4 3 2 1` splits along two different diagonals when each
+    is fanned from its own first corner, and no triangle of one side then has the same corners as one of
+    the other: each ray or pixel would meet whichever face came first. Fanned from the same corner, the
+    two sides split alike. Polygons without a reversed twin keep their triangles."""
+    faces = np.array(faces, np.int64).reshape(-1, 3)
+    table = np.asarray(polygons, np.int64).reshape(-1, 2)
+    weight = positions @ WEIGHTS
+    for n in np.unique(table[:, 1]):
+        rows = table[table[:, 1] == n, 0][:, None] + np.arange(n - 2)
+        fan = faces[rows]   # (P, n - 2, 3): (c0, ck, ck+1)
+        corners = np.concatenate([fan[:, 0, :2], fan[:, :, 2]], axis=1)
+        p = positions[corners]
+        normal = np.cross(p, np.roll(p, -1, axis=1)).sum(axis=1)   # Newell's: the polygon's front
+        _, same, counts = np.unique(np.sort(weight[corners], axis=1), axis=0, return_inverse=True,
+                                    return_counts=True)
+        same = same.reshape(-1)
+        sheet = np.zeros(len(corners), bool)
+        for group in np.flatnonzero(counts > 1):   # polygons of the same corners: some facing each other?
+            members = np.flatnonzero(same == group)
+            facing = normal[members] @ normal[members].T < 0
+            sheet[members[facing.any(axis=1)]] = True
+        if not sheet.any():
+            continue
+        turned = corners[sheet]
+        start = np.argmin(weight[turned], axis=1)[:, None]
+        turned = np.take_along_axis(turned, (start + np.arange(n)) % n, axis=1)
+        k = np.arange(1, n - 1)
+        faces[rows[sheet]] = np.stack([np.repeat(turned[:, :1], n - 2, axis=1), turned[:, k], turned[:, k + 1]],
+                                      axis=2)
+    return faces
 
 
 def _statements(lines: list[str]):
