@@ -222,16 +222,24 @@ def _sheet_fans(positions: np.ndarray, faces, polygons: list[int]) -> np.ndarray
         rows = table[table[:, 1] == n, 0][:, None] + np.arange(n - 2)
         fan = faces[rows]   # (P, n - 2, 3): (c0, ck, ck+1)
         corners = np.concatenate([fan[:, 0, :2], fan[:, :, 2]], axis=1)
-        p = positions[corners]
-        normal = np.cross(p, np.roll(p, -1, axis=1)).sum(axis=1)   # Newell's: the polygon's front
-        _, same, counts = np.unique(np.sort(weight[corners], axis=1), axis=0, return_inverse=True,
-                                    return_counts=True)
-        same = same.reshape(-1)
+        ranked = np.sort(weight[corners], axis=1)
+        key = ranked @ np.sqrt(np.arange(7, 7 + n, dtype=np.float64))   # any order of the same corners alike
+        order = np.argsort(key, kind="stable")
+        equal = np.flatnonzero(key[order[1:]] == key[order[:-1]])
+        if not len(equal):   # no two polygons on the same corners: the usual file, one sort
+            continue
         sheet = np.zeros(len(corners), bool)
-        for group in np.flatnonzero(counts > 1):   # polygons of the same corners: some facing each other?
-            members = np.flatnonzero(same == group)
-            facing = normal[members] @ normal[members].T < 0
-            sheet[members[facing.any(axis=1)]] = True
+        step = np.diff(equal) != 1
+        pair = np.r_[True, step] & np.r_[step, True]   # two polygons of the same corners (a sheet's sides)
+        two = np.stack([order[equal[pair]], order[equal[pair] + 1]], axis=1)
+        front = _fronts(positions[corners[two]])
+        facing = np.all(ranked[two[:, 0]] == ranked[two[:, 1]], axis=1) & (np.sum(front[:, 0] * front[:, 1], 1) < 0)
+        sheet[two[facing].ravel()] = True
+        for first, last in _runs(equal[~pair]):   # more of the same corners: do some face each other?
+            members = order[first:last + 2]
+            members = members[np.all(ranked[members] == ranked[members[0]], axis=1)]
+            front = _fronts(positions[corners[members]])
+            sheet[members[(front @ front.T < 0).any(axis=1)]] = True
         if not sheet.any():
             continue
         turned = corners[sheet]
@@ -241,6 +249,19 @@ def _sheet_fans(positions: np.ndarray, faces, polygons: list[int]) -> np.ndarray
         faces[rows[sheet]] = np.stack([np.repeat(turned[:, :1], n - 2, axis=1), turned[:, k], turned[:, k + 1]],
                                       axis=2)
     return faces
+
+
+def _fronts(corners: np.ndarray) -> np.ndarray:
+    """(..., 3) the fronts of polygons of `corners` (..., n, 3), by Newell's sum (unnormalized)."""
+    return np.cross(corners, np.roll(corners, -1, axis=-2)).sum(axis=-2)
+
+
+def _runs(index: np.ndarray):
+    """(first, last) of each run of consecutive integers in sorted `index`."""
+    if not len(index):
+        return []
+    breaks = np.flatnonzero(np.diff(index) != 1)
+    return zip(index[np.r_[0, breaks + 1]].tolist(), index[np.r_[breaks, len(index) - 1]].tolist())
 
 
 def _statements(lines: list[str]):
