@@ -17,10 +17,22 @@ from viewer.scene import Scene
 
 
 def moved_a_tenth(scene: Scene, group: str) -> Scene:
-    """`scene` with `group` moved along x by a tenth of the scene's width: the benchmarks' drag."""
+    """`scene` with `group` moved by a tenth of the scene's width (along x) as a user drags it: along the
+    floor, a wall or the ceiling it rests on, towards the scene's centre, so that it stays in the room. The
+    first of x and z along which the group is not flat and the move keeps it within the scene's bounds;
+    else x towards the centre. (Along +x alone, a lamp on a room's +x wall left the room.)"""
     lo, hi = scene.bounds
+    step = 0.1 * float(hi[0] - lo[0])
+    corners = scene.triangles[scene.face_group == scene.group_index(group)].reshape(-1, 3)
+    low, high = corners.min(axis=0), corners.max(axis=0)
+    centre = 0.5 * (lo + hi) - 0.5 * (low + high)
     move = np.eye(4)
-    move[0, 3] = 0.1 * float(hi[0] - lo[0])
+    for axis in (0, 2):
+        shift = step if centre[axis] >= 0 else -step
+        if high[axis] - low[axis] > 1e-9 * step and lo[axis] <= low[axis] + shift and high[axis] + shift <= hi[axis]:
+            move[axis, 3] = shift
+            return scene.transformed_group(group, move)
+    move[0, 3] = step if centre[0] >= 0 else -step
     return scene.transformed_group(group, move)
 
 
