@@ -49,8 +49,10 @@ def to_mitsuba(scene: Scene, max_depth: int = -1) -> dict:
       `mesh_attribute` texture, so thousands of colours cost nothing.
     - No vertex normals: Mitsuba then uses the face normal cross(v1-v0, v2-v0), our CCW front, and its
       area emitters emit on that side only, as ours do.
-    - The BSDF is a two-sided diffuse: our surfaces reflect on both sides (Mitsuba's `diffuse` alone is
-      black from behind); emission stays one-sided.
+    - The BSDF is a two-sided diffuse (Mitsuba's `diffuse` alone is black from behind); emission stays
+      one-sided. A face lit from behind thus reflects there in Mitsuba, where our rays take its back for
+      the inside of a solid and bring no light (docs/ARCHITECTURE.md, "Sides"): the two agree on closed
+      surfaces and two-sided sheets and differ only on a lone face seen from behind.
     - The two faces of a two-sided sheet are pulled a hair apart (`sheets_apart`), so that each side
       shows its own face.
     - A textured group's faces that emit nothing form a mesh of their own, with per-corner texture
