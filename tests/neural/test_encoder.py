@@ -48,6 +48,27 @@ def test_same_numbers_as_encode_after_every_kind_of_edit(name, resolution):
         assert_same_encoding(encoder.encode(voxels, edited.sun, blockers), reference)
 
 
+def test_without_the_probes_shadows_the_same_numbers_as_encode_after_every_kind_of_edit():
+    """The direct input without the probes' shadows (`encoding.DIRECT_SHADOWS`, as the card says): the
+    numbers of `encode` told the same, after every edit, a sunlit room's included; the voxels' own direct
+    light keeps its shadows (the bounce and seen inputs are those of the shadowed encoding), and no
+    probe's visibility to a lamp is traced."""
+    scene = load("cornell")
+    lo, hi = scene.bounds
+    encoder = Encoder(lo, hi, 16, direct_shadows=False)
+    for what, edited in [("new scene", scene)] + edits(scene):
+        voxels, blockers, shadowed = encoded(edited)
+        reference = encoding.encode(voxels, edited.sun, lo, hi, 16, blockers, direct_shadows=False)
+        assert_same_encoding(encoder.encode(voxels, edited.sun, blockers), reference)
+        light = [encoding.BOUNCE, encoding.SEEN]
+        for part in light:   # in units of each pass's scale, which the shadows change
+            np.testing.assert_allclose(reference.inputs[:, part] * reference.scale[:, None, None, None, None],
+                                       shadowed.inputs[:, part] * shadowed.scale[:, None, None, None, None],
+                                       rtol=1e-4, atol=1e-6)
+        assert encoder._shadows._rows == {}, what
+    assert not np.allclose(reference.inputs[:, encoding.DIRECT], shadowed.inputs[:, encoding.DIRECT])
+
+
 def test_same_numbers_on_wide_procedural_rooms():
     """v2 rooms (several lights on any surface, glowing objects, windows with the sun), one encoder for
     all of them when their bounds agree, a fresh one otherwise."""

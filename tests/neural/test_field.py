@@ -35,8 +35,8 @@ def random_model(seed: int = 0) -> ProbeNet:
     return model.eval()
 
 
-def encoded(scene: Scene, m: int = 8) -> encoding.Encoding:
-    return encoding.encode_scene(scene, m, 16)
+def encoded(scene: Scene, m: int = 8, direct_shadows: bool = True) -> encoding.Encoding:
+    return encoding.encode_scene(scene, m, 16, direct_shadows=direct_shadows)
 
 
 @pytest.fixture(scope="module")
@@ -88,15 +88,22 @@ def test_neural_field_gives_probes_in_radiance_units(exported):
     scene = load("cornell")
     grid = field.solve(scene)
     assert grid.coefficients.shape == (8, 8, 8, 9, 3) and np.all(np.isfinite(grid.coefficients))
-    enc = encoded(scene)
+    assert field.card.direct_shadows == encoding.DIRECT_SHADOWS   # as the export writes it
+    enc = encoded(scene, direct_shadows=field.card.direct_shadows)
     with torch.no_grad():   # the viewer's filter stops at walls as training's does
         out = model(torch.from_numpy(enc.inputs), links=torch.from_numpy(enc.links[None])).numpy()
-    expected = out[:, :9] * enc.scale[:, None, None, None, None]
+    out = (out[:, :18] * enc.scale[:, None, None, None, None]).transpose(2, 3, 4, 1, 0)
+    if field.card.direct_shadows:
+        expected = out[..., :9, :]
+    else:   # all the light: the probes' direct light with its shadows, and the network's reflected light
+        voxels = voxelize(scene, 16)
+        direct = encoding.probe_direct(voxels, scene.sun, *scene.bounds, 8, encoding.occluders(scene, voxels))
+        expected = out[..., 9:, :] + direct.reshape(8, 8, 8, 9, 3)
     # the live encoder and `encode` sum the lamps' terms in their own orders: their inputs differ by
     # float32 ulps (4e-6 of 18 at most), which a random network carries to its outputs
-    np.testing.assert_allclose(grid.coefficients, expected.transpose(2, 3, 4, 1, 0), rtol=1e-4,
-                               atol=1e-5 * np.abs(expected).max())
+    np.testing.assert_allclose(grid.coefficients, expected, rtol=1e-4, atol=1e-5 * np.abs(expected).max())
     reflected = field.solve(scene, include_emitted=False).coefficients
+    np.testing.assert_allclose(reflected, out[..., 9:, :], rtol=1e-4, atol=1e-5 * np.abs(out).max())
     assert not np.allclose(reflected, grid.coefficients)
 
 
@@ -233,6 +240,41 @@ def test_the_runtime_casts_the_seen_rays_the_card_names(exported, tmp_path):
     default = older.solve(scene)
     assert older.encoder(*scene.bounds, older.resolution).seen.rays == encoding.SEEN_RAYS
     assert not np.allclose(eight.coefficients, default.coefficients)
+
+
+def test_the_probes_direct_light_is_shadowed_as_the_card_says(exported, tmp_path):
+    """A card written before cards said whether the network's direct input carries the probes' shadows
+    had them; the runtime encodes as the card says. Without them, the all-light probes take the
+    shadowed direct light computed apart, so both networks' all-light probes minus their reflected
+    light are the same shadowed direct light; the reflected light differs (the network read other
+    inputs), and a drag keeps every unshadowed basis."""
+    _, path = exported
+    assert neural.ModelCard.read(ROOT / "models" / "probenet.onnx").direct_shadows is encoding.DIRECT_SHADOWS
+    target = tmp_path / "model.onnx"
+    shutil.copy(path, target)
+    card = json.loads(path.with_suffix(".json").read_text())
+    fields, direct = {}, {}
+    scene = load("cornell")
+    for shadows in (True, False):
+        card["inputs"]["direct_shadows"] = shadows
+        if shadows:
+            del card["inputs"]["direct_shadows"]
+        target.with_suffix(".json").write_text(json.dumps(card))
+        field = fields[shadows] = neural.NeuralField(target)
+        assert field.card.direct_shadows is shadows
+        every, reflected = field.solve(scene), field.solve(scene, include_emitted=False)
+        assert field.encoder(*scene.bounds, field.resolution).direct_shadows is shadows
+        direct[shadows] = (every.coefficients - reflected.coefficients, reflected.coefficients)
+    np.testing.assert_allclose(direct[False][0], direct[True][0], rtol=1e-4, atol=1e-5 * np.abs(direct[True][0]).max())
+    assert not np.allclose(direct[False][1], direct[True][1])
+    gi = neural.NeuralGI(fields[False])
+    gi.update(scene)
+    bases = [e.basis for e in fields[False].encoder(*scene.bounds, 8).emitters]
+    matrix = np.eye(4)
+    matrix[0, 3] = 0.05
+    gi.update(scene.transformed_group("large-box", matrix))
+    kept = [e.basis for e in fields[False].encoder(*scene.bounds, 8).emitters]
+    assert len(kept) == len(bases) and all(a is b for a, b in zip(kept, bases))
 
 
 def test_sample_with_a_missing_model_exits_2(tmp_path):

@@ -13,8 +13,8 @@ viewer/neural/lattice.py):
   and touch each other (a lamp), each with the shadowed SH of its patches at every probe summed once
   (`emitter_basis`; the probes near a patch sum its pieces, `encoding.patch_pieces`): each patch's
   terms times its visibility, traced as `encode` traces it (one ray per probe and cluster of patches,
-  `encoding.shadow_targets`). The direct light is linear in the
-  emitted radiance, so a lamp's colour or intensity is its basis times a new RGB;
+  `encoding.shadow_targets`; none where the network reads the direct light without the probes'
+  shadows, `direct_shadows`). It is linear in the emitted radiance: a colour is the basis times an RGB;
 - the sun's visibility for the last direction (`encoding.sun_visibility`): its irradiance is a factor;
 - the bounce feature's patches and the voxels' last direct light (`encoding.Bounce`);
 - the seen rays (`encoding.seen_rays`), cast once per geometry and occluders: any edit of light or
@@ -90,11 +90,14 @@ class Encoder:
     One encoder serves one lattice; any voxel grid and occluders may be passed to `encode`, and whatever
     still holds from the previous call is reused."""
 
-    def __init__(self, lo, hi, resolution: int, rays: int = encoding.SEEN_RAYS):
-        """`rays`: the seen rays a probe (those the network was trained with: `ModelCard.seen_rays`)."""
+    def __init__(self, lo, hi, resolution: int, rays: int = encoding.SEEN_RAYS,
+                 direct_shadows: bool = True):
+        """`rays`: the seen rays a probe, and `direct_shadows` whether the probes' direct light carries their
+        shadows (as the network was trained: `ModelCard.seen_rays`, `ModelCard.direct_shadows`)."""
         self.lo, self.hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         self.resolution = int(resolution)
         self.rays = int(rays)
+        self.direct_shadows = bool(direct_shadows)
         self.points = ProbeGrid.positions_for(self.lo, self.hi, self.resolution).reshape(-1, 3)  # x slowest, as encode
         self.serial = next(_serials)
         """Tells encoders apart (a cache of the network's outputs keys on it and on `revisions`)."""
@@ -235,7 +238,8 @@ class Encoder:
                 if emitter.radiance[c] != 0.0:
                     direct[c] += np.float32(emitter.radiance[c]) * emitter.basis
         if direction is not None and np.any(irradiance > 0):
-            visible = self._shadows.sun_visibility(direction).astype(np.float32)
+            visible = (self._shadows.sun_visibility(direction).astype(np.float32) if self.direct_shadows
+                       else np.ones(p, np.float32))
             delta = sh.basis(direction / np.linalg.norm(direction))  # per unit irradiance (sh.project_delta)
             for c in range(3):
                 if irradiance[c] != 0.0:
@@ -281,7 +285,7 @@ class Encoder:
                 kept.append(emitter)
                 matched.append((emitter, np.array(members), weights))
         stale = matched if new_voxels or self._moved else []
-        resum = matched if self._moved else []
+        resum = matched if self._moved and self.direct_shadows else []   # unshadowed bases hold after a move
         fresh = np.flatnonzero(~claimed)
         changed = len(kept) != len(self.emitters) or len(fresh) > 0
         lamps = self._lamps(fresh, position, radiance, voxels.voxel_size)
@@ -294,7 +298,7 @@ class Encoder:
         traced = np.unique(np.concatenate([cluster[fresh]] + [cluster[m] for _, m, _ in resum]))
         if len(fresh):
             self.recomputed.append("emitters")
-        if len(traced):
+        if len(traced) and self.direct_shadows:
             row[traced] = np.arange(len(traced))
             visible = self._shadows.visibility(target[traced])
         for emitter, members, weights in resum:
@@ -330,7 +334,8 @@ class Encoder:
                                   visible, row[cluster[members]], own)
             values, lit = received(members, weights, own)
             kept.append(Emitter({keys[e]: float(w) for e, w in zip(members, weights)}, basis, values,
-                                radiance[members[0]] / weights[0], (visible, row[cluster[members]]), lit))
+                                radiance[members[0]] / weights[0],
+                                None if visible is None else (visible, row[cluster[members]]), lit))
         self.emitters = kept
         return changed
 

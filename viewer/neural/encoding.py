@@ -13,14 +13,17 @@ Four choices make a small network generalize beyond the layouts it was trained o
 - **Scale out.** Transport is linear in the emitted light too: each channel's inputs are divided by a
   scale `s` (the mean direct radiance over the probes, shadows included) and the network's output is
   multiplied by it, so a lamp twice as bright gives exactly twice the light, whatever was trained.
-- **Direct light as an input, shadowed.** The light arriving straight from the emitters is most of the
-  field: one term per emitting lattice cell, times its visibility from the probe. The shadows are
-  traced against the scene's own triangles (on the ray layer, `viewer.rays.voxel_rays`: Embree, or the
-  cell-exact DDA on the encoder's coarse voxel grid), one ray per probe and cluster of VISIBILITY_CELLS^2
-  emitting cells, and the sun's one ray per probe. Version 2 left the shadows to the network, and it could not learn them: on the v2 rooms
-  (partitions, objects, lamps on walls) the unshadowed input was 54% off the shadowed direct light in
-  the median room, and after training all the light was 64% off, against 12% with traced shadows
-  (docs/TRAINING.md).
+- **Direct light as an input; the probes' direct light computed, not learned.** The light arriving
+  straight from the emitters is most of the field: one term per emitting lattice cell, times its
+  visibility from the probe. The network predicts the reflected light; all the light at a probe is the
+  direct light computed exactly (`probe_direct`: the shadows traced against the scene's own triangles on
+  the ray layer, `viewer.rays.voxel_rays`, one ray per probe and cluster of VISIBILITY_CELLS^2 emitting
+  cells, and the sun's one ray per probe) plus the predicted reflected light. So the direct input the
+  network reads need not carry the probes' shadows (DIRECT_SHADOWS): it is what the reflected light
+  needs to know of where the lamps are and how bright, and the voxels' own direct light, which the
+  bounces start from, keeps its shadows. Version 2 left the shadows to a network that predicted all
+  the light, and it could not learn them (on the v2 rooms all the light 64% off, against 12% with traced
+  shadows, docs/TRAINING.md).
 - **One bounce as an input.** The reflected light, which the renderer shades, is a gather over the whole
   room, beyond what a small network's receptive field carries well: `bounce_sh` reflects the direct
   light once off every surface (albedo x irradiance / pi, the irradiance summed at each voxel with its
@@ -99,7 +102,15 @@ FEATURES = (
     "open",             # the share of those rays that leave the probe into the open (0 inside a solid)
 )
 CHANNELS = len(FEATURES)
-SETTINGS = {"seen_rays": SEEN_RAYS, "seen_bounces": SEEN_BOUNCES, "tail_ratio_max": TAIL_RATIO_MAX,
+DIRECT_SHADOWS = False
+"""Whether the direct-light input (and the scale it sets) carries the probes' shadows, for the networks
+trained now (`viewer.training.samples` encodes with it, the card records it); the viewer encodes as a
+network's card says (`ModelCard.direct_shadows`: networks trained before it record none and had them). Without
+them a new scene skips tracing every probe's visibility to every lamp (val-00003 148 -> 121 ms, val-00009
+181 -> 131 ms, stage by stage on 2 cores), and an object's move every probe's basis it changed, where
+the reflected light moved little: the shipped network fed unshadowed direct light without retraining
+was within 1.46x -> 1.52x of the solver's error at worst (docs/TRAINING.md)."""
+SETTINGS = {"seen_rays": SEEN_RAYS, "direct_shadows": DIRECT_SHADOWS, "seen_bounces": SEEN_BOUNCES, "tail_ratio_max": TAIL_RATIO_MAX,
             "interleave": INTERLEAVE, "seed": SEED, "read_back": READ_BACK, "bounce_patch": BOUNCE_PATCH,
             "bounce_lattice": BOUNCE_LATTICE, "near_pieces": NEAR_PIECES, "shadow_offset": SHADOW_OFFSET,
             "visibility_cells": VISIBILITY_CELLS, "sun_side": SUN_SIDE, "near_all": NEAR_ALL,
@@ -236,7 +247,8 @@ def seen_rays(blockers: VoxelRays | None, voxels: VoxelGrid, points: np.ndarray,
     return SeenRays(blockers.landing, voxels.count, points, rays, previous=previous, box=box, voxels=voxels)
 
 
-def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None) -> Encoding:
+def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None,
+                 direct_shadows: bool = True) -> Encoding:
     """`encode` of `scene` voxelized at `voxel_resolution`, on the lattice over [lo, hi] (its bounds by
     default)."""
     from viewer.rays.voxels import voxelize
@@ -244,7 +256,7 @@ def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None
     grid = voxelize(scene, voxel_resolution)
     if lo is None or hi is None:
         lo, hi = scene.bounds
-    return encode(grid, scene.sun, lo, hi, resolution, occluders(scene, grid))
+    return encode(grid, scene.sun, lo, hi, resolution, occluders(scene, grid), direct_shadows)
 
 
 def lit_voxels(scene, resolution: int) -> tuple[VoxelGrid, VoxelRays | None, np.ndarray]:
@@ -264,9 +276,35 @@ def lit_voxels(scene, resolution: int) -> tuple[VoxelGrid, VoxelRays | None, np.
     return grid, blockers, voxel_direct(grid, lights, pieces, blockers, scene.sun, lo, spacing)
 
 
-def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays | None) -> Encoding:
-    """The network's input for the probe lattice of `resolution`^3 cells over the box [lo, hi], with the
-    direct light shadowed by `blockers` (`occluders`; None: nothing casts a shadow)."""
+def lattice_points(lo: np.ndarray, spacing: np.ndarray, m: int) -> np.ndarray:
+    """(m^3, 3) the lattice's cell centres, x slowest (`ProbeGrid.positions_for`'s order)."""
+    return lo + (np.stack(np.meshgrid(*[np.arange(m)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) * spacing
+
+
+def probe_direct(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays | None) -> np.ndarray:
+    """(m^3, 9, 3) the light arriving at the probes straight from the emitters and the sun, shadowed by
+    `blockers`: what all the light adds to the reflected light the network predicts (`encode`'s direct
+    input, with its shadows)."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    m = int(resolution)
+    spacing = (hi - lo) / m
+    flat = lattice_cells(voxels.position, lo, spacing, m)
+    lights = emitting_patches(flat, voxels)
+    pieces = patch_pieces(flat, voxels, lights[3], NEAR_PIECES * spacing.max())
+    return _direct(lights, pieces, sun, lattice_points(lo, spacing, m), lo, spacing, blockers)
+
+
+def _direct(lights, pieces, sun, points, lo, spacing, blockers: VoxelRays | None) -> np.ndarray:
+    """(P, 9, 3) the emitters' and the sun's light at `points`, shadowed by `blockers` (None: unshadowed)."""
+    visible = None if blockers is None else lattice_visibility(blockers, points, lights[0], lights[1], lo, spacing)
+    return emitter_sh(lights, points, visible, pieces) + sun_sh(sun, blockers, points)
+
+
+def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays | None,
+           direct_shadows: bool = True) -> Encoding:
+    """The network's input for the probe lattice of `resolution`^3 cells over the box [lo, hi], the
+    light shadowed by `blockers` (`occluders`; None: nothing casts a shadow); the probes' direct light
+    without its shadows where not `direct_shadows` (the voxels' keeps them)."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     m = int(resolution)
     spacing = (hi - lo) / m
@@ -289,14 +327,10 @@ def encode(voxels: VoxelGrid, sun, lo, hi, resolution: int, blockers: VoxelRays 
     albedo = np.stack([gather(area * voxels.albedo[:, c]) for c in range(3)]) / safe
     emitted = np.stack([gather(area * voxels.emission[:, c]) for c in range(3)])
 
-    points = lo + (np.stack(np.meshgrid(*[np.arange(m)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) * spacing
+    points = lattice_points(lo, spacing, m)
     lights = emitting_patches(flat, voxels)
-    visible = None
-    if blockers is not None:
-        visible = lattice_visibility(blockers, points, lights[0], lights[1], lo, spacing)
     pieces = patch_pieces(flat, voxels, lights[3], NEAR_PIECES * spacing.max())
-    direct = emitter_sh(lights, points, visible, pieces)
-    direct += sun_sh(sun, blockers, points)  # (P, 9, 3)
+    direct = _direct(lights, pieces, sun, points, lo, spacing, blockers if direct_shadows else None)
     bounce, seen, rays = np.zeros((cells, sh.SH_COUNT, 3)), np.zeros((cells, sh.SH_COUNT, 3)), None
     if voxels.count:
         once = Bounce(voxels, lo, hi, m)

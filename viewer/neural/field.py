@@ -9,10 +9,8 @@ turns it into exit status 2, the viewer into a message and a fall-back to the co
 
 from __future__ import annotations
 
-import hashlib
-import json
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from functools import partial
 from typing import Callable
 from pathlib import Path
@@ -22,7 +20,8 @@ import numpy as np
 
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.neural import encoding
-from viewer.neural.domain import Domain, Shape, measure, outside
+from viewer.neural.card import ModelCard, ModelError, file_sha256, open_session  # noqa: F401 - the source's API
+from viewer.neural.domain import Shape, measure, outside
 from viewer.neural.encoder import Encoder
 from viewer.neural.network_feed import FILTERED, WallTaps, feed, wall_taps
 from viewer.neural.network_tail import HEAD, Tail, fed_names, run_graph, run_overlapped
@@ -45,86 +44,6 @@ CLOCK = time.perf_counter
 """What the stages are timed with; `python -m viewer.bench.neural` swaps in time.thread_time to count the
 CPU time of each stage alone (everything here runs on the calling thread) on a machine shared with
 other work."""
-
-
-class ModelError(ValueError):
-    """The model file or its card is missing, corrupt or made for other inputs."""
-
-
-def open_session(path: Path, threads: int = 1):
-    """An onnxruntime session on the CPU, or ModelError in one line. One thread by default (the timings the
-    docs compare are of one); with more, the threads sleep between runs instead of spin-waiting, which took
-    a core from the renderer's threads (two threads that spin made a Cornell box's albedo edit 63 ms to
-    the settled frame where one made it 66 and two that sleep 54, on 2 cores: the viewer's choice,
-    `viewer.ui.neural_source`)."""
-    try:
-        import onnxruntime as ort
-    except ImportError as exc:
-        raise ModelError(f"the neural GI source needs onnxruntime ({exc}): pip install onnxruntime") from None
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = threads
-    options.inter_op_num_threads = 1
-    if threads > 1:
-        options.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    try:
-        return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-    except Exception as exc:  # noqa: BLE001 - onnxruntime raises its own types for bad files
-        raise ModelError(f"{Path(path).name}: onnxruntime cannot load it ({str(exc).splitlines()[0]})") from None
-
-
-@dataclass(frozen=True)
-class ModelCard:
-    path: Path
-    """The .onnx file."""
-    data: dict
-    """The card as written by `viewer.training.export`."""
-
-    @property
-    def probes(self) -> int:
-        return int(self.data["probes"]["resolution"])
-
-    @property
-    def voxels(self) -> int:
-        return int(self.data["inputs"]["voxels"])
-
-    @property
-    def seen_rays(self) -> int:
-        """The seen rays a probe the network learned on, which the runtime casts (SEEN_RAYS on older cards)."""
-        return int(self.data["inputs"].get("seen_rays", encoding.SEEN_RAYS))
-
-    @property
-    def sha256(self) -> str:
-        return str(self.data["sha256"])
-
-    @property
-    def domain(self) -> Domain:
-        """What the model was trained on (viewer.neural.domain): the card's `domain`, or for a card written
-        before cards had one, the domain of the ranges its dataset names (`training.ranges`; `v1`, the
-        first dataset's, when it names none)."""
-        if "domain" in self.data:
-            return Domain.from_dict(self.data["domain"])
-        return Domain.from_preset(str(self.data.get("training", {}).get("ranges", "v1")))
-
-    @staticmethod
-    def read(model: Path) -> "ModelCard":
-        card_path = model.with_suffix(".json")
-        if not model.is_file():
-            raise ModelError(f"no trained model at {model} (train one: see docs/TRAINING.md)")
-        if not card_path.is_file():
-            raise ModelError(f"{model.name} has no model card ({card_path.name})")
-        try:
-            data = json.loads(card_path.read_text())
-            card = ModelCard(model, data)
-            _ = (card.probes, card.voxels, card.sha256, data["inputs"]["encoding_version"], card.domain)
-            if card.seen_rays < 1:
-                raise ValueError(f"seen_rays {card.seen_rays}")
-        except (ValueError, KeyError, TypeError) as exc:
-            raise ModelError(f"{card_path.name}: not a valid model card ({exc})") from None
-        return card
-
-
-def file_sha256(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 class NeuralField:
@@ -194,12 +113,17 @@ class NeuralField:
         `reuse=False` encodes and runs everything afresh: what a new scene costs."""
         m = resolution or self.resolution
         clock = clock_now()
-        encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m, self.card.seen_rays)
+        encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m, self.card.seen_rays, self.card.direct_shadows)
         enc = encoder.encode(voxels, sun, blockers)
         encoded = clock_now()
         out = self._network(encoder, enc.inputs) if reuse else self.run(enc.inputs, partial(wall_taps, encoder.seen))
         ran = clock_now()
-        grid = unpack(out, enc.scale, enc.lo, enc.hi, include_emitted)
+        computed = include_emitted and not encoder.direct_shadows   # the network's direct light is unshadowed
+        grid = unpack(out, enc.scale, enc.lo, enc.hi, include_emitted and not computed)
+        unpacked = clock_now()
+        if computed:   # all the light: the probes' direct light with its shadows, added
+            direct = encoding.probe_direct(voxels, sun, enc.lo, enc.hi, m, blockers).reshape(grid.coefficients.shape)
+            grid = replace(grid, coefficients=(grid.coefficients + direct).astype(np.float32))
         if reuse and blockers is not None:   # the geometry's first vote on which probes are valid stays
             if self._valid is not None and self._valid[0] is encoder and self._valid[1] is blockers:
                 grid = replace(grid, valid=self._valid[2])
@@ -207,7 +131,9 @@ class NeuralField:
                 self._valid = (encoder, blockers, grid.valid)
         if timings is not None:
             rays = encoder.ray_seconds   # the seen rays, cast once per geometry (viewer/neural/seen.py)
-            timings.update(encode=encoded - clock - rays, rays=rays, network=ran - encoded, unpack=clock_now() - ran)
+            timings.update(encode=encoded - clock - rays, rays=rays, network=ran - encoded, unpack=unpacked - ran)
+            if computed:
+                timings["direct"] = clock_now() - unpacked
         return grid
 
     def forget(self) -> None:
@@ -217,7 +143,7 @@ class NeuralField:
     def encoder(self, lo, hi, resolution: int) -> Encoder:
         """The encoder of this lattice, kept from the last call when the lattice is the same."""
         if self._encoder is None or not self._encoder.fits(lo, hi, resolution):
-            self._encoder = Encoder(lo, hi, resolution, self.card.seen_rays)
+            self._encoder = Encoder(lo, hi, resolution, self.card.seen_rays, self.card.direct_shadows)
         return self._encoder
 
     def _network(self, encoder: Encoder, inputs: np.ndarray) -> np.ndarray:

@@ -116,9 +116,11 @@ def write_card(path: Path, model: ProbeNet, resolution: int, training: dict, met
         "inputs": {
             "name": "inputs", "shape": ["3 x scenes", encoding.CHANNELS, resolution, resolution, resolution],
             "features": list(encoding.FEATURES), "encoding_version": encoding.VERSION, "voxels": ENCODING_VOXELS,
-            "seen_rays": encoding.SEEN_RAYS,
+            "seen_rays": encoding.SEEN_RAYS, "direct_shadows": encoding.DIRECT_SHADOWS,
             "normalization": "one pass per colour channel; emission and direct light divided by the pass's "
-                             "scale (mean direct radiance DC over the probes, shadows traced), outputs multiplied by it",
+                             "scale (mean direct radiance DC over the probes, "
+                             + ("shadows traced" if encoding.DIRECT_SHADOWS else "without the probes' shadows")
+                             + "), outputs multiplied by it",
             "second_input": {"name": "compressed", "features": "the same, the light through asinh: channels "
                              + ", ".join(f"{part.start}-{part.stop - 1}" for part in encoding.COMPRESSED)},
             "filtered": {"inputs": list(FILTERED) if output == HEAD else graph_filters(path),
@@ -277,7 +279,7 @@ def main(argv=None) -> int:
         print(f"wrote {args.out / 'best.pt'} from {args.run}", file=sys.stderr)
         return 0
     scene = load("paper-test")
-    inputs = encoding.encode_scene(scene, args.probes, ENCODING_VOXELS).inputs
+    inputs = encoding.encode_scene(scene, args.probes, ENCODING_VOXELS, direct_shadows=encoding.DIRECT_SHADOWS).inputs
     history = json.loads((args.run / "history.json").read_text())
     metrics = json.loads(args.metrics.read_text()) if args.metrics else {}
     data = json.loads((args.run / "data.json").read_text()) if (args.run / "data.json").exists() else {}

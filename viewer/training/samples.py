@@ -162,7 +162,7 @@ def encode_scene(path: str, resolution: int, voxels: int = ENCODING_VOXELS) -> d
     example = load_example(path)
     grid = voxelize(example.scene, voxels)
     enc = encoding.encode(grid, example.scene.sun, example.lo, example.hi, resolution,
-                          encoding.occluders(example.scene, grid))
+                          encoding.occluders(example.scene, grid), encoding.DIRECT_SHADOWS)
     valid = example.valid[resolution]
     # the light reflected by surfaces: all of it minus the part straight from emitters and the sun,
     # filled inside solid objects like the total

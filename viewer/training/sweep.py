@@ -311,7 +311,7 @@ def measure_run(run: Path, args, evaluation) -> dict:
     config = state["config"]
     m = args.probes
     scene = scenes.load("paper-test")
-    inputs = encoding.encode_scene(scene, m, ENCODING_VOXELS).inputs
+    inputs = encoding.encode_scene(scene, m, ENCODING_VOXELS, direct_shadows=encoding.DIRECT_SHADOWS).inputs
     recorded = run / "data.json"   # what the run trained on (train.record_data): the dataset may have grown
     train_scenes = (json.loads(recorded.read_text())["training_rooms"] if recorded.exists()
                     else len(training_split(args.data, m, quiet=True)))

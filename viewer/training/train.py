@@ -25,6 +25,7 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
+from viewer.neural import encoding
 from viewer.training.batches import (Batch, batches, mirror, mirror_sh,  # noqa: F401 - read from here too
                                      probe_weights, reflected_target, sh_signs, traced_direct)
 from viewer.training.models import REFLECTED, TOTAL, VALIDITY, ProbeNet, ProbeNetConfig, parameter_count
@@ -116,6 +117,8 @@ def loss_terms(model, batch: Batch, settings: "TrainSettings"):
     w = probe_weights(batch)
     direct = out[:, TOTAL] - out[:, REFLECTED]
     direct_loss = (w * (direct - (batch.y[:, TOTAL] - batch.y[:, REFLECTED])) ** 2).mean()
+    if not encoding.DIRECT_SHADOWS:   # the direct light is computed with its shadows, not learned (`probe_direct`)
+        direct_loss = direct_loss * 0.0
     room = batch.has_unbiased + (1 - batch.has_unbiased) * settings.solver_weight
     target = reflected_target(batch)
     if settings.reflected_loss in ("room", "rmse"):
@@ -166,6 +169,8 @@ def evaluate(model, samples: Samples, settings: "TrainSettings", batch: int = 8)
             scale = torch.from_numpy(samples.scale[b.pick]).reshape(-1, 1, 1, 1, 1)
             out = out[:, :18] * scale
             y = b.y * scale
+            if not encoding.DIRECT_SHADOWS:   # all the light: the exact direct light and the predicted reflected
+                out = torch.cat([y[:, TOTAL] - y[:, REFLECTED] + out[:, REFLECTED], out[:, REFLECTED]], dim=1)
             add("all_truth", out[:, TOTAL], y[:, TOTAL])
             add("reflected_truth", out[:, REFLECTED], y[:, REFLECTED])
             rows = b.has_unbiased > 0
