@@ -108,8 +108,9 @@ trained now (`viewer.training.samples` encodes with it, the card records it); th
 network's card says (`ModelCard.direct_shadows`: networks trained before it record none and had them). Without
 them a new scene skips tracing every probe's visibility to every lamp (val-00003 148 -> 121 ms, val-00009
 181 -> 131 ms, stage by stage on 2 cores), and an object's move every probe's basis it changed, where
-the reflected light moved little: the shipped network fed unshadowed direct light without retraining
-was within 1.46x -> 1.52x of the solver's error at worst (docs/TRAINING.md)."""
+the reflected light moved little: the network trained with them and fed unshadowed direct light was at
+worst 1.46x -> 1.52x the solver's error on the 26 evaluation scenes; fine-tuned on it, 1.498x
+(docs/TRAINING.md)."""
 SETTINGS = {"seen_rays": SEEN_RAYS, "direct_shadows": DIRECT_SHADOWS, "seen_bounces": SEEN_BOUNCES, "tail_ratio_max": TAIL_RATIO_MAX,
             "interleave": INTERLEAVE, "seed": SEED, "read_back": READ_BACK, "bounce_patch": BOUNCE_PATCH,
             "bounce_lattice": BOUNCE_LATTICE, "near_pieces": NEAR_PIECES, "shadow_offset": SHADOW_OFFSET,
