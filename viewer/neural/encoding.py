@@ -11,7 +11,7 @@ Four choices make a small network generalize beyond the layouts it was trained o
   monochrome and runs as a batch of three, so a pink wall is just a wall whose albedo differs between
   the three passes, and every training scene teaches three problems.
 - **Scale out.** Transport is linear in the emitted light too: each channel's inputs are divided by a
-  scale `s` (the mean direct radiance over the probes, shadows included) and the network's output is
+  scale `s` (the mean of the direct-light input's radiance over the probes) and the network's output is
   multiplied by it, so a lamp twice as bright gives exactly twice the light, whatever was trained.
 - **Direct light as an input; the probes' direct light computed, not learned.** The light arriving
   straight from the emitters is most of the field: one term per emitting lattice cell, times its
@@ -111,8 +111,9 @@ them a new scene skips tracing every probe's visibility to every lamp (val-00003
 the reflected light moved little: the network trained with them and fed unshadowed direct light was at
 worst 1.46x -> 1.52x the solver's error on the 26 evaluation scenes; fine-tuned on it, 1.498x
 (docs/TRAINING.md)."""
-SETTINGS = {"seen_rays": SEEN_RAYS, "direct_shadows": DIRECT_SHADOWS, "seen_bounces": SEEN_BOUNCES, "tail_ratio_max": TAIL_RATIO_MAX,
-            "interleave": INTERLEAVE, "seed": SEED, "read_back": READ_BACK, "bounce_patch": BOUNCE_PATCH,
+SETTINGS = {"seen_rays": SEEN_RAYS, "direct_shadows": DIRECT_SHADOWS, "seen_bounces": SEEN_BOUNCES,
+            "tail_ratio_max": TAIL_RATIO_MAX, "interleave": INTERLEAVE, "seed": SEED, "read_back": READ_BACK,
+            "bounce_patch": BOUNCE_PATCH,
             "bounce_lattice": BOUNCE_LATTICE, "near_pieces": NEAR_PIECES, "shadow_offset": SHADOW_OFFSET,
             "visibility_cells": VISIBILITY_CELLS, "sun_side": SUN_SIDE, "near_all": NEAR_ALL,
             "sight_seed_cells": SEED_CELLS, "sight_soft": SOFT}

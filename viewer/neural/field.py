@@ -113,7 +113,8 @@ class NeuralField:
         `reuse=False` encodes and runs everything afresh: what a new scene costs."""
         m = resolution or self.resolution
         clock = clock_now()
-        encoder = self.encoder(lo, hi, m) if reuse else Encoder(lo, hi, m, self.card.seen_rays, self.card.direct_shadows)
+        encoder = (self.encoder(lo, hi, m) if reuse
+                   else Encoder(lo, hi, m, self.card.seen_rays, self.card.direct_shadows))
         enc = encoder.encode(voxels, sun, blockers)
         encoded = clock_now()
         out = self._network(encoder, enc.inputs) if reuse else self.run(enc.inputs, partial(wall_taps, encoder.seen))
