@@ -31,6 +31,29 @@ def test_each_edit_changes_what_it_says_and_nothing_else():
         assert np.array_equal(edited[what].albedo, scene.albedo)
 
 
+def test_the_drag_keeps_each_group_in_the_room_and_on_its_surface():
+    """The benchmarks' drag moves a group a tenth of the room along the floor, wall or ceiling it rests
+    on, towards the centre: val-00000's lamp on its +x wall slides along z and stays in the room, where
+    a move along +x took it out; the Cornell box's lamp slides along its ceiling."""
+    from viewer.bench.edit_methods import moved_a_tenth
+    from viewer.ui.scene_edits import emitter_group
+
+    for scene in (share.validation_room(0), load("cornell")):
+        lo, hi = scene.bounds
+        for group in (emitter_group(scene), share.moved_group(scene)):
+            before = scene.triangles[scene.face_group == scene.group_index(group)].reshape(-1, 3)
+            moved = moved_a_tenth(scene, group)
+            after = moved.triangles[moved.face_group == moved.group_index(group)].reshape(-1, 3)
+            shift = (after - before).mean(axis=0)
+            assert np.isclose(np.abs(shift).sum(), 0.1 * (hi[0] - lo[0])) and shift[1] == 0, (scene.name, group)
+            assert np.all(after >= lo - 1e-9) and np.all(after <= hi + 1e-9), (scene.name, group)
+            flat = np.ptp(before, axis=0) < 1e-9
+            assert not np.any(flat & (np.abs(shift) > 0)), (scene.name, group)   # not off its surface
+    wall_lamp = share.validation_room(0)
+    lamp = wall_lamp.triangles[wall_lamp.face_group == wall_lamp.group_index("light")].reshape(-1, 3)
+    assert np.ptp(lamp[:, 0]) < 1e-9 and lamp[0, 0] > 0.8 * wall_lamp.bounds[1][0]   # on the +x wall
+
+
 def test_the_command_prints_every_edit_with_its_share(capsys):
     assert share.main(["cornell", "--repeats", "1"]) == 0
     rows = [line.split("|")[1:-1] for line in capsys.readouterr().out.splitlines()
