@@ -9,8 +9,9 @@ tracer names either one: which depends on the order its hierarchy tests them, so
 on the near side could be named the far side's face met from behind, which brings no light. Each face's
 reversed twin is found once per scene (`Scene.twins`), and a face met from behind that has one is
 named as its twin met from the front (`facing_face`): the sheet's near side, whichever of the two the
-tracer reported. Faces that share a plane without sharing corners (a quad and its reversed copy split
-along the other diagonal, a box's base on the floor) still tie, and the tracer's order settles them.
+tracer reported. Faces that share a plane without sharing corners (a PLY's quad and its reversed copy
+split along the other diagonal, a box's base on the floor) still tie, and the tracer's order settles them;
+an OBJ's reversed polygons are fanned alike so that they pair up (viewer.scene.obj).
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ from viewer.scene.geometry import NO_TWIN  # noqa: F401 - what a `twin` table of
 
 NO_FACE = -1
 """The face of a ray that meets nothing within its length."""
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def front_of(f, dx, dy, dz, e1, e2):
     """Whether a ray along d meets face f from the front: d . (e1 x e2) < 0, the DDA's test."""
