@@ -42,7 +42,6 @@ import numpy as np
 
 from viewer.neural.changes import same_voxels
 from viewer.probes import sh
-from viewer.rays.dda import BACKFACE
 from viewer.rays.packets import LANES
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import VoxelGrid
@@ -100,20 +99,20 @@ class SeenRays:
                 remap[match[match >= 0]] = np.flatnonzero(match >= 0)
                 before = (*before, previous._faces[2], remap)
         if before is None:
-            hits, face, t, self.traced = landing.kept_bundle(points, directions, None, None,
-                                                             lattice_packets(len(points), self.rays, seed))
+            landed = landing.kept_bundle(points, directions, None, None, lattice_packets(len(points), self.rays, seed),
+                                         none=self.count)
         else:   # the directions a subset of probes shares, read without a copy a probe
             distinct, sets = lattice_directions(len(points), self.rays, seed)
-            hits, face, t, self.traced = landing.kept_bundle(points, distinct, before, box, None, sets)
-        """`traced`: how many of the rays were traced (the others landed again)."""
-        self._faces = None if face is None else (face, t, hits)
+            landed = landing.kept_bundle(points, distinct, before, box, None, sets, none=self.count)
+        self.traced = landed.traced
+        """How many of the rays were traced (the others landed again)."""
+        self._faces = None if landed.faces is None else (landed.faces, landed.t, landed.hits)
         """(P, R) the face each ray met, its distance and the voxel it landed on, for the rays after a move."""
         self._voxels = voxels
-        self.open = 1.0 - (hits == BACKFACE).mean(axis=-1).reshape(-1).astype(np.float32)
+        self.open = (1.0 - landed.backs / self.rays).astype(np.float32)
         """(P,) the share of each probe's rays that leave it through the front of a surface or into the
         open: near 0 inside a solid, whose rays meet the backs of its faces."""
-        hits = hits.reshape(-1)
-        self.voxel = np.where(hits < 0, count, hits).astype(np.int32)
+        self.voxel = landed.sources.reshape(-1)
         """(P x R,) the voxel each ray lands on; `count` where it brings no light."""
         self.links = lattice_links(landing, points, None if before is None else (previous.links, box))
         """(3, m, m, m) bool on a cubic lattice (else None): whether the segment from each probe to its

@@ -44,41 +44,106 @@ def bundle(o, d, intersect, scene, faces, e1, e2, twin, v0, lo, h, n, first, tri
             out[p, k] = voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel)
 
 
+ORIGINS_A_TASK = 64
+"""Origins a thread takes at a time in `bundle_kept`: one Embree record a task rather than one an origin
+(13,824 of them for a 24^3 probe lattice)."""
+
+
 @numba.njit(cache=True, nogil=True, parallel=True)
-def bundle_kept(o, d, which, kept, box_lo, box_hi, old_hits, remap, intersect, scene, faces, e1, e2, twin, v0, lo, h,
-                n, first, triangle, voxel, out, face, t):
+def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, remap, intersect, scene, faces, e1, e2,
+                twin, v0, lo, h, n, first, triangle, voxel, out, face, t, none, sources, backs):
     """`_bundle` for directions d[which[p]] from origin p (d (S, D, 3)), keeping each ray's face and t:
-    with `kept`, a ray that does not pass through the box [box_lo, box_hi] before its hit (`face`, `t` as
-    they are) keeps them, and its voxel is the one it landed on before (`old_hits` (P, D), empty: looked
-    up again) under its new index (`remap`: each old voxel's, -1 where the voxel changed: looked up
-    again); the others are traced. (P,) how many rays of each origin were traced (the box test in the same
-    pass: apart, it read every ray again, 2.8 ms of a box moved in the Cornell box)."""
+    with `kept`, a ray that does not pass through the box [box_lo, box_hi] before its old hit
+    (`old_face`, `old_t`) keeps them, and its voxel is the one it landed on before (`old_hits` (P, D),
+    empty: looked up again) under its new index (`remap`: each old voxel's, -1 where the voxel changed:
+    looked up again); the others are traced. Also `sources`: the hits with `none` for a miss or a back
+    face, and `backs` (P,): how many of each origin's rays met a back face. Returns (P,) how many rays of
+    each origin were traced.
+
+    The box test in the same pass as the copy of the kept rays (apart, each read every ray again: 2.8 ms
+    of a box moved in the Cornell box), the ray first tested against the sphere around the box (a dot
+    product: most rays point elsewhere), the slab test with the directions' inverses made once: the kept
+    rays of a 24^3 lattice's 64 a probe 4.3 -> 2.7 ms on two cores."""
     traced = np.zeros(o.shape[0], np.int64)
     known = old_hits.shape[0] == o.shape[0]
-    for p in numba.prange(o.shape[0]):
-        record = embree.record()
-        row = d[which[p]]
+    inverse = np.empty_like(d)
+    for s in range(d.shape[0]):
         for k in range(d.shape[1]):
-            dx, dy, dz = row[k, 0], row[k, 1], row[k, 2]
-            if not kept or meets_box(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz,
-                                     FAR if face[p, k] == NO_FACE else t[p, k], box_lo, box_hi):
-                traced[p] += 1
-                f, th, _, _, front = first_face(intersect, scene, record, faces, e1, e2, twin, v0, o[p, 0], o[p, 1],
-                                                o[p, 2], dx, dy, dz, FAR)
-                face[p, k], t[p, k] = f, th
-            else:
-                if known:   # a miss or a back face stays one: the same face, met from the same side
-                    was = old_hits[p, k]
-                    now = was if was < 0 else remap[was]
-                    if was < 0 or now >= 0:
-                        out[p, k] = now
-                        continue
-                f, th, front = face[p, k], t[p, k], False
-                if f != NO_FACE:
-                    f, front = facing_face(f, dx, dy, dz, e1, e2, twin)
-            out[p, k] = voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, th, front, lo, h, n, first, triangle,
-                                 voxel)
+            for axis in range(3):
+                inverse[s, k, axis] = 1.0 / d[s, k, axis] if d[s, k, axis] != 0.0 else np.inf
+    centre, reach = 0.5 * (box_lo + box_hi), 0.0
+    if kept:
+        half = 0.5 * (box_hi - box_lo)
+        reach = half[0] * half[0] + half[1] * half[1] + half[2] * half[2]
+    for task in numba.prange((o.shape[0] + ORIGINS_A_TASK - 1) // ORIGINS_A_TASK):
+        record = embree.record()
+        for p in range(task * ORIGINS_A_TASK, min(o.shape[0], (task + 1) * ORIGINS_A_TASK)):
+            row, step = d[which[p]], inverse[which[p]]
+            ox, oy, oz = o[p, 0], o[p, 1], o[p, 2]
+            wx, wy, wz = centre[0] - ox, centre[1] - oy, centre[2] - oz
+            gap = wx * wx + wy * wy + wz * wz - reach   # <= 0: the origin is within the sphere
+            back = 0
+            for k in range(d.shape[1]):
+                dx, dy, dz = row[k, 0], row[k, 1], row[k, 2]
+                again = not kept
+                if kept:
+                    along = dx * wx + dy * wy + dz * wz   # the ray's line passes within the sphere
+                    if gap <= 0.0 or (along > 0.0 and along * along >= gap * (dx * dx + dy * dy + dz * dz)):
+                        again = meets_box_inverse(ox, oy, oz, step[k, 0], step[k, 1], step[k, 2], dx, dy, dz,
+                                                  FAR if old_face[p, k] == NO_FACE else old_t[p, k], box_lo, box_hi)
+                if again:
+                    traced[p] += 1
+                    f, th, _, _, front = first_face(intersect, scene, record, faces, e1, e2, twin, v0, ox, oy, oz,
+                                                    dx, dy, dz, FAR)
+                    face[p, k], t[p, k] = f, th
+                    hit = voxel_of(ox, oy, oz, dx, dy, dz, f, th, front, lo, h, n, first, triangle, voxel)
+                else:
+                    f, th = old_face[p, k], old_t[p, k]
+                    face[p, k], t[p, k] = f, th
+                    hit = dda.MISS - 1   # not known yet
+                    if known:   # a miss or a back face stays one: the same face, met from the same side
+                        was = old_hits[p, k]
+                        if was < 0 or remap[was] >= 0:
+                            hit = was if was < 0 else remap[was]
+                    if hit == dda.MISS - 1:
+                        front = False
+                        if f != NO_FACE:
+                            f, front = facing_face(f, dx, dy, dz, e1, e2, twin)
+                        hit = voxel_of(ox, oy, oz, dx, dy, dz, f, th, front, lo, h, n, first, triangle, voxel)
+                out[p, k] = hit
+                sources[p, k] = none if hit < 0 else hit
+                back += hit == dda.BACKFACE
+            backs[p] = back
     return traced
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def tallied(hits, none, sources, backs):
+    """`bundle_kept`'s `sources` and `backs` of (P, D) hits found otherwise."""
+    for p in numba.prange(hits.shape[0]):
+        back = 0
+        for k in range(hits.shape[1]):
+            hit = hits[p, k]
+            sources[p, k] = none if hit < 0 else hit
+            back += hit == dda.BACKFACE
+        backs[p] = back
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def meets_box_inverse(ox, oy, oz, ix, iy, iz, dx, dy, dz, far, lo, hi):
+    """`meets_box` with the direction's inverse (ix, iy, iz) given: products where it divided."""
+    near = 0.0
+    for axis in range(3):
+        start = ox if axis == 0 else (oy if axis == 1 else oz)
+        step = dx if axis == 0 else (dy if axis == 1 else dz)
+        inverse = ix if axis == 0 else (iy if axis == 1 else iz)
+        if step == 0.0:
+            if start < lo[axis] or start > hi[axis]:
+                return False
+        else:
+            a, b = (lo[axis] - start) * inverse, (hi[axis] - start) * inverse
+            near, far = max(near, min(a, b)), min(far, max(a, b))
+    return near <= far
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -16,13 +16,14 @@ minute of CPU on an empty cache), where the lookup below compiles in about a sec
 from __future__ import annotations
 
 from functools import cached_property
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
 from viewer.rays import dda, embree
 from viewer.rays.cast import TriangleCaster, embree_available
-from viewer.rays.landing import FAR, bundle, bundle_kept, bundle_packed, landed
+from viewer.rays.landing import FAR, bundle, bundle_kept, bundle_packed, landed, tallied
 from viewer.rays.packets import LANES, occluded8, packet
 
 
@@ -33,6 +34,23 @@ HAIR = 1e-6
 cell's face counts both cells."""
 HELD_EVERYWHERE = np.zeros((0, 0, 0), np.int32)
 """An `occupied` table of no cells: `empty_box` finds no box empty, so every segment is traced."""
+
+
+class Landed(NamedTuple):
+    """`VoxelRays.kept_bundle`'s rays, (P, D) for D rays from each of P origins."""
+
+    hits: np.ndarray
+    """int32: the voxel each ray met first, dda.MISS or dda.BACKFACE."""
+    faces: np.ndarray | None
+    """int32: the face each ray met (None where the rays are not traced through Embree from compiled code)."""
+    t: np.ndarray | None
+    """float64: how far each ray went to it (None as `faces`)."""
+    traced: int
+    """How many of the rays were traced (the others kept their face, `kept_bundle`'s `before`)."""
+    sources: np.ndarray
+    """int32: `hits` with the call's `none` where a ray met no front face: the row it gathers light from."""
+    backs: np.ndarray
+    """(P,) int64: how many of each origin's rays met a face from behind."""
 
 
 class VoxelRays:
@@ -108,27 +126,29 @@ class VoxelRays:
         return out
 
     def kept_bundle(self, origins: np.ndarray, directions: np.ndarray, before=None, box=None, packets=None,
-                    which: np.ndarray | None = None):
-        """`bundle_hits` for (P, D, 3) `directions`, with what a later call needs to keep them: (hits,
-        faces, t, traced): the hits, each ray's face and distance (None, None where the rays are not
-        traced through Embree from compiled code), and how many rays were traced. `before`: the (faces,
-        t) of the same rays in a scene where only the triangles in `box` ((lo, hi): their old and new
-        places, with room for a cell's neighbours) moved; a ray that does not pass through the box before
-        its old hit meets the same face at the same t, and only its voxel is looked up again in this
-        listing; the others are traced again. `before` may add (hits, remap): the voxel each ray landed on
-        then and the new index of each old voxel (-1 where it changed), so that a kept ray takes its old
-        voxel's new index without a lookup (the same voxel: its face did not move, nor did its cell's
-        surface). `packets`: (N, LANES) flat ray indices (origin x D +
-        ray, -1 for none) that cover every ray once, traced a packet at a time where all are traced
+                    which: np.ndarray | None = None, none: int = dda.MISS) -> "Landed":
+        """`bundle_hits` for (P, D, 3) `directions`, with what a later call needs to keep them (`Landed`).
+        `before`: the (faces, t) of the same rays in a scene where only the triangles in `box` ((lo, hi):
+        their old and new places, with room for a cell's neighbours) moved; a ray that does not pass
+        through the box before its old hit meets the same face at the same t, and only its voxel is looked
+        up again in this listing; the others are traced again. `before` may add (hits, remap): the voxel
+        each ray landed on then and the new index of each old voxel (-1 where it changed), so that a kept
+        ray takes its old voxel's new index without a lookup (the same voxel: its face did not move, nor
+        did its cell's surface). `packets`: (N, LANES) flat ray indices (origin x D + ray, -1 for none)
+        that cover every ray once, traced a packet at a time where all are traced
         (`landing.bundle_packed`): parallel rays from nearby origins, the same hits. `which`: (P,) the
-        row of `directions` (S, D, 3) each origin casts (None: one row each)."""
+        row of `directions` (S, D, 3) each origin casts (None: one row each). `none`: what `Landed.sources`
+        holds for a ray that meets no front face."""
         o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
         d = np.ascontiguousarray(directions, np.float64)
         which = (np.arange(len(o), dtype=np.int32) if which is None
                  else np.ascontiguousarray(which, np.int32))
         shape = (len(o), d.shape[1])
+        sources, backs = np.empty(shape, np.int32), np.empty(len(o), np.int64)
         if self.caster is None or self.caster.direct is None:
-            return self.bundle_hits(o, d[which]), None, None, shape[0] * shape[1]
+            out = self.bundle_hits(o, d[which])
+            tallied(out, none, sources, backs)
+            return Landed(out, None, None, shape[0] * shape[1], sources, backs)
         c, caster = self.cells, self.caster
         out = np.empty(shape, np.int32)
         face = np.empty(shape, np.int32)
@@ -139,19 +159,21 @@ class VoxelRays:
             bundle_packed(o, d.reshape(-1, 3), d.shape[1], packets, *caster.direct.packets, caster.faces, caster.e1,
                           caster.e2, caster.twin, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out.reshape(-1),
                           face.reshape(-1), t.reshape(-1))
-            return out, face, t, out.size
-        if before is None:   # every ray traced: a box that holds everything
-            lo, hi, kept = np.full(3, -np.inf), np.full(3, np.inf), False
+            tallied(out, none, sources, backs)
+            return Landed(out, face, t, out.size, sources, backs)
+        if before is None:   # every ray traced
+            lo, hi, kept, old_face, old_t = np.full(3, -np.inf), np.full(3, np.inf), False, face, t
         else:
-            face[:], t[:] = before[:2]
+            old_face, old_t = (np.ascontiguousarray(a) for a in before[:2])
             lo, hi, kept = np.asarray(box[0], np.float64), np.asarray(box[1], np.float64), True
         old_hits, remap = (before[2:] if before is not None and len(before) == 4
                            else (np.zeros((0, 0), np.int32), np.zeros(0, np.int32)))
-        traced = bundle_kept(o, d, which, kept, lo, hi, np.ascontiguousarray(old_hits, np.int32),
+        traced = bundle_kept(o, d, which, kept, lo, hi, old_face.astype(np.int32, copy=False),
+                             old_t.astype(np.float64, copy=False), np.ascontiguousarray(old_hits, np.int32),
                              np.ascontiguousarray(remap, np.int32), *caster.direct.handle, caster.faces, caster.e1,
                              caster.e2, caster.twin, caster.v0, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out, face,
-                             t)
-        return out, face, t, int(traced.sum())
+                             t, none, sources, backs)
+        return Landed(out, face, t, int(traced.sum()), sources, backs)
 
     def escapes(self, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """(R,) bool: a ray from each origin along one direction meets no surface (it leaves the scene)."""
