@@ -7,7 +7,7 @@ import pytest
 from viewer import scene as scenes
 from viewer.neural import encoding
 from viewer.neural.encoder import Encoder
-from viewer.neural.network_feed import WallTaps, encoding_walls, filtered, wall_taps
+from viewer.neural.network_feed import WallTaps, _walled_taps, encoding_walls, filtered, wall_taps
 from viewer.rays.voxels import voxelize
 
 
@@ -132,3 +132,19 @@ def test_the_shipped_network_gives_the_doorways_dark_room_its_true_light():
     truth = truth_sh(scene, points, 512, include_emitted=False)
     ours = NeuralField().solve(scene, include_emitted=False).interpolate(points)
     assert 0.9 <= ours[dark][:, 0].mean() / truth[dark][:, 0].mean() <= 1.1
+
+
+def test_only_the_probes_near_a_closed_link_are_walled_and_they_are_all_found():
+    # random walls on a small lattice: the probes whose taps differ, worked out for every probe, are the
+    # ones WallTaps finds among those near a closed link, with the same taps and scales
+    rng = np.random.default_rng(5)
+    m = 7
+    links = rng.random((3, m, m, m)) > 0.03
+    links[0, -1], links[1, :, -1], links[2, :, :, -1] = True, True, True
+    opened = rng.random((m, m, m)).astype(np.float32)
+    walled, differs, plain, taken = _walled_taps(links, opened.reshape(-1))
+    walls = WallTaps(links, opened)
+    np.testing.assert_array_equal(walls.rows, np.flatnonzero(differs))
+    np.testing.assert_array_equal(walls.sources, walled[differs])
+    np.testing.assert_allclose(walls.scale, np.maximum(plain, 1.0)[differs] / np.maximum(taken, 1.0)[differs])
+    assert 0 < len(walls.rows) < m ** 3
