@@ -321,28 +321,46 @@ def lattice_links(landing: VoxelRays, points: np.ndarray, kept=None) -> np.ndarr
     to the next along each axis crosses no surface (the last layer's links are True: `_open_box`
     repeats the faces); None where `points` are not a cubic lattice. `kept`: (the same lattice's links
     before some triangles moved, (lo, hi) a box around their old and new places): only the segments
-    that reach into the box are tested again."""
+    that reach into the box are tested again (found in one compiled pass: numpy's took 0.55 ms a move on a
+    24^3 lattice)."""
     side = round(len(points) ** (1.0 / 3.0))
     if side ** 3 != len(points) or side < 2:
         return None
-    grid = np.asarray(points, np.float64).reshape(side, side, side, 3)
-    links = np.ones((3, side, side, side), bool)
+    points = np.ascontiguousarray(points, np.float64)
     before, box = (None, None) if kept is None else kept
-    for axis in range(3):
-        here = [slice(None)] * 3
-        there = [slice(None)] * 3
-        here[axis], there[axis] = slice(0, side - 1), slice(1, side)
-        a, b = grid[tuple(here)], grid[tuple(there)]
-        test = np.ones(a.shape[:3], bool)
-        if before is not None and before.shape == links.shape:
-            links[(axis, *here)] = before[(axis, *here)]
-            low, high = np.minimum(a, b), np.maximum(a, b)
-            test = ((low[..., 0] <= box[1][0]) & (high[..., 0] >= box[0][0]) & (low[..., 1] <= box[1][1])
-                    & (high[..., 1] >= box[0][1]) & (low[..., 2] <= box[1][2]) & (high[..., 2] >= box[0][2]))
-        if test.any():
-            view = links[(axis, *here)]
-            view[test] = landing.segments_clear(a[test], b[test])
+    if before is not None and before.shape == (3, side, side, side):
+        links = before.copy()
+        test = _links_in_box(points.reshape(side, side, side, 3), np.asarray(box[0], np.float64),
+                             np.asarray(box[1], np.float64))
+    else:
+        links = np.ones((3, side, side, side), bool)
+        test = np.ones((3, side, side, side), bool)
+        test[0, -1], test[1, :, -1], test[2, :, :, -1] = False, False, False
+    flat = np.flatnonzero(test)
+    if len(flat):
+        start = flat % side ** 3
+        end = start + np.array([side * side, side, 1])[flat // side ** 3]
+        links.reshape(-1)[flat] = landing.segments_clear(points[start], points[end])
     return links
+
+
+@numba.njit(cache=True, nogil=True)
+def _links_in_box(grid, lo, hi):
+    """(3, m, m, m) bool: whether the segment from each probe of `grid` (m, m, m, 3) to the next along each
+    axis has its box overlap [lo, hi] (False for the last layer, which has no next)."""
+    m = grid.shape[0]
+    out = np.zeros((3, m, m, m), np.bool_)
+    for axis in range(3):
+        for i in range(m - (axis == 0)):
+            for j in range(m - (axis == 1)):
+                for k in range(m - (axis == 2)):
+                    i2, j2, k2 = i + (axis == 0), j + (axis == 1), k + (axis == 2)
+                    inside = True
+                    for c in range(3):
+                        a, b = grid[i, j, k, c], grid[i2, j2, k2, c]
+                        inside &= min(a, b) <= hi[c] and max(a, b) >= lo[c]
+                    out[axis, i, j, k] = inside
+    return out
 
 
 def _open_box(light: np.ndarray, weight: np.ndarray, links: np.ndarray) -> np.ndarray:
