@@ -19,17 +19,35 @@ NEAR_FIELD = 1.0 / np.pi
 """r^2 + A/pi: the near-field clamp of the transport kernel, so a probe next to a lamp stays finite."""
 def splat(points: np.ndarray, lo: np.ndarray, spacing: np.ndarray, m: int):
     """[(flat cell index (P,), weight (P,))] for the 8 cell centres around each point (weights sum to
-    1; clamped at the lattice's faces, so a wall on the scene's bounds stays in the boundary layer)."""
-    u = np.clip((points - lo) / spacing - 0.5, 0.0, m - 1)
-    i0 = np.minimum(np.floor(u).astype(np.int64), max(m - 2, 0))
-    f = u - i0
-    out = []
-    for corner in range(8):
-        bits = [(corner >> a) & 1 for a in range(3)]
-        index = [i0[:, a] + bits[a] for a in range(3)]
-        weight = np.prod([f[:, a] if bits[a] else 1.0 - f[:, a] for a in range(3)], axis=0)
-        out.append((np.minimum((index[0] * m + index[1]) * m + index[2], m ** 3 - 1), weight))
-    return out
+    1; clamped at the lattice's faces, so a wall on the scene's bounds stays in the boundary layer). In one
+    compiled pass (numpy's took 0.3 ms for a room's 2,311 voxels, three times a new geometry)."""
+    points = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+    index, weight = np.empty((8, len(points)), np.int64), np.empty((8, len(points)))
+    _splat(points, np.asarray(lo, np.float64).reshape(3), np.asarray(spacing, np.float64).reshape(3), int(m), index,
+           weight)
+    return list(zip(index, weight))
+
+
+@numba.njit(cache=True, nogil=True)
+def _splat(points, lo, spacing, m, index, weight):
+    top, last = max(m - 2, 0), m ** 3 - 1
+    for p in range(points.shape[0]):
+        i, fi = _corner(points[p, 0], lo[0], spacing[0], m, top)
+        j, fj = _corner(points[p, 1], lo[1], spacing[1], m, top)
+        k, fk = _corner(points[p, 2], lo[2], spacing[2], m, top)
+        for corner in range(8):
+            b0, b1, b2 = corner & 1, (corner >> 1) & 1, (corner >> 2) & 1
+            w = (fi if b0 else 1.0 - fi) * (fj if b1 else 1.0 - fj)
+            weight[corner, p] = w * (fk if b2 else 1.0 - fk)
+            index[corner, p] = min(((i + b0) * m + j + b1) * m + k + b2, last)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _corner(x, lo, spacing, m, top):
+    """The lower corner's index along one axis and the point's fraction past it."""
+    u = min(max((x - lo) / spacing - 0.5, 0.0), m - 1.0)
+    i = min(np.int64(np.floor(u)), top)
+    return i, u - i
 
 
 def lattice_cells(points: np.ndarray, lo: np.ndarray, spacing: np.ndarray, m: int) -> np.ndarray:

@@ -147,7 +147,7 @@ class Encoder:
         self.ray_seconds = 0.0
         geometry_changed = self._geometry is None or not self._geometry.fits(voxels)
         if geometry_changed:
-            self._geometry = LatticeGeometry(voxels, self.lo, self.hi, self.points)
+            self._geometry = LatticeGeometry(voxels, self.lo, self.hi, self.points, self._geometry)
             self.recomputed.append("geometry")
         # where only some triangles moved: the box around their old and new places, outside which the
         # seen rays and the shadow rays keep their answers

@@ -27,7 +27,11 @@ PLACE = slice(encoding.FEATURES.index("coord_x"), encoding.FEATURES.index("bounc
 class LatticeGeometry:
     """What the encoding takes from the voxels' geometry alone (positions, normals, areas) on one lattice."""
 
-    def __init__(self, voxels: VoxelGrid, lo: np.ndarray, hi: np.ndarray, points: np.ndarray):
+    def __init__(self, voxels: VoxelGrid, lo: np.ndarray, hi: np.ndarray, points: np.ndarray,
+                 previous: "LatticeGeometry | None" = None):
+        """`previous`: the same lattice's geometry for other voxels, whose coordinate and extent features
+        are these too (made again, they took 0.4 ms of a moved object's 0.8 here)."""
+        self.points = points
         self.position, self.normal, self.area = voxels.position, voxels.normal, voxels.area
         m = round(len(points) ** (1 / 3))
         spacing = (hi - lo) / m
@@ -50,9 +54,12 @@ class LatticeGeometry:
         encoding."""
         self.features[0] = self.density / self.cell_area
         self.features[1:4] = normals.T / self.cell_area
-        self.features[15:18] = ((points - lo) / (hi - lo) * 2.0 - 1.0).T
-        extent = hi - lo
-        self.features[18:21] = (extent / extent.max())[:, None]
+        if previous is not None and previous.points is points:
+            self.features[PLACE] = previous.features[PLACE]
+        else:
+            self.features[15:18] = ((points - lo) / (hi - lo) * 2.0 - 1.0).T
+            extent = hi - lo
+            self.features[18:21] = (extent / extent.max())[:, None]
         self.spacing = spacing
 
     def fits(self, voxels: VoxelGrid) -> bool:
