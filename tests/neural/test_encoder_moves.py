@@ -203,6 +203,7 @@ def test_after_a_move_the_seen_rays_land_where_rays_cast_afresh_do(name, group, 
         return voxels, encoding.Occluders(scene, voxels, "embree")
 
     voxels, blockers = occluders(scene)
+    voxels_before = voxels
     before = encoding.seen_rays(blockers, voxels, points)
     shifted = moved(scene, group, offset)
     voxels, after_blockers = occluders(shifted)
@@ -224,3 +225,12 @@ def test_after_a_move_the_seen_rays_land_where_rays_cast_afresh_do(name, group, 
     looked_up = SeenRays(after_blockers.landing, voxels.count, points, previous=before,
                          box=moved_box(blockers, after_blockers))
     assert np.array_equal(after.voxel, looked_up.voxel) and np.array_equal(after.open, looked_up.open)
+    # the previous rays' arrays updated in place, as the encoder drops them: the same rays, and the
+    # previous ones cannot serve again
+    again = encoding.seen_rays(blockers, voxels_before, points)
+    reused = encoding.seen_rays(after_blockers, voxels, points, again, moved_box(blockers, after_blockers),
+                                reuse=True)
+    assert again._faces is None and again.voxel is None
+    assert np.array_equal(reused.voxel, after.voxel) and np.array_equal(reused.open, after.open)
+    assert all(np.array_equal(a, b) for a, b in zip(reused._faces, after._faces))
+    assert reused.traced == after.traced

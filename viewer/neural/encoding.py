@@ -241,12 +241,14 @@ def landing_cells(scene, voxels: VoxelGrid, previous: dda.Cells | None = None) -
 
 
 def seen_rays(blockers: VoxelRays | None, voxels: VoxelGrid, points: np.ndarray, previous: SeenRays | None = None,
-              box=None, rays: int = SEEN_RAYS) -> SeenRays | None:
+              box=None, rays: int = SEEN_RAYS, reuse: bool = False) -> SeenRays | None:
     """The seen rays of the lattice `points` on `blockers`' landing listing, `rays` a probe; None without
-    `Occluders` (nothing is seen then: the seen features are zero). `previous`, `box`: see `SeenRays`."""
+    `Occluders` (nothing is seen then: the seen features are zero). `previous`, `box`, `reuse`: see
+    `SeenRays`."""
     if not isinstance(blockers, Occluders):
         return None
-    return SeenRays(blockers.landing, voxels.count, points, rays, previous=previous, box=box, voxels=voxels)
+    return SeenRays(blockers.landing, voxels.count, points, rays, previous=previous, box=box, voxels=voxels,
+                    reuse=reuse)
 
 
 def encode_scene(scene, resolution: int, voxel_resolution: int, lo=None, hi=None,

@@ -51,14 +51,16 @@ ORIGINS_A_TASK = 64
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, remap, intersect, scene, faces, e1, e2,
-                twin, v0, lo, h, n, first, triangle, voxel, out, face, t, none, sources, backs):
+                twin, v0, lo, h, n, first, triangle, voxel, out, face, t, none, sources, backs, in_place):
     """`_bundle` for directions d[which[p]] from origin p (d (S, D, 3)), keeping each ray's face and t:
     with `kept`, a ray that does not pass through the box [box_lo, box_hi] before its old hit
     (`old_face`, `old_t`) keeps them, and its voxel is the one it landed on before (`old_hits` (P, D),
     empty: looked up again) under its new index (`remap`: each old voxel's, -1 where the voxel changed:
     looked up again); the others are traced. Also `sources`: the hits with `none` for a miss or a back
     face, and `backs` (P,): how many of each origin's rays met a back face. Returns (P,) how many rays of
-    each origin were traced.
+    each origin were traced. `in_place`: `face`, `t` and `out` are `old_face`, `old_t` and `old_hits`, whose
+    kept rays' faces and distances are then neither read nor written (a kept ray past the sphere test
+    reads nothing but its old voxel).
 
     The box test in the same pass as the copy of the kept rays (apart, each read every ray again: 2.8 ms
     of a box moved in the Cornell box), the ray first tested against the sphere around the box (a dot
@@ -98,15 +100,15 @@ def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, re
                     face[p, k], t[p, k] = f, th
                     hit = voxel_of(ox, oy, oz, dx, dy, dz, f, th, front, lo, h, n, first, triangle, voxel)
                 else:
-                    f, th = old_face[p, k], old_t[p, k]
-                    face[p, k], t[p, k] = f, th
+                    if not in_place:
+                        face[p, k], t[p, k] = old_face[p, k], old_t[p, k]
                     hit = dda.MISS - 1   # not known yet
                     if known:   # a miss or a back face stays one: the same face, met from the same side
                         was = old_hits[p, k]
                         if was < 0 or remap[was] >= 0:
                             hit = was if was < 0 else remap[was]
                     if hit == dda.MISS - 1:
-                        front = False
+                        f, th, front = old_face[p, k], old_t[p, k], False
                         if f != NO_FACE:
                             f, front = facing_face(f, dx, dy, dz, e1, e2, twin)
                         hit = voxel_of(ox, oy, oz, dx, dy, dz, f, th, front, lo, h, n, first, triangle, voxel)

@@ -126,7 +126,7 @@ class VoxelRays:
         return out
 
     def kept_bundle(self, origins: np.ndarray, directions: np.ndarray, before=None, box=None, packets=None,
-                    which: np.ndarray | None = None, none: int = dda.MISS) -> "Landed":
+                    which: np.ndarray | None = None, none: int = dda.MISS, in_place: bool = False) -> "Landed":
         """`bundle_hits` for (P, D, 3) `directions`, with what a later call needs to keep them (`Landed`).
         `before`: the (faces, t) of the same rays in a scene where only the triangles in `box` ((lo, hi):
         their old and new places, with room for a cell's neighbours) moved; a ray that does not pass
@@ -138,7 +138,9 @@ class VoxelRays:
         that cover every ray once, traced a packet at a time where all are traced
         (`landing.bundle_packed`): parallel rays from nearby origins, the same hits. `which`: (P,) the
         row of `directions` (S, D, 3) each origin casts (None: one row each). `none`: what `Landed.sources`
-        holds for a ray that meets no front face."""
+        holds for a ray that meets no front face. `in_place`: `before`'s (faces, t, hits) become the
+        result's, updated where they change (their owner drops them: a move of a 24^3 lattice's rays then
+        reads and writes a third of the memory)."""
         o = np.ascontiguousarray(origins, np.float64).reshape(-1, 3)
         d = np.ascontiguousarray(directions, np.float64)
         which = (np.arange(len(o), dtype=np.int32) if which is None
@@ -150,9 +152,14 @@ class VoxelRays:
             tallied(out, none, sources, backs)
             return Landed(out, None, None, shape[0] * shape[1], sources, backs)
         c, caster = self.cells, self.caster
-        out = np.empty(shape, np.int32)
-        face = np.empty(shape, np.int32)
-        t = np.empty(shape, np.float64)
+        if in_place and before is not None and len(before) == 4:
+            face, t, out = before[0], before[1], before[2]
+            if not all(a.flags.c_contiguous and a.shape == shape and a.dtype == kind
+                       for a, kind in ((face, np.int32), (t, np.float64), (out, np.int32))):
+                raise ValueError("rays updated in place take C-contiguous (P, D) faces, distances and hits")
+        else:
+            out, face, t = np.empty(shape, np.int32), np.empty(shape, np.int32), np.empty(shape, np.float64)
+            in_place = False
         if before is None and packets is not None:
             if len(d) != len(o):
                 raise ValueError("rays in packets take a row of directions for each origin")
@@ -172,7 +179,7 @@ class VoxelRays:
                              old_t.astype(np.float64, copy=False), np.ascontiguousarray(old_hits, np.int32),
                              np.ascontiguousarray(remap, np.int32), *caster.direct.handle, caster.faces, caster.e1,
                              caster.e2, caster.twin, caster.v0, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out, face,
-                             t, none, sources, backs)
+                             t, none, sources, backs, in_place)
         return Landed(out, face, t, int(traced.sum()), sources, backs)
 
     def escapes(self, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:

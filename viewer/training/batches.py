@@ -67,7 +67,7 @@ class Batch:
 def mirror_links(links: torch.Tensor, axis: int) -> torch.Tensor:
     """(rooms, 3, X, Y, Z) links mirrored in world axis `axis`: the links along the other axes flip with
     their probes; those along `axis` join probes i and i + 1, which the mirror makes M - 2 - i and M - 1 - i
-    (the last layer's links stay True: `seen.lattice_links`)."""
+    (the last layer's links stay True: `seen_links.lattice_links`)."""
     dim = 2 + axis
     out = links.flip(dim)
     along = links[:, axis].narrow(axis + 1, 0, links.shape[dim] - 1).flip(axis + 1)
