@@ -44,6 +44,8 @@ def bundle(o, d, intersect, scene, faces, e1, e2, twin, v0, lo, h, n, first, tri
             out[p, k] = voxel_of(o[p, 0], o[p, 1], o[p, 2], dx, dy, dz, f, t, front, lo, h, n, first, triangle, voxel)
 
 
+UNKNOWN = -3
+"""A kept ray's voxel before it is found (neither a voxel, dda.MISS nor dda.BACKFACE)."""
 ORIGINS_A_TASK = 64
 """Origins a thread takes at a time in `bundle_kept`: one Embree record a task rather than one an origin
 (13,824 of them for a 24^3 probe lattice)."""
@@ -102,12 +104,12 @@ def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, re
                 else:
                     if not in_place:
                         face[p, k], t[p, k] = old_face[p, k], old_t[p, k]
-                    hit = dda.MISS - 1   # not known yet
+                    hit = UNKNOWN
                     if known:   # a miss or a back face stays one: the same face, met from the same side
                         was = old_hits[p, k]
                         if was < 0 or remap[was] >= 0:
                             hit = was if was < 0 else remap[was]
-                    if hit == dda.MISS - 1:
+                    if hit == UNKNOWN:
                         f, th, front = old_face[p, k], old_t[p, k], False
                         if f != NO_FACE:
                             f, front = facing_face(f, dx, dy, dz, e1, e2, twin)
