@@ -153,17 +153,10 @@ def meets_box_inverse(ox, oy, oz, ix, iy, iz, dx, dy, dz, far, lo, hi):
 @numba.njit(cache=True, nogil=True, inline="always")
 def meets_box(ox, oy, oz, dx, dy, dz, far, lo, hi):
     """Whether o + s d for s in [0, far] passes through the box [lo, hi] (a slab test)."""
-    near = 0.0
-    for axis in range(3):
-        start = ox if axis == 0 else (oy if axis == 1 else oz)
-        step = dx if axis == 0 else (dy if axis == 1 else dz)
-        if step == 0.0:
-            if start < lo[axis] or start > hi[axis]:
-                return False
-        else:
-            a, b = (lo[axis] - start) / step, (hi[axis] - start) / step
-            near, far = max(near, min(a, b)), min(far, max(a, b))
-    return near <= far
+    ix = 1.0 / dx if dx != 0.0 else np.inf
+    iy = 1.0 / dy if dy != 0.0 else np.inf
+    iz = 1.0 / dz if dz != 0.0 else np.inf
+    return meets_box_inverse(ox, oy, oz, ix, iy, iz, dx, dy, dz, far, lo, hi)
 
 
 PACKETS_A_TASK = 64
