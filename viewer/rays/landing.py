@@ -66,8 +66,9 @@ def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, re
 
     The box test in the same pass as the copy of the kept rays (apart, each read every ray again: 2.8 ms
     of a box moved in the Cornell box), the ray first tested against the sphere around the box (a dot
-    product: most rays point elsewhere), the slab test with the directions' inverses made once: the kept
-    rays of a 24^3 lattice's 64 a probe 4.3 -> 2.7 ms on two cores."""
+    product: most rays point elsewhere), the slab test with the directions' inverses made once: val-00001's
+    moved box, 885k rays of which 16k are traced, 9.2 -> 5.1 ms on two cores (the copy of the kept faces
+    that came before the pass included)."""
     traced = np.zeros(o.shape[0], np.int64)
     known = old_hits.shape[0] == o.shape[0]
     inverse = np.empty_like(d)
