@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from viewer.neural import encoding
-from viewer.neural.network_feed import FILTERED, feed, filtered
+from viewer.neural.network_feed import FILTERED, feed, filtered_products
 
 _OPEN, _SEEN, _BOUNCE, _DIRECT = encoding.OPEN, encoding.SEEN.start, encoding.BOUNCE.start, encoding.DIRECT.start
 HEAD = "head"
@@ -89,7 +89,7 @@ def run_overlapped(session, inputs: np.ndarray, kernels: np.ndarray, walls, prev
 
     def products() -> dict[str, np.ndarray]:
         taps = walls() if callable(walls) else walls
-        return {name: filtered(inputs, part, kernels, taps) for name, part in FILTERED.items()}
+        return filtered_products(inputs, kernels, taps)
 
     made = _FILTERS.submit(products)
     head = _graph(session, fed)
