@@ -112,6 +112,12 @@ class FaceVoxels:
         return Voxelization(grid, faces, keys, tint)
 
 
+INSERTION_SORT = 32
+"""`_grouped` orders a voxel's pairs of up to this many faces in place, one by one, and sorts longer ones:
+numpy's sort a voxel, each a small array of its own, took half the pass (200k pairs of 64^3 voxels
+48 -> 24 ms, a box room's 3,000 in 24^3 voxels 0.39 -> 0.29 ms; the same order)."""
+
+
 @numba.njit(cache=True, nogil=True)
 def _grouped(key, face, area, moment, normals, bound):
     """The pairs grouped by voxel key (keys in [0, `bound`)): (keys (K,) ascending, each pair's voxel (Q,),
@@ -153,10 +159,17 @@ def _grouped(key, face, area, moment, normals, bound):
         r = inverse[q]
         order[slot[r]] = q
         slot[r] += 1
-    for r in range(count):
-        row = order[first[r]:first[r + 1]]
-        if len(row) > 1:
+    for r in range(count):   # each voxel's pairs in order of face (a voxel holds one pair a face)
+        if first[r + 1] - first[r] > INSERTION_SORT:
+            row = order[first[r]:first[r + 1]]
             row[:] = row[np.argsort(face[row])]
+            continue
+        for i in range(first[r] + 1, first[r + 1]):
+            q, j = order[i], i
+            while j > first[r] and face[order[j - 1]] > face[q]:
+                order[j] = order[j - 1]
+                j -= 1
+            order[j] = q
     return keys, inverse, total, moments, normal, first, order
 
 
