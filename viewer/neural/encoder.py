@@ -154,8 +154,8 @@ class Encoder:
         box = None if not shadows_changed or self._shadows is None else moved_box(self._shadows.blockers, blockers)
         if geometry_changed or shadows_changed:
             clock = time.perf_counter()
-            self._seen = encoding.seen_rays(blockers, voxels, self.points, self._seen, box, self.rays,
-                                            reuse=True)   # the previous rays are dropped
+            previous, self._seen = self._seen, None   # dropped: made into the new ones (none if that fails)
+            self._seen = encoding.seen_rays(blockers, voxels, self.points, previous, box, self.rays, reuse=True)
             self.ray_seconds = time.perf_counter() - clock
         if shadows_changed:
             self._shadows = LatticeShadows(blockers, self.points, self.lo, self._geometry.spacing,
