@@ -255,17 +255,12 @@ def _walled(inputs, firsts, opened, weights, rows, cells, local, scale, out):
     parts, passes, count = out.shape[0], out.shape[1], out.shape[2]
     width = parts * count
     flat = inputs.reshape(passes, inputs.shape[1], inputs.shape[2] * inputs.shape[3] * inputs.shape[4])
-    light = np.empty((passes, cells.shape[0], width), np.float32)
-    share = np.empty((passes, cells.shape[0]), np.float32)
+    light = np.empty((passes, cells.shape[0], width + 1), np.float32)   # the open share last
     for job in numba.prange(passes * (width + 1)):
         b, row = job // (width + 1), job % (width + 1)
         source = flat[b, opened] if row == width else flat[b, firsts[row // count] + row % count]
         for i in range(cells.shape[0]):
-            value = source[cells[i]]
-            if row == width:
-                share[b, i] = value
-            else:
-                light[b, i, row] = value
+            light[b, i, row] = source[cells[i]]
     target = out.reshape(parts, passes, count, flat.shape[2])
     taps = np.ascontiguousarray(weights.T)   # (27, count): a tap's weights side by side
     blocks = (rows.shape[0] + WALLED_ROWS - 1) // WALLED_ROWS
@@ -276,7 +271,8 @@ def _walled(inputs, firsts, opened, weights, rows, cells, local, scale, out):
             totals[:] = 0.0
             for t in range(27):
                 q = local[s, t]
-                taken, values = share[b, q], light[b, q]
+                values = light[b, q]
+                taken = values[width]
                 for f in range(parts):
                     for c in range(count):
                         totals[f * count + c] += taps[t, c] * values[f * count + c] * taken

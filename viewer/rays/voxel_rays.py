@@ -171,12 +171,11 @@ class VoxelRays:
         if before is None:   # every ray traced
             lo, hi, kept, old_face, old_t = np.full(3, -np.inf), np.full(3, np.inf), False, face, t
         else:
-            old_face, old_t = (np.ascontiguousarray(a) for a in before[:2])
+            old_face, old_t = np.ascontiguousarray(before[0], np.int32), np.ascontiguousarray(before[1], np.float64)
             lo, hi, kept = np.asarray(box[0], np.float64), np.asarray(box[1], np.float64), True
         old_hits, remap = (before[2:] if before is not None and len(before) == 4
                            else (np.zeros((0, 0), np.int32), np.zeros(0, np.int32)))
-        traced = bundle_kept(o, d, which, kept, lo, hi, old_face.astype(np.int32, copy=False),
-                             old_t.astype(np.float64, copy=False), np.ascontiguousarray(old_hits, np.int32),
+        traced = bundle_kept(o, d, which, kept, lo, hi, old_face, old_t, np.ascontiguousarray(old_hits, np.int32),
                              np.ascontiguousarray(remap, np.int32), *caster.direct.handle, caster.faces, caster.e1,
                              caster.e2, caster.twin, caster.v0, c.lo, c.h, c.n, c.first, c.triangle, c.voxel, out, face,
                              t, none, sources, backs, in_place)
