@@ -27,11 +27,13 @@ solver's probes within 1.1% at three quarters of a voxel on the Cornell box, pap
 CornellBox-Original (four bounces and the tail: 0.989-1.004 of their mean), and fall 1-4.6% short at
 half a voxel (0.954-0.990), where the probes nearest a wall, half a lattice cell from it, see the wall
 in half their directions and L2 SH spreads that over the lobe; a whole voxel overshoots (1.002-1.010)."""
-BOUNCE_LATTICE = 2
-"""`bounce_sh` gathers on a lattice this many times coarser than the probes' and interpolates: the
-bounce is smooth, and the coarse lattice is 8x cheaper (measured on 20 v2 rooms, the best-scaled
-one-bounce DC is 37% off the solver's reflected light at 12^3 interpolated, 41% at 24^3, where each
-room's mean is 66% off)."""
+BOUNCE_LATTICE = 3
+"""`bounce_sh` and `Bounce.gathered` gather on a lattice this many times coarser than the probes' and
+interpolate: the bounce is smooth (measured on 20 v2 rooms, the best-scaled one-bounce DC is 37% off the
+solver's reflected light at 12^3 interpolated, 41% at 24^3, where each room's mean is 66% off). A 24^3
+lattice gathers at 8^3 (encoding version 14; 12^3 before): 3.4x fewer points, which every edit pays for
+(the unshadowed gather of all the surfaces' light), and the network fine-tuned on it keeps every scene's
+reflected light within 1.5x the solver's error (docs/TRAINING.md)."""
 
 
 def bounce_sh(voxels: VoxelGrid, direct: np.ndarray, lo: np.ndarray, hi: np.ndarray, m: int) -> np.ndarray:
