@@ -97,16 +97,20 @@ class WallTaps:
         walled, differs, plain_weight, walled_weight = _walled_taps(links, opened, near)
         self.rows = near[differs]
         """(S,) the probes (flat, x slowest) some of whose taps differ from the plain filter's."""
-        self.sources = np.ascontiguousarray(walled[differs])
-        """(S, 27) the probe each of their taps takes, in the kernel's flat order."""
         self.scale = (np.maximum(plain_weight[differs], 1.0)
                       / np.maximum(walled_weight[differs], 1.0)).astype(np.float32)
         """(S,) the graph's open-share average over each probe's plain taps (at least 1/27), over the one
         its taps take."""
-        self.cells, local = np.unique(self.sources, return_inverse=True)
+        sources = walled[differs]
+        self.cells, local = np.unique(sources, return_inverse=True)
         """(T,) the probes their taps take, each once: `_walled` reads their light into one block first."""
-        self.local = np.ascontiguousarray(local.reshape(self.sources.shape), np.int32)
+        self.local = np.ascontiguousarray(local.reshape(sources.shape), np.int32)
         """(S, 27) each tap's place among `cells`."""
+
+    @property
+    def sources(self) -> np.ndarray:
+        """(S, 27) the probe each of their taps takes, in the kernel's flat order."""
+        return self.cells[self.local]
 
 
 _last_walls: tuple = (None, None)
