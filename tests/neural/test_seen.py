@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from viewer.neural import encoding
-from viewer.neural.seen import INTERLEAVE, SEED, SEEN_RAYS, interleaved_lattices, lattice_packets, lattice_rays
+from viewer.neural.seen import (CHAIN_EVERY, INTERLEAVE, SEED, SEEN_RAYS, interleaved_lattices, lattice_packets,
+                                lattice_rays)
 from viewer.probes import sh
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.cast import embree_available
@@ -123,6 +124,46 @@ def test_the_rays_gather_each_probes_sum_of_basis_times_radiance():
         found = rays.gathered(radiance)
         assert found.shape == (len(points), 9, channels) and np.abs(expected).max() > 0.1
         np.testing.assert_allclose(found, expected, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("corner", [(0, 0, 0), (2, 1, 3)])
+def test_the_later_bounces_rays_spread_evenly_over_every_block(corner):
+    """The seen light's later bounces gather each probe's first rays alone (one in CHAIN_EVERY): every
+    3x3x3 block, which the filter after each gather averages, still takes evenly spread directions, one
+    in each of its count of equal-area bands of heights, and each probe's own look all around."""
+    side, rays = 8, SEEN_RAYS
+    first = interleaved_lattices(side, rays, SEED)[:, :rays // CHAIN_EVERY]
+    n = INTERLEAVE ** 3 * rays
+    turn = np.linalg.lstsq(sh.sphere_directions(n)[0], sh.sphere_directions(n, seed=SEED)[0], rcond=None)[0]
+    found = block(first, side, corner) @ np.linalg.inv(turn)
+    count = len(found)
+    assert count == INTERLEAVE ** 3 * rays // CHAIN_EVERY
+    bands = np.floor((1.0 - found[:, 2]) / 2.0 * count).astype(int)
+    assert np.array_equal(np.sort(bands), np.arange(count))
+    assert np.abs(first.mean(axis=1)).max() < 0.2
+
+
+def test_a_later_bounces_gather_takes_the_first_rays_weighted_as_the_whole():
+    """`SeenRays.gathered(part=True)`: each probe's first rays alone, each weighted CHAIN_EVERY times its
+    share of the whole; over the lattice, light of one radiance on every voxel has the same DC either way
+    (to the few rays' noise)."""
+    from viewer.neural.seen import SeenRays
+
+    scene = load("cornell")
+    voxels = voxelize(scene, 12)
+    lo, hi = scene.bounds
+    points = ProbeGrid.positions_for(lo, hi, 6).reshape(-1, 3)
+    rays = SeenRays(encoding.occluders(scene, voxels).landing, voxels.count, points, SEEN_RAYS)
+    radiance = np.random.default_rng(2).random((voxels.count, 3)).astype(np.float32)
+    padded = np.vstack([radiance, np.zeros((1, 3), np.float32)])
+    _, basis, sets = lattice_rays(len(points), SEEN_RAYS, SEED)
+    part = SEEN_RAYS // CHAIN_EVERY
+    landed = padded[rays.voxel.reshape(len(points), SEEN_RAYS)[:, :part]]
+    expected = CHAIN_EVERY * np.einsum("pbr,prc->pbc", basis[sets][:, :, :part].astype(np.float64), landed)
+    np.testing.assert_allclose(rays.gathered(radiance, part=True), expected, rtol=1e-5, atol=1e-6)
+    uniform = np.ones((voxels.count, 3), np.float32)
+    whole, first = rays.gathered(uniform)[:, 0].sum(), rays.gathered(uniform, part=True)[:, 0].sum()
+    assert whole > 0 and abs(first / whole - 1.0) < 0.02
 
 
 @pytest.mark.parametrize("side", [24, 13])

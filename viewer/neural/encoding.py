@@ -59,8 +59,8 @@ from viewer.rays.voxels import VoxelGrid, face_facing
 
 # The features' parts, re-exported: callers read them as `encoding.<name>`.
 from viewer.neural.bounce import BOUNCE_LATTICE, BOUNCE_PATCH, READ_BACK, Bounce, bounce_sh  # noqa: F401
-from viewer.neural.seen import (INTERLEAVE, SEED, SEEN_BOUNCES, SEEN_RAYS, TAIL_RATIO_MAX, SeenRays,  # noqa: F401
-                                seen_light)
+from viewer.neural.seen import (CHAIN_EVERY, INTERLEAVE, SEED, SEEN_BOUNCES, SEEN_RAYS, TAIL_RATIO_MAX,  # noqa: F401
+                                SeenRays, seen_light)
 from viewer.neural.irradiance import (emitter_irradiance_rows, sun_irradiance, surface_points,  # noqa: F401
                                       voxel_direct)
 from viewer.neural.direct import (NEAR_ALL, NEAR_FIELD, NEAR_PIECES, Pieces, emitter_sh,  # noqa: F401
@@ -114,6 +114,7 @@ the reflected light moved little: the network trained with them and fed unshadow
 worst 1.46x -> 1.52x the solver's error on the 26 evaluation scenes; fine-tuned on it, 1.498x
 (docs/TRAINING.md)."""
 SETTINGS = {"seen_rays": SEEN_RAYS, "direct_shadows": DIRECT_SHADOWS, "seen_bounces": SEEN_BOUNCES,
+            "chain_every": CHAIN_EVERY,
             "tail_ratio_max": TAIL_RATIO_MAX, "interleave": INTERLEAVE, "seed": SEED, "read_back": READ_BACK,
             "bounce_patch": BOUNCE_PATCH,
             "bounce_lattice": BOUNCE_LATTICE, "near_pieces": NEAR_PIECES, "shadow_offset": SHADOW_OFFSET,

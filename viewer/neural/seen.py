@@ -27,8 +27,9 @@ and gathered again. On 20 validation rooms, against the solver's reflected light
 30.0%. So two bounces carry all that these rays can of the light's shape; its amount needs more where the
 walls reflect much (SEEN_BOUNCES).
 
-Kept per geometry (`SeenRays`): the rays are cast once; a light or colour edit is two gathers of the
-voxels' new light, each a (P, 9, R) x (P, R, 3) product. A moved object or lamp casts again only the rays
+Kept per geometry (`SeenRays`): the rays are cast once; a light or colour edit gathers the voxels' new
+light again, each gather a (P, 9, R) x (P, R, 3) product (the bounces that only feed the next one on a
+quarter of the rays: CHAIN_EVERY). A moved object or lamp casts again only the rays
 that pass through the box around its old and new places; the others keep the face they met and are
 landed again on the new voxels.
 """
@@ -69,6 +70,14 @@ TAIL_RATIO_MAX = 0.95
 geometric tail's ratio): past it the tail's 1 / (1 - r) would grow without bound."""
 SEED = 0x5EE
 """The directions' rotation: the same in training and in the viewer."""
+CHAIN_EVERY = 4
+"""The bounces after the first that only feed the next one gather one in CHAIN_EVERY of each probe's
+rays (`SeenRays.gathered`'s `part`: every CHAIN_EVERY-th along its spiral, which its directions list
+first); the first bounce and the last gather, of every later bounce's light together, take them all.
+The filter after each gather averages 27 probes' rays: the network's reflected light moved by at most
+0.01x the solver's error in every evaluation scene (every bounce on a quarter of the rays took val-00012
+from 1.497x to 1.520x), and a gather of a quarter takes 0.55-0.62 ms where all take 1.03-1.10 (24^3
+probes, two cores): an albedo edit 0.1-0.9 ms sooner."""
 
 
 class SeenRays:
@@ -144,15 +153,17 @@ class SeenRays:
         out = open_box(light.reshape(side, side, side, -1), self.open.reshape(side, side, side), self.links)
         return out.reshape(shape)
 
-    def gathered(self, radiance: np.ndarray) -> np.ndarray:
+    def gathered(self, radiance: np.ndarray, part: bool = False) -> np.ndarray:
         """(P, 9, C) the light of the voxels leaving with `radiance` (K, C), as the rays see it (one
-        compiled pass over the rays: half the time of a fancy-indexed copy and a batched product)."""
+        compiled pass over the rays: half the time of a fancy-indexed copy and a batched product).
+        `part`: each probe's first rays alone (one in CHAIN_EVERY, `part_basis`)."""
         radiance = np.asarray(radiance, np.float32)
         channels = radiance.shape[1]
         padded = np.zeros((len(radiance) + 1, -(-channels // 3) * 3), np.float32)   # a row for no light
         padded[:-1, :channels] = radiance
         voxel = self.voxel.reshape(self.probes, self.rays)
-        parts = [_gathered(voxel, self._sets, self._basis, np.ascontiguousarray(padded[:, c:c + 3]))
+        basis = part_basis(self.probes, self.rays, self.seed) if part else self._basis
+        parts = [_gathered(voxel, self._sets, basis, np.ascontiguousarray(padded[:, c:c + 3]))
                  for c in range(0, padded.shape[1], 3)]
         return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2))[:, :, :channels]
 
@@ -175,17 +186,22 @@ def seen_light(rays: SeenRays, bounce, albedo: np.ndarray, leaving: np.ndarray,
     network had to guess the rest from the albedo it sees (it gave 0.43x the truth); with the tail the
     seen light is 22% off the solver's in such rooms where two bounces were 45% off (3 rooms, best gain:
     1.67 for two bounces, 0.97 with the tail), and in 20 validation rooms 29.3% where two bounces were
-    29.5% (best gain 0.99 against 1.12)."""
+    29.5% (best gain 0.99 against 1.12).
+
+    The first bounce is gathered on every ray, the later ones on a quarter of them (CHAIN_EVERY), and the
+    seen light is the first bounce's gather plus one gather of every later bounce's light together."""
     leaving = np.asarray(leaving, np.float32)
-    surface = leaving.copy()
+    once = rays.gathered(leaving)
+    later = np.zeros_like(leaving)
     before = leaving
     for step in range(1, bounces):
-        reflected = bounce.reflected(albedo, rays.filtered(rays.gathered(before)))
+        gathered = once if step == 1 else rays.gathered(before, part=True)
+        reflected = bounce.reflected(albedo, rays.filtered(gathered))
         if step == bounces - 1:
             reflected = reflected / (1.0 - tail_ratio(bounce.area, reflected, before)).astype(np.float32)
-        surface += reflected
+        later += reflected
         before = reflected
-    return rays.gathered(surface), surface
+    return once + rays.gathered(later), leaving + later
 
 
 def tail_ratio(area: np.ndarray, light: np.ndarray, before: np.ndarray) -> np.ndarray:
@@ -211,6 +227,16 @@ def lattice_rays(count: int, rays: int, seed: int) -> tuple[np.ndarray, np.ndarr
     for array in (directions, basis):
         array.flags.writeable = False
     return directions, basis, sets
+
+
+@lru_cache(maxsize=2)
+def part_basis(count: int, rays: int, seed: int) -> np.ndarray:
+    """(S, 9, rays / CHAIN_EVERY) `lattice_rays`' SH weights of each set's first rays, times CHAIN_EVERY: one
+    in CHAIN_EVERY along the set's spiral (`chain_first`)."""
+    _, basis, _ = lattice_rays(count, rays, seed)
+    out = np.ascontiguousarray(basis[:, :, :rays // CHAIN_EVERY] * np.float32(CHAIN_EVERY), np.float32)
+    out.flags.writeable = False
+    return out
 
 
 @lru_cache(maxsize=2)
@@ -267,10 +293,22 @@ def interleaved_lattices(side: int, rays: int, seed: int) -> np.ndarray:
 
 def interleaved_subsets(rays: int, seed: int) -> np.ndarray:
     """(INTERLEAVE^3, rays, 3): the subsets of the interleaved lattice, subset s every INTERLEAVE^3-th
-    direction from offset s."""
+    direction from offset s (in `chain_first`'s order)."""
     n = INTERLEAVE ** 3
     whole, _ = sh.sphere_directions(n * rays, seed=seed)
-    return np.stack([whole[offset::n] for offset in range(n)])
+    return chain_first(np.stack([whole[offset::n] for offset in range(n)]))
+
+
+def chain_first(sets: np.ndarray) -> np.ndarray:
+    """(S, R, 3) sets of directions, each along its spiral, reordered so that set s lists first its every
+    CHAIN_EVERY-th direction from offset s mod CHAIN_EVERY (the rays the seen light's later bounces
+    gather), then the others. On an interleaved lattice each probe's first rays are then a band of its
+    spiral that still looks all around, and the 27 probes of a 3x3x3 block take evenly spread directions
+    together (27 of every 27 x CHAIN_EVERY along the lattice's spiral), which the filter after the gather
+    averages."""
+    orders = np.stack([np.argsort((np.arange(sets.shape[1]) - s) % CHAIN_EVERY, kind="stable")
+                       for s in range(CHAIN_EVERY)])
+    return np.ascontiguousarray(np.take_along_axis(sets, orders[np.arange(len(sets)) % CHAIN_EVERY, :, None], axis=1))
 
 
 def interleaved_sets(side: int) -> np.ndarray:
@@ -290,7 +328,7 @@ def turned_lattices(count: int, rays: int, seed: int) -> np.ndarray:
         np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
         np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
         np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)  # (P, 3, 3)
-    return np.einsum("pij,rj->pri", rotation, lattice)
+    return chain_first(np.einsum("pij,rj->pri", rotation, lattice))
 
 
 GATHER_BLOCK = 64
@@ -304,7 +342,7 @@ def _gathered(voxel, sets, basis, radiance):
     rays' radiance is read into a buffer, and each coefficient is a dot product along the rays that
     vectorizes; three colours fixed at compile time unroll their loops: 64 rays from a 24^3 lattice
     1.85 -> 1.25 ms on two cores, where the colours were counted at run time."""
-    probes, rays = voxel.shape
+    probes, rays = voxel.shape[0], basis.shape[2]   # each probe's first `rays`
     out = np.empty((probes, 9, 3), np.float32)
     for block in numba.prange((probes + GATHER_BLOCK - 1) // GATHER_BLOCK):
         values = np.empty((3, rays), np.float32)
