@@ -46,12 +46,8 @@ def bundle(o, d, intersect, scene, faces, e1, e2, twin, v0, lo, h, n, first, tri
 
 UNKNOWN = -3
 """A kept ray's voxel before it is found (neither a voxel, dda.MISS nor dda.BACKFACE)."""
-ORIGINS_A_TASK = 64
-"""Origins a thread takes at a time in `bundle_kept`: one Embree record a task rather than one an origin
-(13,824 of them for a 24^3 probe lattice)."""
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
 def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, remap, intersect, scene, faces, e1, e2,
                 twin, v0, lo, h, n, first, triangle, voxel, out, face, t, none, sources, backs, in_place):
     """`_bundle` for directions d[which[p]] from origin p (d (S, D, 3)), keeping each ray's face and t:
@@ -64,61 +60,138 @@ def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, re
     kept rays' faces and distances are then neither read nor written (a kept ray past the sphere test
     reads nothing but its old voxel).
 
-    The box test in the same pass as the copy of the kept rays (apart, each read every ray again: 2.8 ms
-    of a box moved in the Cornell box), the ray first tested against the sphere around the box (a dot
-    product: most rays point elsewhere), the slab test with the directions' inverses made once: val-00001's
-    moved box, 885k rays of which 16k are traced, 9.2 -> 5.1 ms on two cores (the copy of the kept faces
-    that came before the pass included)."""
-    traced = np.zeros(o.shape[0], np.int64)
+    Three passes: every ray's old voxel under its new index, and whether its line passes within the
+    sphere around the box (a dot product: most rays point elsewhere); then the rays near the box or whose
+    voxel changed, listed and shared evenly among the threads, tested against the box itself and traced
+    or looked up again; then each origin's tallies. (In one pass over the origins, the rays to trace,
+    which bunch up in the origins near the box, fell to one thread: val-00001's moved box, 885k rays of
+    which 16k are traced, 4.8 -> 2.5 ms on two cores.)"""
+    count = d.shape[1]
     known = old_hits.shape[0] == o.shape[0]
-    inverse = np.empty_like(d)
-    for s in range(d.shape[0]):
-        for k in range(d.shape[1]):
-            for axis in range(3):
-                inverse[s, k, axis] = 1.0 / d[s, k, axis] if d[s, k, axis] != 0.0 else np.inf
     centre, reach = 0.5 * (box_lo + box_hi), 0.0
     if kept:
         half = 0.5 * (box_hi - box_lo)
-        reach = half[0] * half[0] + half[1] * half[1] + half[2] * half[2]
-    for task in numba.prange((o.shape[0] + ORIGINS_A_TASK - 1) // ORIGINS_A_TASK):
+        reach = float(half[0] * half[0] + half[1] * half[1] + half[2] * half[2])
+    near = np.empty((o.shape[0], count), np.bool_)
+    listed = _kept_voxels(o, d, which, kept, centre, reach, old_hits, remap, known, old_face, old_t, out, face, t,
+                          in_place, near, none, sources, backs)
+    starts = np.zeros(o.shape[0] + 1, np.int64)
+    starts[1:] = np.cumsum(listed)
+    rays = _listed(near, starts)
+    met, backed = np.zeros(rays.shape[0], np.bool_), np.zeros(rays.shape[0], np.int64)
+    _again(o, d, which, kept, box_lo, box_hi, old_face, old_t, rays, intersect, scene, faces, e1, e2, twin, v0, lo, h,
+           n, first, triangle, voxel, out, face, t, none, sources, met, backed)
+    return _tallies(starts, met, backed, backs)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _kept_voxels(o, d, which, kept, centre, reach, old_hits, remap, known, old_face, old_t, out, face, t, in_place,
+                 near, none, sources, backs):
+    """`bundle_kept`'s first pass: out[p, k] the ray's old voxel under its new index (UNKNOWN where it
+    changed or none is known), `sources` and `backs` of those, its old face and t copied unless `in_place`,
+    and near[p, k] whether it is to be tested again: its line passes within the sphere around the box, or
+    its voxel is UNKNOWN (the tests as bitwise ors, so that the loop holds no branch). Returns (P,) how
+    many of each origin's rays are."""
+    listed = np.zeros(o.shape[0], np.int64)
+    everything = not kept
+    for p in numba.prange(o.shape[0]):
+        row = d[which[p]]
+        wx, wy, wz = centre[0] - o[p, 0], centre[1] - o[p, 1], centre[2] - o[p, 2]
+        gap = wx * wx + wy * wy + wz * wz - reach   # <= 0: the origin is within the sphere
+        hits, marked = out[p], near[p]
+        if known:
+            was_row = old_hits[p]
+            for k in range(row.shape[0]):
+                was = was_row[k]
+                moved_to = remap[max(was, 0)]
+                hits[k] = was if was < 0 else (moved_to if moved_to >= 0 else UNKNOWN)
+        else:
+            hits[:] = UNKNOWN
+        found = back = 0
+        for k in range(row.shape[0]):
+            dx, dy, dz = row[k, 0], row[k, 1], row[k, 2]
+            along = dx * wx + dy * wy + dz * wz
+            hit = hits[k]
+            marked[k] = (everything | (hit == UNKNOWN) | (gap <= 0.0)
+                         | ((along > 0.0) & (along * along >= gap * (dx * dx + dy * dy + dz * dz))))
+            sources[p, k] = none if hit < 0 else hit
+            back += hit == dda.BACKFACE
+        for k in range(row.shape[0]):
+            found += marked[k]
+        if not in_place:
+            face[p], t[p] = old_face[p], old_t[p]
+        listed[p], backs[p] = found, back
+    return listed
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _listed(near, starts):
+    """(N,) the flat indices (origin x D + ray) of the rays `near` marks, origin by origin."""
+    out = np.empty(starts[-1], np.int64)
+    for p in numba.prange(near.shape[0]):
+        at = starts[p]
+        if at == starts[p + 1]:
+            continue
+        for k in range(near.shape[1]):
+            if near[p, k]:
+                out[at] = p * near.shape[1] + k
+                at += 1
+    return out
+
+
+RAYS_A_TASK = 256
+"""Listed rays a thread takes at a time in `bundle_kept`'s second pass."""
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _again(o, d, which, kept, box_lo, box_hi, old_face, old_t, rays, intersect, scene, faces, e1, e2, twin, v0, lo, h,
+           n, first, triangle, voxel, out, face, t, none, sources, met, backed):
+    """`bundle_kept`'s second pass over the listed `rays`, shared evenly among the threads: traced (met[i])
+    where the ray meets the box before its old hit (or is not `kept`), else its voxel looked up again on
+    its old face where it is UNKNOWN; its `sources` entry brought up to date, and backed[i] how its
+    origin's count of back faces changes."""
+    count = d.shape[1]
+    inverse = np.empty_like(d)
+    for s in range(d.shape[0]):
+        for k in range(count):
+            for axis in range(3):
+                inverse[s, k, axis] = 1.0 / d[s, k, axis] if d[s, k, axis] != 0.0 else np.inf
+    for task in numba.prange((rays.shape[0] + RAYS_A_TASK - 1) // RAYS_A_TASK):
         record = embree.record()
-        for p in range(task * ORIGINS_A_TASK, min(o.shape[0], (task + 1) * ORIGINS_A_TASK)):
-            row, step = d[which[p]], inverse[which[p]]
+        for i in range(task * RAYS_A_TASK, min(rays.shape[0], (task + 1) * RAYS_A_TASK)):
+            p, k = rays[i] // count, rays[i] % count
             ox, oy, oz = o[p, 0], o[p, 1], o[p, 2]
-            wx, wy, wz = centre[0] - ox, centre[1] - oy, centre[2] - oz
-            gap = wx * wx + wy * wy + wz * wz - reach   # <= 0: the origin is within the sphere
-            back = 0
-            for k in range(d.shape[1]):
-                dx, dy, dz = row[k, 0], row[k, 1], row[k, 2]
-                again = not kept
-                if kept:
-                    along = dx * wx + dy * wy + dz * wz   # the ray's line passes within the sphere
-                    if gap <= 0.0 or (along > 0.0 and along * along >= gap * (dx * dx + dy * dy + dz * dz)):
-                        again = meets_box_inverse(ox, oy, oz, step[k, 0], step[k, 1], step[k, 2], dx, dy, dz,
-                                                  FAR if old_face[p, k] == NO_FACE else old_t[p, k], box_lo, box_hi)
-                if again:
-                    traced[p] += 1
-                    f, th, _, _, front = first_face(intersect, scene, record, faces, e1, e2, twin, v0, ox, oy, oz,
-                                                    dx, dy, dz, FAR)
-                    face[p, k], t[p, k] = f, th
-                    hit = voxel_of(ox, oy, oz, dx, dy, dz, f, th, front, lo, h, n, first, triangle, voxel)
-                else:
-                    if not in_place:
-                        face[p, k], t[p, k] = old_face[p, k], old_t[p, k]
-                    hit = UNKNOWN
-                    if known:   # a miss or a back face stays one: the same face, met from the same side
-                        was = old_hits[p, k]
-                        if was < 0 or remap[was] >= 0:
-                            hit = was if was < 0 else remap[was]
-                    if hit == UNKNOWN:
-                        f, th, front = old_face[p, k], old_t[p, k], False
-                        if f != NO_FACE:
-                            f, front = facing_face(f, dx, dy, dz, e1, e2, twin)
-                        hit = voxel_of(ox, oy, oz, dx, dy, dz, f, th, front, lo, h, n, first, triangle, voxel)
-                out[p, k] = hit
-                sources[p, k] = none if hit < 0 else hit
-                back += hit == dda.BACKFACE
-            backs[p] = back
+            q = which[p]
+            dx, dy, dz = d[q, k, 0], d[q, k, 1], d[q, k, 2]
+            before = out[p, k]
+            again = not kept or meets_box_inverse(ox, oy, oz, inverse[q, k, 0], inverse[q, k, 1], inverse[q, k, 2],
+                                                  dx, dy, dz, FAR if old_face[p, k] == NO_FACE else old_t[p, k],
+                                                  box_lo, box_hi)
+            if again:
+                met[i] = True
+                f, th, _, _, front = first_face(intersect, scene, record, faces, e1, e2, twin, v0, ox, oy, oz, dx, dy,
+                                                dz, FAR)
+                face[p, k], t[p, k] = f, th
+                out[p, k] = voxel_of(ox, oy, oz, dx, dy, dz, f, th, front, lo, h, n, first, triangle, voxel)
+            elif before == UNKNOWN:   # a kept ray whose voxel changed: its old face met from the same side
+                f, th, front = old_face[p, k], old_t[p, k], False
+                if f != NO_FACE:
+                    f, front = facing_face(f, dx, dy, dz, e1, e2, twin)
+                out[p, k] = voxel_of(ox, oy, oz, dx, dy, dz, f, th, front, lo, h, n, first, triangle, voxel)
+            hit = out[p, k]
+            sources[p, k] = none if hit < 0 else hit
+            backed[i] = (hit == dda.BACKFACE) - (before == dda.BACKFACE)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _tallies(starts, met, backed, backs):
+    """`bundle_kept`'s last pass: (P,) each origin's traced rays, and its back faces brought up to date, from
+    its listed rays' (`starts`)."""
+    traced = np.zeros(starts.shape[0] - 1, np.int64)
+    for p in numba.prange(traced.shape[0]):
+        for i in range(starts[p], starts[p + 1]):
+            traced[p] += met[i]
+            backs[p] += backed[i]
     return traced
 
 
