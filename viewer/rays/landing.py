@@ -63,9 +63,9 @@ def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, re
     Three passes: every ray's old voxel under its new index, and whether its line passes within the
     sphere around the box (a dot product: most rays point elsewhere); then the rays near the box or whose
     voxel changed, listed and shared evenly among the threads, tested against the box itself and traced
-    or looked up again; then each origin's tallies. (In one pass over the origins, the rays to trace,
-    which bunch up in the origins near the box, fell to one thread: val-00001's moved box, 885k rays of
-    which 16k are traced, 4.8 -> 2.5 ms on two cores.)"""
+    or looked up again; then each origin's tallies. In one pass over the origins, the rays to trace, which
+    bunch up in the origins near the box, fell to one thread: the 885k rays of a moved box in val-00002
+    (9.6k traced again) 5.1 -> 4.1 ms on two cores, the 68k-triangle scan's moved bunny (146k) 39 -> 35."""
     count = d.shape[1]
     known = old_hits.shape[0] == o.shape[0]
     centre, reach = 0.5 * (box_lo + box_hi), 0.0
