@@ -130,7 +130,7 @@ def test_the_rays_gather_each_probes_sum_of_basis_times_radiance():
 def test_the_later_bounces_rays_spread_evenly_over_every_block(corner):
     """The seen light's later bounces gather each probe's first rays alone (one in CHAIN_EVERY): every
     3x3x3 block, which the filter after each gather averages, still takes evenly spread directions, one
-    in each of its count of equal-area bands of heights, and each probe's own look all around."""
+    in each of its count of equal-area bands of heights, and each probe's own fall one in each of theirs."""
     side, rays = 8, SEEN_RAYS
     first = interleaved_lattices(side, rays, SEED)[:, :rays // CHAIN_EVERY]
     n = INTERLEAVE ** 3 * rays
@@ -140,6 +140,10 @@ def test_the_later_bounces_rays_spread_evenly_over_every_block(corner):
     assert count == INTERLEAVE ** 3 * rays // CHAIN_EVERY
     bands = np.floor((1.0 - found[:, 2]) / 2.0 * count).astype(int)
     assert np.array_equal(np.sort(bands), np.arange(count))
+    own = rays // CHAIN_EVERY
+    heights = (first @ np.linalg.inv(turn))[..., 2]
+    each = np.floor((1.0 - heights) / 2.0 * own).astype(int)
+    assert all(np.array_equal(np.sort(b), np.arange(own)) for b in each)
     assert np.abs(first.mean(axis=1)).max() < 0.2
 
 

@@ -188,8 +188,8 @@ def seen_light(rays: SeenRays, bounce, albedo: np.ndarray, leaving: np.ndarray,
     1.67 for two bounces, 0.97 with the tail), and in 20 validation rooms 29.3% where two bounces were
     29.5% (best gain 0.99 against 1.12).
 
-    The first bounce is gathered on every ray, the later ones on a quarter of them (CHAIN_EVERY), and the
-    seen light is the first bounce's gather plus one gather of every later bounce's light together."""
+    The first bounce is gathered on every ray, the later ones on one in CHAIN_EVERY, and the seen light is
+    the first bounce's gather plus one gather of every later bounce's light together."""
     leaving = np.asarray(leaving, np.float32)
     once = rays.gathered(leaving)
     later = np.zeros_like(leaving)
@@ -231,10 +231,12 @@ def lattice_rays(count: int, rays: int, seed: int) -> tuple[np.ndarray, np.ndarr
 
 @lru_cache(maxsize=2)
 def part_basis(count: int, rays: int, seed: int) -> np.ndarray:
-    """(S, 9, rays / CHAIN_EVERY) `lattice_rays`' SH weights of each set's first rays, times CHAIN_EVERY: one
-    in CHAIN_EVERY along the set's spiral (`chain_first`)."""
+    """(S, 9, rays / CHAIN_EVERY) `lattice_rays`' SH weights of each set's first rays (one in CHAIN_EVERY
+    along the set's spiral: `chain_first`), each weighted as the share of the sphere that so many rays
+    take."""
     _, basis, _ = lattice_rays(count, rays, seed)
-    out = np.ascontiguousarray(basis[:, :, :rays // CHAIN_EVERY] * np.float32(CHAIN_EVERY), np.float32)
+    part = max(rays // CHAIN_EVERY, 1)
+    out = np.ascontiguousarray(basis[:, :, :part] * np.float32(rays / part), np.float32)
     out.flags.writeable = False
     return out
 
@@ -302,9 +304,9 @@ def interleaved_subsets(rays: int, seed: int) -> np.ndarray:
 def chain_first(sets: np.ndarray) -> np.ndarray:
     """(S, R, 3) sets of directions, each along its spiral, reordered so that set s lists first its every
     CHAIN_EVERY-th direction from offset s mod CHAIN_EVERY (the rays the seen light's later bounces
-    gather), then the others. On an interleaved lattice each probe's first rays are then a band of its
-    spiral that still looks all around, and the 27 probes of a 3x3x3 block take evenly spread directions
-    together (27 of every 27 x CHAIN_EVERY along the lattice's spiral), which the filter after the gather
+    gather), then the others. On an interleaved lattice each probe's first rays then fall one in each of
+    as many bands of heights, and the 27 probes of a 3x3x3 block take evenly spread directions together
+    (27 of every 27 x CHAIN_EVERY along the lattice's spiral), which the filter after the gather
     averages."""
     orders = np.stack([np.argsort((np.arange(sets.shape[1]) - s) % CHAIN_EVERY, kind="stable")
                        for s in range(CHAIN_EVERY)])

@@ -78,7 +78,7 @@ def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, re
     starts = np.zeros(o.shape[0] + 1, np.int64)
     starts[1:] = np.cumsum(listed)
     rays = _listed(near, starts)
-    met, backed = np.zeros(rays.shape[0], np.bool_), np.zeros(rays.shape[0], np.int64)
+    met, backed = np.zeros(rays.shape[0], np.bool_), np.zeros(rays.shape[0], np.int8)
     _again(o, d, which, kept, box_lo, box_hi, old_face, old_t, rays, intersect, scene, faces, e1, e2, twin, v0, lo, h,
            n, first, triangle, voxel, out, face, t, none, sources, met, backed)
     return _tallies(starts, met, backed, backs)
