@@ -148,3 +148,8 @@ def test_only_the_probes_near_a_closed_link_are_walled_and_they_are_all_found():
     np.testing.assert_array_equal(walls.sources, walled[differs])
     np.testing.assert_allclose(walls.scale, np.maximum(plain, 1.0)[differs] / np.maximum(taken, 1.0)[differs])
     assert 0 < len(walls.rows) < m ** 3
+    # the probes the taps take, each once and in order, and each tap's place among them: numpy's unique
+    cells, places = np.unique(walled[differs], return_inverse=True)
+    np.testing.assert_array_equal(walls.cells, cells)
+    np.testing.assert_array_equal(walls.local, places.reshape(walls.local.shape))
+    assert walls.local.dtype == np.int32

@@ -101,16 +101,36 @@ class WallTaps:
                       / np.maximum(walled_weight[differs], 1.0)).astype(np.float32)
         """(S,) the graph's open-share average over each probe's plain taps (at least 1/27), over the one
         its taps take."""
-        sources = walled[differs]
-        self.cells, local = np.unique(sources, return_inverse=True)
-        """(T,) the probes their taps take, each once: `_walled` reads their light into one block first."""
-        self.local = np.ascontiguousarray(local.reshape(sources.shape), np.int32)
-        """(S, 27) each tap's place among `cells`."""
+        self.cells, self.local = _taken(np.ascontiguousarray(walled[differs]), m ** 3)
+        """(T,) the probes their taps take, each once, in order: `_walled` reads their light into one block
+        first; and (S, 27) each tap's place among them. Marked in an array of the lattice's probes, not
+        sorted: 0.05 ms where numpy's `unique` took 0.7 of the 1.1 these taps took (val-00001's 1,690
+        walled probes)."""
 
     @property
     def sources(self) -> np.ndarray:
         """(S, 27) the probe each of their taps takes, in the kernel's flat order."""
         return self.cells[self.local]
+
+
+@numba.njit(cache=True, nogil=True)
+def _taken(sources, probes):
+    """`np.unique(sources, return_inverse=True)` of (S, 27) probe indices below `probes`: the distinct ones
+    in order (T,) int32, and each entry's place among them (S, 27) int32."""
+    place = np.full(probes, -1, np.int32)
+    flat = sources.reshape(-1)
+    for q in flat:
+        place[q] = 0
+    cells = np.empty(probes, np.int32)
+    count = 0
+    for q in range(probes):
+        if place[q] == 0:
+            place[q], cells[count] = count, q
+            count += 1
+    local = np.empty(flat.shape[0], np.int32)
+    for i in range(flat.shape[0]):
+        local[i] = place[flat[i]]
+    return cells[:count].copy(), local.reshape(sources.shape)
 
 
 _last_walls: tuple = (None, None)
