@@ -247,10 +247,74 @@ def test_a_network_without_the_unshadowed_bounce_keeps_its_gain_at_zero():
     assert float(after.bounce_gain) == 0.0 and float(after.seen_gain) != pytest.approx(1.0)
 
 
+def test_a_narrower_head_keeps_the_channels_that_carry_the_most():
+    """A network with a narrower head loads a wider one's weights, keeping in each hidden layer the
+    channels whose activity times outgoing weights is largest (`narrowed`): where the wide head's dropped
+    channels carry nothing onward, the narrow network gives its answers; the channels kept follow the
+    activity, not the order."""
+    from viewer.scene import load
+    from viewer.training.models import channel_activity, narrowed
+
+    x = torch.from_numpy(encoding.encode_scene(load("cornell"), 8, 16).inputs)
+    torch.manual_seed(9)
+    wide = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=3))
+    with torch.no_grad():
+        for p in wide.parameters():
+            p.normal_(0.0, 0.2)
+        wide.local.bias += 2.0   # every hidden channel fires somewhere
+        wide.head[0].bias += 2.0
+        pristine = {name: value.clone() for name, value in wide.state_dict().items()}
+        wide.head[0].weight[:, [1, 6]] = 0.0   # two channels of the levels' sum that go nowhere
+        wide.head[2].weight[:, [0, 3]] = 0.0   # and two of the head's hidden layer
+    activity = channel_activity(wide, [x])
+    assert all(len(activity[k]) == 8 and bool((activity[k] > 0).all()) for k in ("sum", "head.0"))
+    narrow = ProbeNet(ProbeNetConfig(width=4, hidden=6, levels=3))
+    narrow.load_unshadowed(wide.state_dict(), activity)
+    wide.eval()
+    narrow.eval()
+    with torch.no_grad():
+        torch.testing.assert_close(narrow(x), wide(x), rtol=1e-5, atol=1e-5)
+    kept = [c for c in range(8) if c not in (1, 6)]
+    torch.testing.assert_close(narrow.local.weight, wide.local.weight[kept], rtol=0, atol=0)
+    torch.testing.assert_close(narrow.head[2].weight, wide.head[2].weight[:, [1, 2, 4, 5, 6, 7]], rtol=0, atol=0)
+    by_weights = narrowed(wide.state_dict(), narrow.state_dict())   # without activity: the same channels here
+    torch.testing.assert_close(by_weights["code.weight"], wide.code.weight[kept], rtol=0, atol=0)
+    quiet = {k: a.clone() for k, a in activity.items()}
+    quiet["sum"][[0, 2]] = 0.0   # two channels that never fire go first
+    chosen = narrowed(pristine, narrow.state_dict(), quiet)
+    assert torch.equal(chosen["local.weight"], pristine["local.weight"][[1, 3, 4, 5, 6, 7]])
+
+
+def test_narrower_levels_keep_the_channels_that_carry_the_most():
+    """The same for every level: a network of width 3 (levels of 3, 6 and 12 channels) loads one of width
+    4 (4, 8, 16) whose dropped channels, in each level's two layers and the head's, carry nothing onward,
+    and gives its answers."""
+    from viewer.scene import load
+    from viewer.training.models import channel_activity, hidden_layers
+
+    x = torch.from_numpy(encoding.encode_scene(load("cornell"), 8, 16).inputs)
+    torch.manual_seed(11)
+    wide = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=3))
+    narrow = ProbeNet(ProbeNetConfig(width=3, hidden=6, levels=3))
+    with torch.no_grad():
+        for p in wide.parameters():
+            p.normal_(0.0, 0.2)
+        state = wide.state_dict()
+        for _, makers, readers, _ in hidden_layers(state):
+            drop = range(narrow.state_dict()[makers[0]].shape[0], state[makers[0]].shape[0])
+            for name in readers:
+                state[name][:, list(drop)] = 0.0   # the last channels of each layer go nowhere
+    narrow.load_unshadowed(wide.state_dict(), channel_activity(wide, [x]))
+    with torch.no_grad():
+        torch.testing.assert_close(narrow.eval()(x), wide.eval()(x), rtol=1e-5, atol=1e-5)
+    assert narrow.down[2][2].weight.shape == (12, 12, 3, 3, 3) and narrow.code.weight.shape == (6, 12)
+
+
 def test_wider_coarse_levels_start_from_a_narrower_networks_answers():
     """A network whose coarse levels are wider (`ProbeNetConfig.coarse`) loads a narrower one's weights
     and gives its answers exactly; after one step its new channels carry something (they are trained,
-    not dead), and a shape that would shrink is refused."""
+    not dead). A narrower one loads it cut to its channels; one that is wider in one layer and narrower in
+    another is refused."""
     from viewer.scene import load
     from viewer.training.models import REFLECTED
 
@@ -274,8 +338,10 @@ def test_wider_coarse_levels_start_from_a_narrower_networks_answers():
     optimizer.step()
     with torch.no_grad():
         assert not torch.equal(wide.eval()(x), narrow(x))
-    with pytest.raises(ValueError, match="cannot grow"):
-        narrow.load_unshadowed(wide.state_dict())
+    narrow.load_unshadowed(wide.state_dict())   # the other way: cut to its channels (`narrowed`)
+    mixed = ProbeNet(ProbeNetConfig(width=4, hidden=8, levels=3, coarse=(16, 8)))
+    with pytest.raises(ValueError, match="cannot grow"):   # one level wider, one narrower: neither
+        narrow.load_unshadowed(mixed.state_dict())
     with pytest.raises(ValueError, match="coarse widths"):
         ProbeNetConfig(levels=3, coarse=(16,))
     with pytest.raises(ValueError, match="not the same layers"):   # another head, not a wider one

@@ -195,11 +195,13 @@ class ProbeNet(nn.Module):
             total = total + out[:, TOTAL] * (direct_dc.abs() + bounce_dc.abs() + MAGNITUDE_FLOOR)
         return torch.cat([total, reflected, out[:, VALIDITY:]], dim=1)
 
-    def load_unshadowed(self, state: dict) -> None:
+    def load_unshadowed(self, state: dict, activity: dict[str, torch.Tensor] | None = None) -> None:
         """Load `state` (a state dict, of this network or of a narrower one: `widened`); where this network
         takes no unshadowed bounce, that bounce's learned gain is moved to the seen light, which carries
-        the same light with visibility."""
-        self.load_state_dict(widened(state, self.state_dict()))
+        the same light with visibility. A state with wider levels or head is cut to this one's (`narrowed`, by
+        the wide network's `activity`)."""
+        own = self.state_dict()
+        self.load_state_dict(widened(narrowed(state, own, activity), own))
         if not self.config.unshadowed:
             with torch.no_grad():
                 self.seen_gain += self.bounce_gain
@@ -235,6 +237,78 @@ def widened(state: dict, wide: dict) -> dict:
         grown[tuple(slice(0, n) for n in old.shape)] = old
         out[name] = grown
     return out
+
+
+def hidden_layers(state: dict) -> list[tuple[str, list[str], list[str], str]]:
+    """The hidden layers of a ProbeNet of state dict `state`, each as (name, the parameters that make its
+    channels (along their first axis), the weights that read them (along their second axis), the module
+    whose input they are): each level's two convolutions, the sum of the levels and the probe's own
+    features, and the head's hidden layers."""
+    levels = sum(1 for k in state if k.startswith("down.") and k.endswith(".0.weight"))
+    convs = sorted((k[:-len(".weight")] for k in state if k.startswith("head.") and k.endswith(".weight")),
+                   key=lambda k: int(k.split(".")[1]))
+    layers = []
+    for i in range(levels):
+        layers.append((f"down.{i}.0", [f"down.{i}.0.weight", f"down.{i}.0.bias"], [f"down.{i}.2.weight"], f"down.{i}.2"))
+        after = [f"project.{i}.weight"] + ([f"down.{i + 1}.0.weight"] if i + 1 < levels else ["code.weight"])
+        layers.append((f"down.{i}.2", [f"down.{i}.2.weight", f"down.{i}.2.bias"], after, f"project.{i}"))
+    sums = ["local.weight", "local.bias", "code.weight"] + [f"project.{i}.{part}" for i in range(levels)
+                                                              for part in ("weight", "bias")]
+    layers.append(("sum", sums, [f"{convs[0]}.weight"], convs[0]))
+    for layer, after in zip(convs[:-1], convs[1:]):
+        layers.append((layer, [f"{layer}.weight", f"{layer}.bias"], [f"{after}.weight"], after))
+    return layers
+
+
+def narrowed(state: dict, narrow: dict, activity: dict[str, torch.Tensor] | None = None) -> dict:
+    """`state` (a ProbeNet's state dict) cut to the narrower levels or head of `narrow` (a ProbeNet's of as
+    many levels and head layers, no layer wider; else `state` as it is, for `widened`). Each hidden layer
+    keeps the channels that carry the most into the next: the mean size of a channel's activation
+    (`activity`: `channel_activity` of the wide network; without it, the norm of its incoming weights and
+    bias) times the norm of its outgoing weights. Not the same function, but a start a fine-tune recovers
+    from in a few epochs, where a narrower network trained afresh would repeat the whole training."""
+    if state.keys() != narrow.keys() or any(state[k].dim() != narrow[k].dim() or any(
+            a < b for a, b in zip(state[k].shape, narrow[k].shape)) for k in state):
+        return state
+    out = dict(state)
+    for name, makers, readers, _ in hidden_layers(state):
+        channels, wanted = state[makers[0]].shape[0], narrow[makers[0]].shape[0]
+        if wanted == channels:
+            continue
+        incoming = torch.cat([state[k].reshape(channels, -1) for k in makers], 1)
+        size = incoming.norm(dim=1) if activity is None else activity[name]
+        outgoing = torch.cat([state[k].transpose(0, 1).reshape(channels, -1) for k in readers], 1)
+        kept = torch.sort(torch.topk(size * outgoing.norm(dim=1), wanted).indices).values
+        for k in makers:
+            out[k] = out[k][kept]
+        for k in readers:
+            out[k] = out[k][:, kept]
+    differ = [name for name, value in narrow.items() if tuple(out[name].shape) != tuple(value.shape)]
+    if differ:
+        raise ValueError(f"not only narrower layers: {', '.join(differ[:4])}{' ...' if len(differ) > 4 else ''}")
+    return out
+
+
+def channel_activity(model: "ProbeNet", inputs: list[torch.Tensor]) -> dict[str, torch.Tensor]:
+    """The mean |activation| of each channel of each of `model`'s hidden layers (`hidden_layers`) over
+    encoded `inputs` (each (B, CHANNELS, M, M, M)): what `narrowed` keeps the largest of."""
+    layers = [(name, model.get_submodule(module)) for name, _, _, module in hidden_layers(model.state_dict())]
+    sums = {name: torch.zeros(module.in_channels) for name, module in layers}
+
+    def seen(name: str):
+        def hook(_, given, __) -> None:
+            sums[name].add_(given[0].abs().mean(dim=(0, 2, 3, 4)))
+        return hook
+
+    hooks = [module.register_forward_hook(seen(name)) for name, module in layers]
+    try:
+        with torch.no_grad():
+            for x in inputs:
+                model.eval()(x)
+    finally:
+        for hook in hooks:
+            hook.remove()
+    return {name: total / max(len(inputs), 1) for name, total in sums.items()}
 
 
 def walled_taps(links: torch.Tensor, passes: int) -> torch.Tensor:

@@ -28,8 +28,9 @@ from torch.nn import functional as F
 from viewer.neural import encoding
 from viewer.training.batches import (Batch, batches, mirror, mirror_sh,  # noqa: F401 - read from here too
                                      probe_weights, reflected_target, sh_signs, traced_direct)
-from viewer.training.models import REFLECTED, TOTAL, VALIDITY, ProbeNet, ProbeNetConfig, parameter_count
-from viewer.training.samples import Samples, load_split, training_split
+from viewer.training.models import (REFLECTED, TOTAL, VALIDITY, ProbeNet, ProbeNetConfig, channel_activity,
+                                    parameter_count)
+from viewer.training.samples import ENCODING_VOXELS, Samples, load_split, training_split
 
 VALIDITY_WEIGHT = 0.05
 BEST = "best.pt"
@@ -346,7 +347,8 @@ def main(argv=None) -> int:
                             direct_correction=not args.no_direct_correction, unshadowed=not args.no_unshadowed)
     model = ProbeNet(config)
     if args.init and not (args.out / "checkpoint.pt").exists():
-        model.load_unshadowed(torch.load(args.init, weights_only=False)["model"])
+        init = torch.load(args.init, weights_only=False)
+        model.load_unshadowed(init["model"], narrowing_activity(init, model, args.probes))
     print(f"ProbeNet {config}: {parameter_count(model)} parameters, {len(train_set)} training scenes",
           file=sys.stderr)
     settings = TrainSettings(epochs=args.epochs, batch=args.batch, learning_rate=args.lr,
@@ -355,6 +357,21 @@ def main(argv=None) -> int:
                              mitsuba=not args.no_mitsuba, reflected_loss=args.reflected_loss, direct_input=args.direct_input)
     train(model, train_set, val_set, settings, run=args.out)
     return 0
+
+
+def narrowing_activity(init: dict, model: ProbeNet, probes: int) -> dict | None:
+    """Where the checkpoint `init` has wider layers than `model`: its channels' activity (`channel_activity`)
+    on the Cornell box and three of the paper's training layouts, by which `narrowed` keeps them; else None."""
+    own = model.state_dict()
+    if not any(a > b for k, v in own.items() if k in init["model"] for a, b in zip(init["model"][k].shape, v.shape)):
+        return None
+    from viewer.scene import load
+
+    wide = ProbeNet(ProbeNetConfig(**init["config"]))
+    wide.load_state_dict(init["model"])
+    scenes = [torch.from_numpy(encoding.encode_scene(load(name), probes, ENCODING_VOXELS).inputs)
+              for name in ("cornell", "paper-train-1", "paper-train-2", "paper-train-3")]
+    return channel_activity(wide, scenes)
 
 
 def record_data(run: Path, data: Path, train_set: Samples, val_set: Samples, probes: int,
