@@ -231,36 +231,43 @@ def _taps(links, probes, walled, differs, opened, sums):
 @numba.njit(cache=True, nogil=True, parallel=True, fastmath=True)
 def _depthwise(inputs, firsts, opened, weights, out):
     """out[f, b, c] = weights[c] (3x3x3) convolved with inputs[b, firsts[f] + c] x inputs[b, opened], edges
-    repeated: each (part, pass, channel) padded into a block of its own, then three taps a row at a time
-    (the rows' loops vectorize: 1.0 ms for the Cornell box's three passes on two cores, where one tap at a
-    time and a clamped index per padded cell took 2.5)."""
+    repeated: each (part, pass, channel) padded into a block of its own, laid out flat, so that each of the
+    27 taps of a whole slab of the output is one long loop over the block (its rows' two padding cells
+    summed too, and dropped), which vectorizes: rows of the lattice's own 24 left a third of each loop to
+    its scalar end."""
     parts, passes, count, m = out.shape[0], out.shape[1], out.shape[2], out.shape[3]
+    s = m + 2
+    plane = s * s
     for job in numba.prange(parts * passes * count):
         f, b, c = job // (passes * count), (job // count) % passes, job % count
-        padded = np.empty((m + 2, m + 2, m + 2), np.float32)
+        padded = np.empty((m + 2) * plane + 2, np.float32)   # two more: the last row's padding taps
         source, share = inputs[b, firsts[f] + c], inputs[b, opened]
         for z in range(m):
             for y in range(m):
-                row, values, weight = padded[z + 1, y + 1], source[z, y], share[z, y]
+                at = (z + 1) * plane + (y + 1) * s
+                values, weight = source[z, y], share[z, y]
                 for x in range(m):
-                    row[x + 1] = values[x] * weight[x]
-                row[0], row[m + 1] = row[1], row[m]
-            padded[z + 1, 0] = padded[z + 1, 1]
-            padded[z + 1, m + 1] = padded[z + 1, m]
-        padded[0] = padded[1]
-        padded[m + 1] = padded[m]
-        target = out[f, b, c]
+                    padded[at + x + 1] = values[x] * weight[x]
+                padded[at], padded[at + m + 1] = padded[at + 1], padded[at + m]
+            at = (z + 1) * plane
+            padded[at:at + s] = padded[at + s:at + 2 * s]
+            padded[at + (m + 1) * s:at + plane] = padded[at + m * s:at + (m + 1) * s]
+        padded[:plane] = padded[plane:2 * plane]
+        padded[(m + 1) * plane:(m + 2) * plane] = padded[m * plane:(m + 1) * plane]
+        padded[(m + 2) * plane:] = 0.0
+        target, kernel = out[f, b, c], weights[c]
+        slab = np.empty(m * s, np.float32)
         for z in range(m):
+            slab[:] = 0.0
+            for i in range(3):
+                for j in range(3):
+                    for k in range(3):
+                        w = kernel[i, j, k]
+                        taps = padded[(z + i) * plane + j * s + k:(z + i) * plane + j * s + k + m * s]
+                        for e in range(m * s):
+                            slab[e] += w * taps[e]
             for y in range(m):
-                row = target[z, y]
-                for x in range(m):
-                    row[x] = 0.0
-                for i in range(3):
-                    for j in range(3):
-                        taps = padded[z + i, y + j]
-                        w0, w1, w2 = weights[c, i, j, 0], weights[c, i, j, 1], weights[c, i, j, 2]
-                        for x in range(m):
-                            row[x] += w0 * taps[x] + w1 * taps[x + 1] + w2 * taps[x + 2]
+                target[z, y, :] = slab[y * s:y * s + m]
 
 
 WALLED_ROWS = 32
