@@ -17,6 +17,7 @@ from viewer.rays.landing import meets_box
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import SURFACE_OFFSET, VoxelGrid
 from viewer.neural.changes import same_voxels
+from viewer.threads import cores_for
 
 
 GEOMETRY = slice(0, encoding.FEATURES.index("albedo"))
@@ -180,7 +181,8 @@ class LatticeShadows:
                 out[c] = row[0] if match is None else np.where(match >= 0, row[0][match], 0.0)
                 kept.append(c)
         if kept:   # the kept rows' rays through the moved box (and from points new here), traced again in one call
-            near = _segments_meet_box(self.points, target[kept], before[0], before[1])
+            with cores_for(len(self.points) * len(kept)):
+                near = _segments_meet_box(self.points, target[kept], before[0], before[1])
             if match is not None:
                 near |= (match < 0)[None, :]
             row, probe = np.nonzero(near)
@@ -234,7 +236,8 @@ class LatticeShadows:
             elif before is not None and before[0] == key and self.blockers is not None:
                 visible = before[1].copy()
                 unit = np.asarray(direction, np.float64) / np.linalg.norm(direction)
-                near = np.flatnonzero(_rays_meet_box(self.points, unit, self._before[0], self._before[1]))
+                with cores_for(len(self.points)):
+                    near = np.flatnonzero(_rays_meet_box(self.points, unit, self._before[0], self._before[1]))
                 visible[near] = encoding.sun_visibility(self.blockers, self.points[near], direction)
             else:
                 visible = encoding.sun_visibility(self.blockers, self.points, direction)
@@ -255,7 +258,9 @@ class LatticeShadows:
         lo, hi = self._before[0] - reach, self._before[1] + reach
         unit = np.asarray(direction, np.float64) / np.linalg.norm(direction)
         cell = voxels.lo + voxels.coords * voxels.voxel_size
-        redo = ((match < 0) | _rays_meet_box(self.points, unit, lo, hi)
+        with cores_for(len(self.points)):
+            crossing = _rays_meet_box(self.points, unit, lo, hi)
+        redo = ((match < 0) | crossing
                 | np.all((cell < hi) & (cell + voxels.voxel_size > lo), axis=1))
         visible = np.where(match >= 0, before[np.maximum(match, 0)], 0.0)
         rows = np.flatnonzero(redo)

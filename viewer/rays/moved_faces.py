@@ -30,7 +30,8 @@ def changed_rows(*pairs) -> np.ndarray:
         if np.shape(a) != np.shape(b) or len(a) != len(out):
             raise ValueError(f"rows of shapes {np.shape(a)} and {np.shape(b)} cannot be compared row by row")
         if a is not b:
-            _changed(np.ascontiguousarray(a).reshape(len(a), -1), np.ascontiguousarray(b).reshape(len(b), -1), out)
+            with cores_for(np.size(a)):   # a box room's faces: fewer than waking the other threads takes
+                _changed(np.ascontiguousarray(a).reshape(len(a), -1), np.ascontiguousarray(b).reshape(len(b), -1), out)
     if all(_frozen(a) for a in arrays):
         out.setflags(write=False)
         _last = ([weakref.ref(a) for a in arrays], out)

@@ -25,6 +25,7 @@ from viewer.rays import dda, embree
 from viewer.rays.cast import TriangleCaster, embree_available
 from viewer.rays.landing import FAR, bundle, bundle_kept, bundle_packed, landed, tallied
 from viewer.rays.packets import LANES, occluded8, packet
+from viewer.threads import cores_for
 
 
 RAYS_PER_CALL = 1 << 18
@@ -77,7 +78,8 @@ class VoxelRays:
         in eight lookups, is one no segment within it can meet."""
         c = self.cells
         held = np.zeros((c.n, c.n, c.n), np.uint8)
-        _held(c.v0, c.e1, c.e2, np.asarray(c.lo, np.float64), float(c.h), held)
+        with cores_for(len(c.v0)):   # a box room's few dozen faces on this thread
+            _held(c.v0, c.e1, c.e2, np.asarray(c.lo, np.float64), float(c.h), held)
         out = np.zeros((c.n + 1, c.n + 1, c.n + 1), np.int32)
         _summed_volume(held, out)
         return out
