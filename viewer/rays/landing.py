@@ -11,6 +11,7 @@ from viewer.rays import dda, embree
 from viewer.rays.packets import LANES, closest8, packet
 from viewer.rays.sides import NO_FACE, facing_face, first_face
 from viewer.rays.listing import NEIGHBOUR_ORDER
+from viewer.threads import cores_for
 
 FAR = 1e37
 """The length of a ray that goes on until it meets something (Embree's own default)."""
@@ -73,7 +74,8 @@ def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, re
         half = 0.5 * (box_hi - box_lo)
         reach = float(half[0] * half[0] + half[1] * half[1] + half[2] * half[2])
     near = np.empty((o.shape[0], count), np.bool_)
-    listed = _kept_voxels(o, d, which, kept, centre, reach, old_hits, remap, known, old_face, old_t, out, face, t,
+    across = np.ascontiguousarray(np.asarray(d, np.float64).transpose(0, 2, 1))   # each set's x, y, z rows
+    listed = _kept_voxels(o, across, which, kept, centre, reach, old_hits, remap, known, old_face, old_t, out, face, t,
                           in_place, near, none, sources, backs)
     starts = np.zeros(o.shape[0] + 1, np.int64)
     starts[1:] = np.cumsum(listed)
@@ -81,13 +83,15 @@ def bundle_kept(o, d, which, kept, box_lo, box_hi, old_face, old_t, old_hits, re
     met, backed = np.zeros(rays.shape[0], np.bool_), np.zeros(rays.shape[0], np.int8)
     _again(o, d, which, kept, box_lo, box_hi, old_face, old_t, rays, intersect, scene, faces, e1, e2, twin, v0, lo, h,
            n, first, triangle, voxel, out, face, t, none, sources, met, backed)
-    return _tallies(starts, met, backed, backs)
+    with cores_for(o.shape[0]):   # a few additions a listed ray: one thread but for the largest lattices
+        return _tallies(starts, met, backed, backs)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _kept_voxels(o, d, which, kept, centre, reach, old_hits, remap, known, old_face, old_t, out, face, t, in_place,
                  near, none, sources, backs):
-    """`bundle_kept`'s first pass: out[p, k] the ray's old voxel under its new index (UNKNOWN where it
+    """`bundle_kept`'s first pass, its directions d (S, 3, D) as each set's rows of x, y and z (so that the
+    test along them vectorizes): out[p, k] the ray's old voxel under its new index (UNKNOWN where it
     changed or none is known), `sources` and `backs` of those, its old face and t copied unless `in_place`,
     and near[p, k] whether it is to be tested again: its line passes within the sphere around the box, or
     its voxel is UNKNOWN (the tests as bitwise ors, so that the loop holds no branch). Returns (P,) how
@@ -95,28 +99,28 @@ def _kept_voxels(o, d, which, kept, centre, reach, old_hits, remap, known, old_f
     listed = np.zeros(o.shape[0], np.int64)
     everything = not kept
     for p in numba.prange(o.shape[0]):
-        row = d[which[p]]
+        xs, ys, zs = d[which[p], 0], d[which[p], 1], d[which[p], 2]
         wx, wy, wz = centre[0] - o[p, 0], centre[1] - o[p, 1], centre[2] - o[p, 2]
         gap = wx * wx + wy * wy + wz * wz - reach   # <= 0: the origin is within the sphere
         hits, marked = out[p], near[p]
         if known:
             was_row = old_hits[p]
-            for k in range(row.shape[0]):
+            for k in range(xs.shape[0]):
                 was = was_row[k]
                 moved_to = remap[max(was, 0)]
                 hits[k] = was if was < 0 else (moved_to if moved_to >= 0 else UNKNOWN)
         else:
             hits[:] = UNKNOWN
         found = back = 0
-        for k in range(row.shape[0]):
-            dx, dy, dz = row[k, 0], row[k, 1], row[k, 2]
+        for k in range(xs.shape[0]):
+            dx, dy, dz = xs[k], ys[k], zs[k]
             along = dx * wx + dy * wy + dz * wz
             hit = hits[k]
             marked[k] = (everything | (hit == UNKNOWN) | (gap <= 0.0)
                          | ((along > 0.0) & (along * along >= gap * (dx * dx + dy * dy + dz * dz))))
             sources[p, k] = none if hit < 0 else hit
             back += hit == dda.BACKFACE
-        for k in range(row.shape[0]):
+        for k in range(xs.shape[0]):
             found += marked[k]
         if not in_place:
             face[p], t[p] = old_face[p], old_t[p]
