@@ -260,6 +260,14 @@ def hidden_layers(state: dict) -> list[tuple[str, list[str], list[str], str]]:
     return layers
 
 
+def narrows(state: dict, narrow: dict) -> bool:
+    """Whether `narrow` (a ProbeNet's state dict) has the layers of `state` with some narrower and none wider:
+    what `narrowed` cuts `state` to."""
+    return state.keys() == narrow.keys() and all(
+        state[k].dim() == narrow[k].dim() and all(a >= b for a, b in zip(state[k].shape, narrow[k].shape))
+        for k in state) and any(tuple(state[k].shape) != tuple(narrow[k].shape) for k in state)
+
+
 def narrowed(state: dict, narrow: dict, activity: dict[str, torch.Tensor] | None = None) -> dict:
     """`state` (a ProbeNet's state dict) cut to the narrower levels or head of `narrow` (a ProbeNet's of as
     many levels and head layers, no layer wider; else `state` as it is, for `widened`). Each hidden layer
@@ -267,8 +275,7 @@ def narrowed(state: dict, narrow: dict, activity: dict[str, torch.Tensor] | None
     (`activity`: `channel_activity` of the wide network; without it, the norm of its incoming weights and
     bias) times the norm of its outgoing weights. Not the same function, but a start a fine-tune recovers
     from in a few epochs, where a narrower network trained afresh would repeat the whole training."""
-    if state.keys() != narrow.keys() or any(state[k].dim() != narrow[k].dim() or any(
-            a < b for a, b in zip(state[k].shape, narrow[k].shape)) for k in state):
+    if not narrows(state, narrow):
         return state
     out = dict(state)
     for name, makers, readers, _ in hidden_layers(state):

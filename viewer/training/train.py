@@ -29,7 +29,7 @@ from viewer.neural import encoding
 from viewer.training.batches import (Batch, batches, mirror, mirror_sh,  # noqa: F401 - read from here too
                                      probe_weights, reflected_target, sh_signs, traced_direct)
 from viewer.training.models import (REFLECTED, TOTAL, VALIDITY, ProbeNet, ProbeNetConfig, channel_activity,
-                                    parameter_count)
+                                    narrows, parameter_count)
 from viewer.training.samples import ENCODING_VOXELS, Samples, load_split, training_split
 
 VALIDITY_WEIGHT = 0.05
@@ -362,8 +362,7 @@ def main(argv=None) -> int:
 def narrowing_activity(init: dict, model: ProbeNet, probes: int) -> dict | None:
     """Where the checkpoint `init` has wider layers than `model`: its channels' activity (`channel_activity`)
     on the Cornell box and three of the paper's training layouts, by which `narrowed` keeps them; else None."""
-    own = model.state_dict()
-    if not any(a > b for k, v in own.items() if k in init["model"] for a, b in zip(init["model"][k].shape, v.shape)):
+    if not narrows(init["model"], model.state_dict()):
         return None
     from viewer.scene import load
 
