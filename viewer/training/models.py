@@ -249,7 +249,8 @@ def hidden_layers(state: dict) -> list[tuple[str, list[str], list[str], str]]:
                    key=lambda k: int(k.split(".")[1]))
     layers = []
     for i in range(levels):
-        layers.append((f"down.{i}.0", [f"down.{i}.0.weight", f"down.{i}.0.bias"], [f"down.{i}.2.weight"], f"down.{i}.2"))
+        layers.append((f"down.{i}.0", [f"down.{i}.0.weight", f"down.{i}.0.bias"], [f"down.{i}.2.weight"],
+                       f"down.{i}.2"))
         after = [f"project.{i}.weight"] + ([f"down.{i + 1}.0.weight"] if i + 1 < levels else ["code.weight"])
         layers.append((f"down.{i}.2", [f"down.{i}.2.weight", f"down.{i}.2.bias"], after, f"project.{i}"))
     sums = ["local.weight", "local.bias", "code.weight"] + [f"project.{i}.{part}" for i in range(levels)
