@@ -19,6 +19,7 @@ from viewer.neural.direct import SH_BLOCK, Pieces, kernel_terms, solid_angle
 from viewer.neural.shadows import patch_visibility
 from viewer.rays.sun import voxel_sun_cover
 from viewer.rays.voxels import SURFACE_OFFSET, VoxelGrid
+from viewer.threads import cores_for
 
 
 def surface_points(voxels: VoxelGrid) -> np.ndarray:
@@ -50,7 +51,8 @@ def emitter_irradiance_rows(lights, points: np.ndarray, normals: np.ndarray, vis
     if len(lights[2]) == 0 or len(points) == 0:
         return out
     f32 = [np.ascontiguousarray(np.asarray(a).T, np.float32) for a in (points, normals)]
-    _emitter_irradiance(*f32, *kernel_terms(lights, visible, pieces, rows), out)
+    with cores_for(len(points) * len(lights[2])):   # the voxels a move changed, from a lamp's few patches
+        _emitter_irradiance(*f32, *kernel_terms(lights, visible, pieces, rows), out)
     return out
 
 

@@ -231,10 +231,11 @@ def _taps(links, probes, walled, differs, opened, sums):
 @numba.njit(cache=True, nogil=True, parallel=True, fastmath=True)
 def _depthwise(inputs, firsts, opened, weights, out):
     """out[f, b, c] = weights[c] (3x3x3) convolved with inputs[b, firsts[f] + c] x inputs[b, opened], edges
-    repeated: each (part, pass, channel) padded into a block of its own, laid out flat, so that each of the
-    27 taps of a whole slab of the output is one long loop over the block (its rows' two padding cells
+    repeated: each (part, pass, channel) padded into a block of its own, laid out flat, so that each row of
+    three taps of a whole slab of the output is one long loop over the block (its rows' two padding cells
     summed too, and dropped), which vectorizes: rows of the lattice's own 24 left a third of each loop to
-    its scalar end."""
+    its scalar end, and a loop a tap read and wrote the slab three times as often (val-00001's two
+    products: 1.80 -> 1.60 ms on one core)."""
     parts, passes, count, m = out.shape[0], out.shape[1], out.shape[2], out.shape[3]
     s = m + 2
     plane = s * s
@@ -256,56 +257,68 @@ def _depthwise(inputs, firsts, opened, weights, out):
         padded[(m + 1) * plane:(m + 2) * plane] = padded[m * plane:(m + 1) * plane]
         padded[(m + 2) * plane:] = 0.0
         target, kernel = out[f, b, c], weights[c]
-        slab = np.empty(m * s, np.float32)
+        n = m * s
+        slab = np.empty(n, np.float32)
         for z in range(m):
             slab[:] = 0.0
             for i in range(3):
-                for j in range(3):
-                    for k in range(3):
-                        w = kernel[i, j, k]
-                        taps = padded[(z + i) * plane + j * s + k:(z + i) * plane + j * s + k + m * s]
-                        for e in range(m * s):
-                            slab[e] += w * taps[e]
+                for j in range(3):   # a row of three taps in one loop: a third of the slab's reads and writes
+                    w0, w1, w2 = kernel[i, j, 0], kernel[i, j, 1], kernel[i, j, 2]
+                    at = (z + i) * plane + j * s
+                    t0, t1, t2 = padded[at:at + n], padded[at + 1:at + 1 + n], padded[at + 2:at + 2 + n]
+                    for e in range(n):
+                        slab[e] += w0 * t0[e] + w1 * t1[e] + w2 * t2[e]
             for y in range(m):
                 target[z, y, :] = slab[y * s:y * s + m]
 
 
 WALLED_ROWS = 32
 """Walled probes a task of `_walled` takes."""
+WALLED_CELLS = 256
+"""Taken probes a task of `_walled` reads into its block."""
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@numba.njit(cache=True, nogil=True, parallel=True, fastmath=True)
 def _walled(inputs, firsts, opened, weights, rows, cells, local, scale, out):
     """`_depthwise`'s sums made again at the probes `rows` (S,) over their taps (`WallTaps`: the probes
     `cells` (T,) they take, each tap's place among them `local` (S, 27)), times their `scale` (S,). The
-    taken probes' light, every part's channels side by side, and their open shares are read into one
-    block first, so that each tap reads one row of it (a task a part and channel read each tap's probe
-    from its own channel: 1.6 -> 1.1 ms for the two products of val-00001's 1,690 walled probes, the
-    same sums). (Adding to the plain sums only the taps that differ, 8.5 of the 27 on the Cornell box, was not
-    faster and left the dark side of a wall a rounding error above zero.)"""
+    taken probes' light, every part's channels side by side and their open share last, is read into one
+    block first, a run of probes a task, so that each tap reads one row of it; each tap's weights are laid
+    out the same way, so that a tap is one loop along the row that vectorizes. val-00001's 1,690 walled
+    probes: 0.95 -> 0.63 ms for the two products on two cores, where a task read one channel of every
+    probe and each tap's sums were taken a part and a channel at a time (float32 sums, as `_depthwise`'s).
+    (Adding to the plain sums only the taps that differ, 8.5 of the 27 on the Cornell box, was not faster
+    and left the dark side of a wall a rounding error above zero.)"""
     parts, passes, count = out.shape[0], out.shape[1], out.shape[2]
     width = parts * count
     flat = inputs.reshape(passes, inputs.shape[1], inputs.shape[2] * inputs.shape[3] * inputs.shape[4])
-    light = np.empty((passes, cells.shape[0], width + 1), np.float32)   # the open share last
-    for job in numba.prange(passes * (width + 1)):
-        b, row = job // (width + 1), job % (width + 1)
-        source = flat[b, opened] if row == width else flat[b, firsts[row // count] + row % count]
-        for i in range(cells.shape[0]):
-            light[b, i, row] = source[cells[i]]
+    channel = np.empty(width + 1, np.int64)   # the input channel of each place in a row
+    for k in range(width):
+        channel[k] = firsts[k // count] + k % count
+    channel[width] = opened
+    light = np.empty((passes, cells.shape[0], width + 1), np.float32)
+    runs = (cells.shape[0] + WALLED_CELLS - 1) // WALLED_CELLS
+    for job in numba.prange(passes * runs):
+        b, run = job // runs, job % runs
+        for i in range(run * WALLED_CELLS, min(cells.shape[0], (run + 1) * WALLED_CELLS)):
+            q, row = cells[i], light[b, i]
+            for k in range(width + 1):
+                row[k] = flat[b, channel[k], q]
+    wide = np.empty((27, width), np.float32)   # each tap's weight of each place in a row
+    for t in range(27):
+        for k in range(width):
+            wide[t, k] = weights[k % count, t]
     target = out.reshape(parts, passes, count, flat.shape[2])
-    taps = np.ascontiguousarray(weights.T)   # (27, count): a tap's weights side by side
     blocks = (rows.shape[0] + WALLED_ROWS - 1) // WALLED_ROWS
     for job in numba.prange(passes * blocks):
         b, block = job // blocks, job % blocks
-        totals = np.empty(width)
+        totals = np.empty(width, np.float32)
         for s in range(block * WALLED_ROWS, min(rows.shape[0], (block + 1) * WALLED_ROWS)):
             totals[:] = 0.0
             for t in range(27):
-                q = local[s, t]
-                values = light[b, q]
+                values, weight = light[b, local[s, t]], wide[t]
                 taken = values[width]
-                for f in range(parts):
-                    for c in range(count):
-                        totals[f * count + c] += taps[t, c] * values[f * count + c] * taken
+                for k in range(width):
+                    totals[k] += weight[k] * values[k] * taken
             for k in range(width):
                 target[k // count, b, k % count, rows[s]] = totals[k] * scale[s]

@@ -63,14 +63,16 @@ def face_pairs(triangles: np.ndarray, areas: np.ndarray, facing: np.ndarray, lo:
     bound = int(offset[-1])
     key, face, area, moment = np.empty(bound, np.int64), np.empty(bound, np.int64), np.empty(bound), np.empty((bound, 3))
     made = np.zeros(len(rows), np.int64)
-    _bin(triangles, rows, np.asarray(areas, np.float64), level, np.asarray(facing, np.int64), lo, float(size),
-         resolution, _chunks(level), offset, key, face, area, moment, made)
+    with cores_for(int(((1 << (2 * level)) + 1).sum())):   # the pieces: a moved box's dozen faces on this thread
+        _bin(triangles, rows, np.asarray(areas, np.float64), level, np.asarray(facing, np.int64), lo, float(size),
+             resolution, _chunks(level), offset, key, face, area, moment, made)
     if made.sum() == bound:
         return key, face, area, moment
     start = np.zeros(len(rows) + 1, np.int64)
     np.cumsum(made, out=start[1:])
     out = (np.empty(start[-1], np.int64), np.empty(start[-1], np.int64), np.empty(start[-1]), np.empty((start[-1], 3)))
-    _packed(offset, start, key, face, area, moment, *out)
+    with cores_for(len(out[0])):
+        _packed(offset, start, key, face, area, moment, *out)
     return out
 
 

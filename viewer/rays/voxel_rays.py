@@ -198,9 +198,10 @@ class VoxelRays:
             return dda.segments_clear(self.cells, a, b)
         if self.caster.direct is not None:   # one compiled pass, the segments in empty cells untraced
             out = np.empty(len(a), np.bool_)
-            _segments_clear(*self.caster.direct.occlusion, a,
-                            np.ascontiguousarray(np.broadcast_to(np.asarray(b, np.float64).reshape(-1, 3), a.shape)),
-                            self.box_table(len(a)), self.cells.lo, self.cells.h, out)
+            with cores_for(len(a)):   # the few shadow segments a move traces again
+                _segments_clear(*self.caster.direct.occlusion, a,
+                                np.ascontiguousarray(np.broadcast_to(np.asarray(b, np.float64).reshape(-1, 3), a.shape)),
+                                self.box_table(len(a)), self.cells.lo, self.cells.h, out)
             return out
         d = np.asarray(b, np.float64).reshape(-1, 3) - a
         length = np.linalg.norm(d, axis=1)
@@ -321,13 +322,14 @@ def _held(v0, e1, e2, lo, h, held):
                     held[z, y, x] = 1
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@numba.njit(cache=True, nogil=True)
 def _summed_volume(held, out):
     """out[z + 1, y + 1, x + 1] = the sum of held (N, N, N) over [0, z] x [0, y] x [0, x] (`out`'s first
-    layers stay 0): each plane summed along x and y, then the columns along z, the cores sharing planes,
-    then rows (a 48^3 grid: 0.8 -> 0.25 ms against numpy's three cumsums and a widening copy)."""
+    layers stay 0): each plane summed along x and y, then the columns along z. A 48^3 grid: 0.08 ms on one
+    core (0.8 in numpy's three cumsums and a widening copy); within a moved box's update the two cores
+    sharing the planes took 0.24, too little work a plane to pay for waking the other (a 128^3 grid: 2 ms)."""
     n = held.shape[0]
-    for z in numba.prange(n):
+    for z in range(n):
         for y in range(n):
             running = 0
             for x in range(n):
@@ -336,7 +338,7 @@ def _summed_volume(held, out):
         for y in range(1, n):
             for x in range(1, n + 1):
                 out[z + 1, y + 1, x] += out[z + 1, y, x]
-    for y in numba.prange(1, n + 1):
+    for y in range(1, n + 1):
         for z in range(1, n):
             for x in range(1, n + 1):
                 out[z + 1, y, x] += out[z, y, x]
