@@ -50,7 +50,7 @@ from viewer.probes import sh
 from viewer.neural.encoding import CHANNELS, Encoding
 from viewer.neural.changes import (kept_received, patch_keys, proportional_channels, rows_changed, same_columns,
                                    same_direction, same_sun, sun_parts)
-from viewer.neural.lattice import LatticeGeometry, LatticeShadows, assemble, moved_box
+from viewer.neural.lattice import LatticeGeometry, LatticeShadows, assemble, direct_light, moved_box
 from viewer.probes.grid import ProbeGrid
 from viewer.rays.voxels import VoxelGrid
 
@@ -232,20 +232,12 @@ class Encoder:
 
     def _direct(self, direction, irradiance) -> np.ndarray:
         """(3, 9, P) float32: the emitters' bases times their radiance, plus the sun."""
-        p = len(self.points)
-        direct = np.zeros((3, sh.SH_COUNT, p), np.float32)
-        for emitter in self.emitters:
-            for c in range(3):
-                if emitter.radiance[c] != 0.0:
-                    direct[c] += np.float32(emitter.radiance[c]) * emitter.basis
+        p, sun, visible = len(self.points), None, None
         if direction is not None and np.any(irradiance > 0):
-            visible = (self._shadows.sun_visibility(direction).astype(np.float32) if self.direct_shadows
-                       else np.ones(p, np.float32))
+            visible = (self._shadows.sun_visibility(direction) if self.direct_shadows else np.ones(p, np.float32))
             delta = sh.basis(direction / np.linalg.norm(direction))  # per unit irradiance (sh.project_delta)
-            for c in range(3):
-                if irradiance[c] != 0.0:
-                    direct[c] += (delta * irradiance[c]).astype(np.float32)[:, None] * visible[None, :]
-        return direct
+            sun = (np.asarray(irradiance, np.float64)[:, None] * delta[None, :]).astype(np.float32)
+        return direct_light([e.basis for e in self.emitters], [e.radiance for e in self.emitters], sun, visible, p)
 
     def _received(self, voxels: VoxelGrid, direction, irradiance) -> np.ndarray:
         """(K, 3) the voxels' irradiance straight from the emitters and the sun (`encoding.voxel_direct`)."""

@@ -17,6 +17,7 @@ from viewer.rays.landing import meets_box
 from viewer.rays.voxel_rays import VoxelRays
 from viewer.rays.voxels import SURFACE_OFFSET, VoxelGrid
 from viewer.neural.changes import same_voxels
+from viewer.probes import sh
 from viewer.threads import cores_for
 
 
@@ -357,3 +358,41 @@ def _assemble(features, geometric, albedo, emitted, direct, bounce, seen, opened
                 target[p] = seen[p, f - seen_row, c] * inv[c]
         elif f == open_row:
             target[:] = opened
+
+
+def direct_light(bases: list[np.ndarray], radiances: list[np.ndarray], sun: np.ndarray | None,
+                 visible: np.ndarray | None, probes: int) -> np.ndarray:
+    """(3, 9, P) float32: the sum of each basis (9, P) times its radiance (3,), plus `sun` (3, 9) (the
+    sun's SH per colour) times its `visible` share at each probe (P,), where given: one compiled pass a
+    term on one core (a lamp and the sun on a 24^3 lattice: 0.26 -> 0.19 ms, where numpy made a product
+    and a sum a colour; waking the other core for passes this short took longer than they do, 0.35)."""
+    out = np.zeros((3, sh.SH_COUNT, probes), np.float32)
+    for basis, radiance in zip(bases, radiances):
+        _add_scaled(out, np.ascontiguousarray(basis, np.float32), np.asarray(radiance, np.float32))
+    if sun is not None:
+        _add_outer(out, np.asarray(sun, np.float32), np.ascontiguousarray(visible, np.float32))
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _add_scaled(out, basis, radiance):
+    """out[c, k] += radiance[c] x basis[k]."""
+    rows = out.shape[1]
+    for job in range(out.shape[0] * rows):
+        c, k = job // rows, job % rows
+        weight, target, source = radiance[c], out[c, k], basis[k]
+        if weight != 0.0:
+            for p in range(target.shape[0]):
+                target[p] += weight * source[p]
+
+
+@numba.njit(cache=True, nogil=True)
+def _add_outer(out, weights, visible):
+    """out[c, k] += weights[c, k] x visible."""
+    rows = out.shape[1]
+    for job in range(out.shape[0] * rows):
+        c, k = job // rows, job % rows
+        weight, target = weights[c, k], out[c, k]
+        if weight != 0.0:
+            for p in range(target.shape[0]):
+                target[p] += weight * visible[p]
