@@ -27,7 +27,7 @@ class NeuralSource:
     geometry's direct light goes on meanwhile. Run on the render thread after that frame instead, the
     Cornell box's probes reached the screen 174-243 ms after a moved box, 157-177 after a moved lamp and
     283-311 after the scene opened; now 147-192, 140-155 and 190-203 (`python -m viewer.bench.edits
-    cornell --sources neural`, 2 cores, llvmpipe: on a GPU the bake leaves the cores to the network).
+    cornell --sources neural`, 2 cores, where llvmpipe bakes on the same cores).
 
     Creating it loads and checks the model: a missing, corrupt or mismatched model raises
     `viewer.neural.field.ModelError`, which the controller shows and answers by falling back to the compute
