@@ -205,3 +205,42 @@ def test_after_a_colour_edit_the_indirect_light_waits_for_the_probes_the_gi_sour
         assert len(updates) == 4                      # no probes coming: gathered at once
     finally:
         offscreen.release()
+
+
+def test_a_moved_box_retraces_only_the_rays_it_can_change(gl_context, cornell, cornell_probes, monkeypatch):
+    """A box dragged across the room is a third of the Cornell box's faces but only 12 of them: its gather
+    rays are traced again where the move can change them alone, and they are the rays a full trace of
+    the moved scene gives, the image the one a fresh renderer draws."""
+    matrix = np.eye(4)
+    matrix[0, 3] = 0.08
+    moved = cornell.transformed_group("small-box", matrix)
+    expected = render(gl_context, moved, cornell_probes, (64, 64), ("indirect",))["indirect"]
+    offscreen = background_renderer(gl_context, cornell, cornell_probes, (64, 64))
+    try:
+        renderer = offscreen.renderer
+        offscreen.render_hdr(view="indirect")
+        wait_for_weights(renderer)
+        from viewer.gpu.final_gather import GatherRays
+
+        full, incremental = [], []
+        of, after_moving = GatherRays.of, GatherRays.after_moving
+        monkeypatch.setattr(GatherRays, "of", staticmethod(lambda *a, **k: full.append(1) or of(*a, **k)))
+        monkeypatch.setattr(GatherRays, "after_moving",
+                            lambda self, *a, **k: incremental.append(1) or after_moving(self, *a, **k))
+        renderer.set_scene(moved)
+        renderer.set_probes(cornell_probes)
+        offscreen.render_hdr(view="indirect")
+        wait_for_weights(renderer)
+        np.testing.assert_allclose(offscreen.render_hdr(view="indirect"), expected, rtol=1e-3, atol=1e-5)
+        assert (full, incremental) == ([], [1])
+        monkeypatch.undo()
+        fresh = OffscreenRenderer((64, 64), samples=0, ctx=gl_context)
+        try:
+            fresh.renderer.set_scene(moved)
+            fresh.renderer.set_probes(cornell_probes)
+            fresh.render_hdr(view="indirect")
+            np.testing.assert_array_equal(renderer._indirect._gather[0].hits, fresh.renderer._indirect._gather[0].hits)
+        finally:
+            fresh.release()
+    finally:
+        offscreen.release()

@@ -44,6 +44,11 @@ MAX_SAMPLES = 3_000_000
 """Above this many samples (both sides) the probes stay per fragment: their weights would take minutes
 and gigabytes (a detailed mesh of 82k triangles has 0.3 M)."""
 MAX_MOVED = 0.1   # a move of at most this share of the faces traces again only the gather rays it can change
+MOVED_FACES = 32
+"""A move of at most this many faces, whatever their share, traces again only the gather rays it can change:
+a ray near the moved faces is tested against each of them (`GatherRays.after_moving`), a few nanoseconds a
+face, where tracing it again through Embree takes a few hundred. A box room's moved box is 12 of its 36
+faces: the Cornell box's settled 465 -> 400 ms after it (the network), 580-610 -> 490 (the compute solver)."""
 KEPT_LATTICES = 2
 """Weights kept per scene: the GI sources' lattices (the network's and the solver's) when they differ."""
 
@@ -283,7 +288,7 @@ class BakedIndirectLight:
             return None
         keep = scene.face_areas > 0
         moved = np.flatnonzero(changed_rows((old_scene.triangles, scene.triangles))[keep])
-        return moved if len(moved) <= MAX_MOVED * keep.sum() else None
+        return moved if len(moved) <= max(MAX_MOVED * keep.sum(), MOVED_FACES) else None
 
     def _install(self, key: tuple, bake: SurfaceBake, caster: TriangleCaster | None = None,
                  gather: tuple | None = None) -> None:
