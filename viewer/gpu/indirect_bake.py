@@ -48,7 +48,8 @@ MOVED_FACES = 32
 """A move of at most this many faces, whatever their share, traces again only the gather rays it can change:
 a ray near the moved faces is tested against each of them (`GatherRays.after_moving`), a few nanoseconds a
 face, where tracing it again through Embree takes a few hundred. A box room's moved box is 12 of its 36
-faces: the Cornell box's settled 465 -> 400 ms after it (the network), 580-610 -> 490 (the compute solver)."""
+faces: the Cornell box's settled frame after it 460-491 -> 379-395 ms with the network, 578-605 -> 456-471
+with the compute solver (`python -m viewer.bench.edits cornell --edits "object move"`, by turns)."""
 KEPT_LATTICES = 2
 """Weights kept per scene: the GI sources' lattices (the network's and the solver's) when they differ."""
 
