@@ -25,7 +25,7 @@ import numpy as np
 from viewer import wake
 from viewer.rays.cast import TriangleCaster
 from viewer.gpu.half_floats import widened
-from viewer.rays.moved_faces import changed_rows
+from viewer.rays.moved_faces import few_moved
 from viewer.gpu.final_gather import GatherRays
 from viewer.gpu.gather_cast import caster_of
 from viewer.gpu.context import finish
@@ -43,13 +43,6 @@ from viewer.scene import Scene
 MAX_SAMPLES = 3_000_000
 """Above this many samples (both sides) the probes stay per fragment: their weights would take minutes
 and gigabytes (a detailed mesh of 82k triangles has 0.3 M)."""
-MAX_MOVED = 0.1   # a move of at most this share of the faces traces again only the gather rays it can change
-MOVED_FACES = 32
-"""A move of at most this many faces, whatever their share, traces again only the gather rays it can change:
-a ray near the moved faces is tested against each of them (`GatherRays.after_moving`), a few nanoseconds a
-face, where tracing it again through Embree takes a few hundred. A box room's moved box is 12 of its 36
-faces: the Cornell box's settled frame after it 460-491 -> 379-395 ms with the network, 578-605 -> 456-471
-with the compute solver (`python -m viewer.bench.edits cornell --edits "object move"`, by turns)."""
 KEPT_LATTICES = 2
 """Weights kept per scene: the GI sources' lattices (the network's and the solver's) when they differ."""
 
@@ -287,9 +280,7 @@ class BakedIndirectLight:
                 or not same_atlas(old_lightmap, lightmap)
                 or not np.array_equal(old_scene.face_areas > 0, scene.face_areas > 0)):
             return None
-        keep = scene.face_areas > 0
-        moved = np.flatnonzero(changed_rows((old_scene.triangles, scene.triangles))[keep])
-        return moved if len(moved) <= max(MAX_MOVED * keep.sum(), MOVED_FACES) else None
+        return few_moved(old_scene.triangles, scene.triangles, scene.face_areas > 0)
 
     def _install(self, key: tuple, bake: SurfaceBake, caster: TriangleCaster | None = None,
                  gather: tuple | None = None) -> None:

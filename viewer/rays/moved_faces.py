@@ -42,6 +42,24 @@ _last: tuple | None = None
 """(weak references to the arrays last compared, read-only, and the answer)."""
 
 
+PARTIAL_SHARE, PARTIAL_FACES = 0.1, 32
+"""A move of at most this share of the faces, or of at most this many whatever their share, traces again
+only the final-gather rays it can change (viewer/gpu/indirect_bake.py): a ray near the moved faces is
+tested against each of them (`GatherRays.after_moving`), a few nanoseconds a face, where tracing it again
+through Embree takes a few hundred. A box room's moved box is 12 of its 36 faces: the Cornell box's
+settled frame after it 460-491 -> 379-395 ms with the network, 578-605 -> 456-471 with the compute solver
+(`python -m viewer.bench.edits cornell --edits "object move"`, by turns), where the share alone traced
+every ray again."""
+
+
+def few_moved(before: np.ndarray, after: np.ndarray, keep: np.ndarray) -> np.ndarray | None:
+    """The places among the `keep` faces (F,) bool of those whose triangles (F, 3, 3) moved from `before` to
+    `after`, where they are few enough to trace again only what they change (PARTIAL_SHARE,
+    PARTIAL_FACES); None where they are not."""
+    moved = np.flatnonzero(changed_rows((before, after))[keep])
+    return moved if len(moved) <= max(PARTIAL_SHARE * keep.sum(), PARTIAL_FACES) else None
+
+
 def _frozen(array) -> bool:
     """Whether nothing can change `array`'s values: it and every array it views into are read-only."""
     while isinstance(array, np.ndarray):
