@@ -93,13 +93,7 @@ def test_a_moved_lamp_retraces_only_what_changed_and_shows_the_probes_meanwhile(
         renderer = offscreen.renderer
         offscreen.render_hdr(view="indirect")
         wait_for_weights(renderer)
-        from viewer.gpu.final_gather import GatherRays
-
-        full, incremental = [], []
-        of, after_moving = GatherRays.of, GatherRays.after_moving
-        monkeypatch.setattr(GatherRays, "of", staticmethod(lambda *a, **k: full.append(1) or of(*a, **k)))
-        monkeypatch.setattr(GatherRays, "after_moving",
-                            lambda self, *a, **k: incremental.append(1) or after_moving(self, *a, **k))
+        full, incremental = count_traces(monkeypatch)
         renderer.set_scene(moved)
         renderer.set_probes(cornell_probes)
         meanwhile = offscreen.render_hdr(view="indirect")
@@ -130,6 +124,18 @@ def test_a_moved_lamp_retraces_only_what_changed_and_shows_the_probes_meanwhile(
             fresh.release()
     finally:
         offscreen.release()
+
+
+def count_traces(monkeypatch) -> tuple[list, list]:
+    """Lists that get an entry each time a geometry's final-gather rays are all traced (GatherRays.of), and
+    each time only those a move can change are (GatherRays.after_moving)."""
+    from viewer.gpu.final_gather import GatherRays
+
+    incremental = []
+    original = GatherRays.after_moving
+    monkeypatch.setattr(GatherRays, "after_moving",
+                        lambda self, *a, **k: incremental.append(1) or original(self, *a, **k))
+    return count_full_traces(monkeypatch), incremental
 
 
 def count_full_traces(monkeypatch) -> list:
@@ -220,13 +226,7 @@ def test_a_moved_box_retraces_only_the_rays_it_can_change(gl_context, cornell, c
         renderer = offscreen.renderer
         offscreen.render_hdr(view="indirect")
         wait_for_weights(renderer)
-        from viewer.gpu.final_gather import GatherRays
-
-        full, incremental = [], []
-        of, after_moving = GatherRays.of, GatherRays.after_moving
-        monkeypatch.setattr(GatherRays, "of", staticmethod(lambda *a, **k: full.append(1) or of(*a, **k)))
-        monkeypatch.setattr(GatherRays, "after_moving",
-                            lambda self, *a, **k: incremental.append(1) or after_moving(self, *a, **k))
+        full, incremental = count_traces(monkeypatch)
         renderer.set_scene(moved)
         renderer.set_probes(cornell_probes)
         offscreen.render_hdr(view="indirect")
